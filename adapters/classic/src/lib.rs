@@ -1,0 +1,1 @@
+//! Classic control (placeholder until the envs land).

@@ -1,0 +1,29 @@
+//! The envhub contract: what every adapter implements and every client relies on.
+//!
+//! This crate is the leaf of the workspace. It holds spaces, the `Env` and `EnvAdapter`
+//! traits, `EnvConfig` and the error types, and nothing heavy: simulators, shared memory,
+//! Zenoh and Python all live in crates that point here, so an adapter can be written and
+//! tested without pulling any of them in.
+//!
+//! The one design choice that shapes everything: an env writes its observation into a byte
+//! slice it is handed (laid out as [`Space::byte_len`] describes) instead of returning a
+//! buffer, so the worker can hand it a slot inside a shared-memory sample and the data is
+//! never copied after the simulator produces it.
+
+mod adapter;
+mod config;
+mod env;
+mod error;
+mod framework;
+mod space;
+mod suggest;
+mod time_limit;
+
+pub use adapter::{Availability, EnvAdapter, EnvSpec};
+pub use config::{AutoresetMode, EnvConfig, ExtraKeys};
+pub use env::{Env, Info, InfoValue, ResetOptions, Transition};
+pub use error::EnvError;
+pub use framework::{FRAMEWORKS, Framework, canonical_framework};
+pub use space::{DType, Space, SpaceError};
+pub use suggest::closest;
+pub use time_limit::TimeLimit;

@@ -1,0 +1,581 @@
+//! Spaces as in `gymnasium.spaces`, plus the flat byte layout that moves through shared memory.
+//!
+//! Every space has a fixed byte length. A leaf is stored as a dense little-endian array of its
+//! dtype; a `Dict` or `Tuple` is its children one after another, each starting on an 8-byte
+//! boundary so that every leaf can be viewed in place as a typed array.
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Element type of a space, named as numpy names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DType {
+    /// `float32`
+    Float32,
+    /// `float64`
+    Float64,
+    /// `int8`
+    Int8,
+    /// `int32`
+    Int32,
+    /// `int64`
+    Int64,
+    /// `uint8`
+    Uint8,
+    /// `bool` (one byte, 0 or 1)
+    Bool,
+}
+
+impl DType {
+    /// Size of one element in bytes.
+    pub fn size(self) -> usize {
+        match self {
+            DType::Float64 | DType::Int64 => 8,
+            DType::Float32 | DType::Int32 => 4,
+            DType::Int8 | DType::Uint8 | DType::Bool => 1,
+        }
+    }
+
+    /// The numpy name (`float32`, `int64`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            DType::Float32 => "float32",
+            DType::Float64 => "float64",
+            DType::Int8 => "int8",
+            DType::Int32 => "int32",
+            DType::Int64 => "int64",
+            DType::Uint8 => "uint8",
+            DType::Bool => "bool",
+        }
+    }
+
+    fn is_float(self) -> bool {
+        matches!(self, DType::Float32 | DType::Float64)
+    }
+
+    /// Reads element `i` of a dense array of this dtype as `f64`.
+    fn read(self, bytes: &[u8], i: usize) -> f64 {
+        let at = i * self.size();
+        let b = &bytes[at..at + self.size()];
+        match self {
+            DType::Float32 => f32::from_le_bytes(b.try_into().unwrap()) as f64,
+            DType::Float64 => f64::from_le_bytes(b.try_into().unwrap()),
+            DType::Int8 => i8::from_le_bytes([b[0]]) as f64,
+            DType::Int32 => i32::from_le_bytes(b.try_into().unwrap()) as f64,
+            DType::Int64 => i64::from_le_bytes(b.try_into().unwrap()) as f64,
+            DType::Uint8 | DType::Bool => b[0] as f64,
+        }
+    }
+
+    /// Writes `v` (already in range for the dtype) as element `i`.
+    fn write(self, bytes: &mut [u8], i: usize, v: f64) {
+        let at = i * self.size();
+        let b = &mut bytes[at..at + self.size()];
+        match self {
+            DType::Float32 => b.copy_from_slice(&(v as f32).to_le_bytes()),
+            DType::Float64 => b.copy_from_slice(&v.to_le_bytes()),
+            DType::Int8 => b.copy_from_slice(&(v as i8).to_le_bytes()),
+            DType::Int32 => b.copy_from_slice(&(v as i32).to_le_bytes()),
+            DType::Int64 => b.copy_from_slice(&(v as i64).to_le_bytes()),
+            DType::Uint8 | DType::Bool => b[0] = v as u8,
+        }
+    }
+}
+
+impl fmt::Display for DType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A Gymnasium space.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Space {
+    /// A box in R^n: one `low`/`high` bound per element (row-major), infinite bounds allowed.
+    Box {
+        /// Element type.
+        dtype: DType,
+        /// Array shape.
+        shape: Vec<usize>,
+        /// Lower bound of every element.
+        #[serde(with = "bounds")]
+        low: Vec<f64>,
+        /// Upper bound of every element.
+        #[serde(with = "bounds")]
+        high: Vec<f64>,
+    },
+    /// `{start, ..., start + n - 1}`, stored as one `int64`.
+    Discrete {
+        /// Number of values.
+        n: i64,
+        /// Smallest value.
+        start: i64,
+    },
+    /// A vector of discrete values, stored as `int64`.
+    MultiDiscrete {
+        /// Number of values of each element.
+        nvec: Vec<i64>,
+        /// Smallest value of each element.
+        start: Vec<i64>,
+    },
+    /// Binary array, stored as `int8` as Gymnasium does.
+    MultiBinary {
+        /// Array shape.
+        shape: Vec<usize>,
+    },
+    /// Named sub-spaces in a fixed order.
+    Dict {
+        /// Keys and spaces, in layout order.
+        spaces: Vec<(String, Space)>,
+    },
+    /// Ordered sub-spaces.
+    Tuple {
+        /// Spaces, in layout order.
+        spaces: Vec<Space>,
+    },
+}
+
+/// Why a value does not belong to a space.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SpaceError {
+    /// The value has the wrong number of bytes for the space.
+    #[error("expected {expected} bytes for {space}, got {got}")]
+    Length {
+        /// The space, described.
+        space: String,
+        /// Bytes expected.
+        expected: usize,
+        /// Bytes given.
+        got: usize,
+    },
+    /// An element is outside the space.
+    #[error("element {index}{path} = {value} is outside {space}")]
+    OutOfRange {
+        /// Flat index of the element in its leaf.
+        index: usize,
+        /// Where the leaf sits in a `Dict`/`Tuple` (`["key"]`, `[0]`), empty for a leaf.
+        path: String,
+        /// The value found.
+        value: f64,
+        /// The space, described.
+        space: String,
+    },
+    /// A float element is NaN or infinite where the space is bounded.
+    #[error("element {index}{path} is {value}, which no policy should send")]
+    NotFinite {
+        /// Flat index of the element in its leaf.
+        index: usize,
+        /// Where the leaf sits in a `Dict`/`Tuple`.
+        path: String,
+        /// The value found.
+        value: f64,
+    },
+}
+
+const ALIGN: usize = 8;
+
+fn align_up(n: usize) -> usize {
+    n.div_ceil(ALIGN) * ALIGN
+}
+
+impl Space {
+    /// A `float32` box with the same bound for every element.
+    pub fn box_f32(shape: &[usize], low: f64, high: f64) -> Space {
+        let n = shape.iter().product();
+        Space::Box {
+            dtype: DType::Float32,
+            shape: shape.to_vec(),
+            low: vec![low; n],
+            high: vec![high; n],
+        }
+    }
+
+    /// A `float32` box with per-element bounds.
+    pub fn box_f32_bounds(low: Vec<f64>, high: Vec<f64>) -> Space {
+        assert_eq!(low.len(), high.len(), "low and high differ in length");
+        Space::Box {
+            dtype: DType::Float32,
+            shape: vec![low.len()],
+            low,
+            high,
+        }
+    }
+
+    /// `Discrete(n)` starting at 0.
+    pub fn discrete(n: i64) -> Space {
+        Space::Discrete { n, start: 0 }
+    }
+
+    /// Number of scalar elements in a leaf space (sum over children for `Dict`/`Tuple`).
+    pub fn num_elements(&self) -> usize {
+        match self {
+            Space::Box { shape, .. } | Space::MultiBinary { shape } => shape.iter().product(),
+            Space::Discrete { .. } => 1,
+            Space::MultiDiscrete { nvec, .. } => nvec.len(),
+            Space::Dict { spaces } => spaces.iter().map(|(_, s)| s.num_elements()).sum(),
+            Space::Tuple { spaces } => spaces.iter().map(Space::num_elements).sum(),
+        }
+    }
+
+    /// The dtype of a leaf space; `None` for `Dict`/`Tuple`.
+    pub fn dtype(&self) -> Option<DType> {
+        match self {
+            Space::Box { dtype, .. } => Some(*dtype),
+            Space::Discrete { .. } | Space::MultiDiscrete { .. } => Some(DType::Int64),
+            Space::MultiBinary { .. } => Some(DType::Int8),
+            Space::Dict { .. } | Space::Tuple { .. } => None,
+        }
+    }
+
+    /// The array shape of a leaf space (`[]` for `Discrete`); `None` for `Dict`/`Tuple`.
+    pub fn shape(&self) -> Option<Vec<usize>> {
+        match self {
+            Space::Box { shape, .. } | Space::MultiBinary { shape } => Some(shape.clone()),
+            Space::Discrete { .. } => Some(vec![]),
+            Space::MultiDiscrete { nvec, .. } => Some(vec![nvec.len()]),
+            Space::Dict { .. } | Space::Tuple { .. } => None,
+        }
+    }
+
+    /// Bytes one value of this space takes in the flat layout.
+    pub fn byte_len(&self) -> usize {
+        match self {
+            Space::Dict { spaces } => spaces.iter().map(|(_, s)| align_up(s.byte_len())).sum(),
+            Space::Tuple { spaces } => spaces.iter().map(|s| align_up(s.byte_len())).sum(),
+            leaf => leaf.num_elements() * leaf.dtype().map_or(0, DType::size),
+        }
+    }
+
+    /// Leaves in layout order with their byte offset and a path (`["observation"]`, `[1]`).
+    pub fn leaves(&self) -> Vec<(String, usize, &Space)> {
+        let mut out = Vec::new();
+        self.collect_leaves(String::new(), 0, &mut out);
+        out
+    }
+
+    fn collect_leaves<'a>(
+        &'a self,
+        path: String,
+        offset: usize,
+        out: &mut Vec<(String, usize, &'a Space)>,
+    ) {
+        let children: Vec<(String, &Space)> = match self {
+            Space::Dict { spaces } => spaces
+                .iter()
+                .map(|(k, s)| (format!("{path}[\"{k}\"]"), s))
+                .collect(),
+            Space::Tuple { spaces } => spaces
+                .iter()
+                .enumerate()
+                .map(|(i, s)| (format!("{path}[{i}]"), s))
+                .collect(),
+            leaf => {
+                out.push((path, offset, leaf));
+                return;
+            }
+        };
+        let mut at = offset;
+        for (p, s) in children {
+            s.collect_leaves(p, at, out);
+            at += align_up(s.byte_len());
+        }
+    }
+
+    /// Checks that `bytes` is a value of this space: right length, every element in range,
+    /// and no NaN or infinity in a float box (whatever its bounds: a policy that emits NaN is
+    /// broken, and stepping a simulator with it only hides the bug).
+    pub fn validate(&self, bytes: &[u8]) -> Result<(), SpaceError> {
+        let expected = self.byte_len();
+        if bytes.len() != expected {
+            return Err(SpaceError::Length {
+                space: self.to_string(),
+                expected,
+                got: bytes.len(),
+            });
+        }
+        for (path, offset, leaf) in self.leaves() {
+            let dtype = leaf.dtype().expect("leaves have a dtype");
+            let data = &bytes[offset..offset + leaf.byte_len()];
+            for i in 0..leaf.num_elements() {
+                let v = dtype.read(data, i);
+                if dtype.is_float() && !v.is_finite() {
+                    return Err(SpaceError::NotFinite {
+                        index: i,
+                        path,
+                        value: v,
+                    });
+                }
+                let (lo, hi) = leaf.bounds(i);
+                // Bounds are checked at the dtype's precision: a float32 box of [-2, 2] must
+                // accept the float32 nearest to 2.0.
+                let (lo, hi) = if dtype == DType::Float32 {
+                    (lo as f32 as f64, hi as f32 as f64)
+                } else {
+                    (lo, hi)
+                };
+                if v < lo || v > hi {
+                    return Err(SpaceError::OutOfRange {
+                        index: i,
+                        path,
+                        value: v,
+                        space: leaf.to_string(),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether `bytes` is a value of this space.
+    pub fn contains(&self, bytes: &[u8]) -> bool {
+        self.validate(bytes).is_ok()
+    }
+
+    /// Inclusive bounds of element `i` of a leaf.
+    fn bounds(&self, i: usize) -> (f64, f64) {
+        match self {
+            Space::Box { low, high, .. } => (low[i], high[i]),
+            Space::Discrete { n, start } => (*start as f64, (start + n - 1) as f64),
+            Space::MultiDiscrete { nvec, start } => {
+                (start[i] as f64, (start[i] + nvec[i] - 1) as f64)
+            }
+            Space::MultiBinary { .. } => (0.0, 1.0),
+            Space::Dict { .. } | Space::Tuple { .. } => unreachable!("bounds of a composite"),
+        }
+    }
+
+    /// Writes a uniformly random value of this space into `out` (as `Space::sample` in
+    /// Gymnasium: unbounded box sides draw from a normal or exponential distribution).
+    pub fn sample_into(&self, rng: &mut impl Rng, out: &mut [u8]) {
+        assert_eq!(
+            out.len(),
+            self.byte_len(),
+            "sample buffer has the wrong length"
+        );
+        for (_, offset, leaf) in self.leaves() {
+            let dtype = leaf.dtype().expect("leaves have a dtype");
+            let data = &mut out[offset..offset + leaf.byte_len()];
+            for i in 0..leaf.num_elements() {
+                let (lo, hi) = leaf.bounds(i);
+                let v = if dtype.is_float() {
+                    sample_interval(rng, lo, hi)
+                } else {
+                    rng.random_range(lo as i64..=hi as i64) as f64
+                };
+                dtype.write(data, i, v);
+            }
+        }
+    }
+
+    /// A random value of this space as a fresh buffer.
+    pub fn sample(&self, rng: &mut impl Rng) -> Vec<u8> {
+        let mut out = vec![0; self.byte_len()];
+        self.sample_into(rng, &mut out);
+        out
+    }
+}
+
+fn sample_interval(rng: &mut impl Rng, lo: f64, hi: f64) -> f64 {
+    let normal = |rng: &mut dyn rand::RngCore| -> f64 {
+        // Box-Muller; enough for random exploration, not a statistics library.
+        let u1: f64 = 1.0 - rand::Rng::random::<f64>(rng);
+        let u2: f64 = rand::Rng::random::<f64>(rng);
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    };
+    let exp = |rng: &mut dyn rand::RngCore| -> f64 { -(1.0 - rand::Rng::random::<f64>(rng)).ln() };
+    match (lo.is_finite(), hi.is_finite()) {
+        (true, true) => lo + (hi - lo) * rng.random::<f64>(),
+        (true, false) => lo + exp(rng),
+        (false, true) => hi - exp(rng),
+        (false, false) => normal(rng),
+    }
+}
+
+impl fmt::Display for Space {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Space::Box {
+                dtype,
+                shape,
+                low,
+                high,
+            } => {
+                let uniform = |v: &[f64]| v.iter().all(|x| x == &v[0]);
+                if !low.is_empty() && uniform(low) && uniform(high) {
+                    write!(f, "Box({}, {}, {shape:?}, {dtype})", low[0], high[0])
+                } else {
+                    write!(f, "Box({shape:?}, {dtype})")
+                }
+            }
+            Space::Discrete { n, start: 0 } => write!(f, "Discrete({n})"),
+            Space::Discrete { n, start } => write!(f, "Discrete({n}, start={start})"),
+            Space::MultiDiscrete { nvec, .. } => write!(f, "MultiDiscrete({nvec:?})"),
+            Space::MultiBinary { shape } => write!(f, "MultiBinary({shape:?})"),
+            Space::Dict { spaces } => {
+                f.write_str("Dict(")?;
+                for (i, (k, s)) in spaces.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "'{k}': {s}")?;
+                }
+                f.write_str(")")
+            }
+            Space::Tuple { spaces } => {
+                f.write_str("Tuple(")?;
+                for (i, s) in spaces.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{s}")?;
+                }
+                f.write_str(")")
+            }
+        }
+    }
+}
+
+/// JSON has no infinity: bounds travel as numbers, or the strings `inf` / `-inf`.
+mod bounds {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(untagged)]
+    enum Bound {
+        Num(f64),
+        Text(String),
+    }
+
+    pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+        v.iter()
+            .map(|x| match *x {
+                x if x == f64::INFINITY => Bound::Text("inf".into()),
+                x if x == f64::NEG_INFINITY => Bound::Text("-inf".into()),
+                x => Bound::Num(x),
+            })
+            .collect::<Vec<_>>()
+            .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        Vec::<Bound>::deserialize(d)?
+            .into_iter()
+            .map(|b| match b {
+                Bound::Num(x) => Ok(x),
+                Bound::Text(t) => match t.as_str() {
+                    "inf" | "+inf" => Ok(f64::INFINITY),
+                    "-inf" => Ok(f64::NEG_INFINITY),
+                    other => Err(serde::de::Error::custom(format!(
+                        "invalid bound `{other}`; expected a number, `inf` or `-inf`"
+                    ))),
+                },
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn rng() -> rand_chacha::ChaCha8Rng {
+        rand_chacha::ChaCha8Rng::seed_from_u64(7)
+    }
+
+    fn goal_dict() -> Space {
+        Space::Dict {
+            spaces: vec![
+                ("achieved_goal".into(), Space::box_f32(&[3], -1.0, 1.0)),
+                (
+                    "observation".into(),
+                    Space::box_f32(&[5], f64::NEG_INFINITY, f64::INFINITY),
+                ),
+                ("flag".into(), Space::discrete(3)),
+            ],
+        }
+    }
+
+    #[test]
+    fn samples_are_contained() {
+        let spaces = [
+            Space::box_f32(&[4], -2.0, 2.0),
+            Space::box_f32(&[2, 3], f64::NEG_INFINITY, f64::INFINITY),
+            Space::Discrete { n: 5, start: -2 },
+            Space::MultiDiscrete {
+                nvec: vec![2, 3, 4],
+                start: vec![0, 0, 1],
+            },
+            Space::MultiBinary { shape: vec![6] },
+            goal_dict(),
+            Space::Tuple {
+                spaces: vec![Space::discrete(2), Space::box_f32(&[1], 0.0, 1.0)],
+            },
+        ];
+        let mut rng = rng();
+        for space in spaces {
+            for _ in 0..200 {
+                let v = space.sample(&mut rng);
+                assert!(space.contains(&v), "{space}: {:?}", space.validate(&v));
+            }
+        }
+    }
+
+    #[test]
+    fn composite_layout_is_aligned() {
+        let space = goal_dict();
+        // 12 bytes -> 16, 20 -> 24, 8
+        assert_eq!(space.byte_len(), 16 + 24 + 8);
+        let offsets: Vec<usize> = space.leaves().iter().map(|l| l.1).collect();
+        assert_eq!(offsets, vec![0, 16, 40]);
+        assert_eq!(space.leaves()[1].0, "[\"observation\"]");
+    }
+
+    #[test]
+    fn rejects_bad_values_with_reasons() {
+        let discrete = Space::discrete(2);
+        let err = discrete.validate(&5i64.to_le_bytes()).unwrap_err();
+        assert!(err.to_string().contains("outside Discrete(2)"), "{err}");
+        let err = discrete.validate(&[0u8; 4]).unwrap_err();
+        assert!(matches!(
+            err,
+            SpaceError::Length {
+                expected: 8,
+                got: 4,
+                ..
+            }
+        ));
+
+        let pend = Space::box_f32(&[1], -2.0, 2.0);
+        let nan = bytemuck::bytes_of(&f32::NAN).to_vec();
+        assert!(matches!(
+            pend.validate(&nan),
+            Err(SpaceError::NotFinite { .. })
+        ));
+        let edge = bytemuck::bytes_of(&2.0f32).to_vec();
+        assert!(pend.contains(&edge));
+        let over = bytemuck::bytes_of(&2.5f32).to_vec();
+        assert!(!pend.contains(&over));
+    }
+
+    #[test]
+    fn serializes_infinite_bounds() {
+        let space = goal_dict();
+        let json = serde_json::to_string(&space).unwrap();
+        assert!(json.contains("\"-inf\""), "{json}");
+        let back: Space = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, space);
+    }
+
+    #[test]
+    fn displays_like_gymnasium() {
+        assert_eq!(Space::discrete(2).to_string(), "Discrete(2)");
+        assert_eq!(
+            Space::box_f32(&[1], -2.0, 2.0).to_string(),
+            "Box(-2, 2, [1], float32)"
+        );
+    }
+}

@@ -1,0 +1,106 @@
+//! `TimeLimit`: truncation after `max_episode_steps`, the same for every adapter.
+
+use crate::{Env, EnvError, Info, ResetOptions, Space, Transition};
+
+/// Wraps an env and truncates episodes after `max_steps` steps, as Gymnasium's `TimeLimit`.
+pub struct TimeLimit<E> {
+    inner: E,
+    max_steps: Option<u32>,
+    elapsed: u32,
+}
+
+impl<E: Env> TimeLimit<E> {
+    /// Truncates after `max_steps` steps; `None` never truncates.
+    pub fn new(inner: E, max_steps: Option<u32>) -> Self {
+        TimeLimit {
+            inner,
+            max_steps,
+            elapsed: 0,
+        }
+    }
+
+    /// Steps taken in the current episode.
+    pub fn elapsed(&self) -> u32 {
+        self.elapsed
+    }
+}
+
+impl<E: Env> Env for TimeLimit<E> {
+    fn observation_space(&self) -> &Space {
+        self.inner.observation_space()
+    }
+
+    fn action_space(&self) -> &Space {
+        self.inner.action_space()
+    }
+
+    fn reset(
+        &mut self,
+        seed: Option<u64>,
+        options: &ResetOptions,
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<(), EnvError> {
+        self.elapsed = 0;
+        self.inner.reset(seed, options, obs, info)
+    }
+
+    fn step(
+        &mut self,
+        action: &[u8],
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<Transition, EnvError> {
+        let mut t = self.inner.step(action, obs, info)?;
+        self.elapsed += 1;
+        if self.max_steps.is_some_and(|max| self.elapsed >= max) {
+            t.truncated = true;
+        }
+        Ok(t)
+    }
+
+    fn render(&mut self) -> Result<Option<(usize, usize, Vec<u8>)>, EnvError> {
+        self.inner.render()
+    }
+
+    fn close(&mut self) {
+        self.inner.close()
+    }
+}
+
+impl Env for Box<dyn Env> {
+    fn observation_space(&self) -> &Space {
+        (**self).observation_space()
+    }
+
+    fn action_space(&self) -> &Space {
+        (**self).action_space()
+    }
+
+    fn reset(
+        &mut self,
+        seed: Option<u64>,
+        options: &ResetOptions,
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<(), EnvError> {
+        (**self).reset(seed, options, obs, info)
+    }
+
+    fn step(
+        &mut self,
+        action: &[u8],
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<Transition, EnvError> {
+        (**self).step(action, obs, info)
+    }
+
+    fn render(&mut self) -> Result<Option<(usize, usize, Vec<u8>)>, EnvError> {
+        (**self).render()
+    }
+
+    fn close(&mut self) {
+        (**self).close()
+    }
+}
