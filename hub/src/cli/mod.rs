@@ -1,0 +1,80 @@
+//! Command-line parsing and dispatch. Each subcommand lives in its own file.
+
+mod envs;
+mod match_cmd;
+mod show;
+mod table;
+
+use clap::{Parser, Subcommand};
+use envhub::{Registry, Settings};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// envhub — a zero-copy, shared-memory hub for robot-learning environments.
+#[derive(Parser, Debug)]
+#[command(name = "envhub", version, about, long_about = None)]
+struct Cli {
+    /// Registry file to use instead of the built-in catalog; repeat to combine files
+    /// (`@default` is the built-in one). Overrides ENVHUB_REGISTRY and the config file.
+    #[arg(long = "registry", value_name = "FILE", global = true)]
+    registries: Vec<PathBuf>,
+
+    /// Hub config file (default: ENVHUB_CONFIG, else ./envhub.yaml if present).
+    #[arg(long, value_name = "FILE", global = true)]
+    config: Option<PathBuf>,
+
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// List and filter the environments of the registry.
+    Envs(envs::Args),
+    /// Show one registry entry in full.
+    Show(show::Args),
+    /// Find the environment that best fits a task description.
+    Match(match_cmd::Args),
+}
+
+/// What a subcommand reports besides its output: success, or "ran fine but found nothing".
+pub(crate) enum Outcome {
+    Done,
+    NotFound,
+}
+
+/// Parses the command line, runs it, prints errors as `error: ...` with a `hint:` line.
+pub fn run() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging();
+    match dispatch(cli) {
+        Ok(Outcome::Done) => ExitCode::SUCCESS,
+        Ok(Outcome::NotFound) => ExitCode::from(1),
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
+    let settings = Settings::discover(cli.config.as_deref())?;
+    let registry = || -> anyhow::Result<Registry> { Ok(settings.registry(&cli.registries)?) };
+    match cli.command {
+        Command::Envs(args) => envs::run(&registry()?, &args),
+        Command::Show(args) => show::run(&registry()?, &args),
+        Command::Match(args) => match_cmd::run(&registry()?, &args),
+    }
+}
+
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = std::env::var(envhub::env_vars::ENVHUB_LOG)
+        .ok()
+        .or_else(|| std::env::var("RUST_LOG").ok())
+        .unwrap_or_else(|| "warn".to_string());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::new(filter))
+        .with_writer(std::io::stderr)
+        .try_init();
+}

@@ -1,0 +1,11 @@
+//! Every `ENVHUB_*` environment variable, in one place.
+
+/// Path of the hub config file (default: `envhub.yaml` in the current directory, if present).
+pub const ENVHUB_CONFIG: &str = "ENVHUB_CONFIG";
+
+/// Registry files to use instead of the built-in catalog, separated by `:`
+/// (`@default` names the built-in one, to combine it with others).
+pub const ENVHUB_REGISTRY: &str = "ENVHUB_REGISTRY";
+
+/// Log filter for the CLI and workers (as `RUST_LOG`, which is also honoured), e.g. `debug`.
+pub const ENVHUB_LOG: &str = "ENVHUB_LOG";

@@ -1,0 +1,267 @@
+//! Task matching: from a plain-language task description to the best registry entry.
+//!
+//! The description is cut into task words; the words that mean something to the registry
+//! (they match some entry's tags or robot model) are searched with the structured fields of
+//! the spec, relaxing the filters step by step as RoboSmith does. The score is the share of
+//! those words the chosen entry matches, so it is easy to explain in the reason.
+
+use crate::entry::EnvEntry;
+use crate::registry::{Registry, RegistryError, SearchQuery, matching_tags};
+use crate::tags::words;
+use serde::{Deserialize, Serialize};
+
+/// What a user wants to train, in RoboSmith's terms.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TaskSpec {
+    /// The task in plain language ("a quadruped runs forward").
+    pub task_description: String,
+    /// Robot morphology (`arm`, `quadruped`, ...).
+    pub robot_type: Option<String>,
+    /// Environment category (`tabletop`, `floor`, ...).
+    pub environment_type: Option<String>,
+    /// A registry id that overrides matching.
+    pub environment_id: Option<String>,
+    /// Restrict to one framework.
+    pub framework: Option<String>,
+    /// Specific robot model (`franka`).
+    pub robot_model: Option<String>,
+}
+
+/// A ranked candidate.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Candidate {
+    /// Registry id.
+    pub id: String,
+    /// Share of the task words matched, in [0, 1].
+    pub score: f64,
+    /// The task words it matched.
+    pub matched_tags: Vec<String>,
+}
+
+/// The best entry for a task, why, and the runners-up.
+#[derive(Clone, Debug)]
+pub struct TaskMatch<'a> {
+    /// The chosen entry.
+    pub entry: &'a EnvEntry,
+    /// Share of the task words matched, in [0, 1] (1 for an explicit id).
+    pub score: f64,
+    /// For people: which words matched, and which filters were used or relaxed.
+    pub reason: String,
+    /// Other candidates, best first.
+    pub alternatives: Vec<Candidate>,
+}
+
+/// Why no entry fits.
+#[derive(Debug, thiserror::Error)]
+pub enum MatchError {
+    /// The explicit `environment_id` does not exist.
+    #[error(transparent)]
+    UnknownId(#[from] RegistryError),
+    /// Nothing fits well enough.
+    #[error("no environment matches the task: {why}\nhint: {hint}")]
+    NoMatch {
+        /// What was tried.
+        why: String,
+        /// What to try.
+        hint: String,
+    },
+}
+
+/// How many runners-up a match reports.
+const MAX_ALTERNATIVES: usize = 5;
+
+/// Once a filter the user gave has been relaxed, the match must cover at least this share of
+/// the task words: the user asked for something else, so weak word overlap is not enough.
+const MIN_RELAXED_SCORE: f64 = 0.5;
+
+/// Finds the best entry of `registry` for `spec`.
+///
+/// Order: an explicit `environment_id`; a search with every structured field and the task
+/// words; the same without the environment type; then robot type and task words only.
+/// A candidate that matches none of the task words is rejected rather than guessed.
+pub fn match_task<'a>(
+    spec: &TaskSpec,
+    registry: &'a Registry,
+) -> Result<TaskMatch<'a>, MatchError> {
+    if let Some(id) = spec
+        .environment_id
+        .as_deref()
+        .filter(|id| !id.trim().is_empty())
+    {
+        let entry = registry.get(id.trim())?;
+        return Ok(TaskMatch {
+            entry,
+            score: 1.0,
+            reason: format!("environment `{}` was requested explicitly", entry.id),
+            alternatives: Vec::new(),
+        });
+    }
+
+    let said = words(&spec.task_description);
+    let tags = known_words(&said, registry);
+    if tags.is_empty() {
+        return Err(MatchError::NoMatch {
+            why: if said.is_empty() {
+                "the description has no task words".to_string()
+            } else {
+                format!(
+                    "none of its words ({}) match a tag or robot model in the registry",
+                    said.join(", ")
+                )
+            },
+            hint: "describe the task with words such as walk, run, reach, push, pick, place, balance, or pass `--id`".to_string(),
+        });
+    }
+
+    let full = SearchQuery {
+        robot_type: spec.robot_type.clone(),
+        env_type: spec.environment_type.clone(),
+        framework: spec.framework.clone(),
+        robot_model: spec.robot_model.clone(),
+        action_type: None,
+        tags: tags.clone(),
+    };
+    let without_env_type = SearchQuery {
+        env_type: None,
+        ..full.clone()
+    };
+    let robot_and_tags = SearchQuery {
+        robot_type: spec.robot_type.clone(),
+        tags: tags.clone(),
+        ..SearchQuery::default()
+    };
+    let given = |q: &SearchQuery| {
+        let fields: Vec<String> = [
+            ("robot type", &q.robot_type),
+            ("environment type", &q.env_type),
+            ("framework", &q.framework),
+            ("model", &q.robot_model),
+        ]
+        .iter()
+        .filter_map(|(name, v)| v.as_ref().map(|v| format!("{name} `{v}`")))
+        .collect();
+        if fields.is_empty() {
+            String::new()
+        } else {
+            format!(" with {}", fields.join(", "))
+        }
+    };
+    let attempts = [
+        (given(&full), full, false),
+        (
+            format!("{} (environment type relaxed)", given(&without_env_type)),
+            without_env_type,
+            true,
+        ),
+        (
+            format!("{} (other filters relaxed)", given(&robot_and_tags)),
+            robot_and_tags,
+            true,
+        ),
+    ];
+
+    // Every word of the description counts, known to the registry or not: a task that is
+    // mostly about things no entry offers ("a submarine in a reef") must not score high.
+    let total = said.len();
+    let score = |n: usize| (n as f64 / total as f64 * 100.0).round() / 100.0;
+    let mut rejected: Option<String> = None;
+    let mut previous: Option<SearchQuery> = None;
+    for (how, query, relaxed) in attempts {
+        // A relaxation that drops nothing would repeat the search before it.
+        if previous.as_ref() == Some(&query) {
+            continue;
+        }
+        let hits = registry.search(&query);
+        previous = Some(query.clone());
+        let Some(best) = hits.first() else { continue };
+        let best_score = score(best.matched_tags.len());
+        if relaxed && best_score < MIN_RELAXED_SCORE {
+            rejected.get_or_insert_with(|| {
+                format!(
+                    "the closest entry, `{}`, matches only {}/{} task words ({}){}",
+                    best.entry.id,
+                    best.matched_tags.len(),
+                    total,
+                    best.matched_tags.join(", "),
+                    how
+                )
+            });
+            continue;
+        }
+        let alternatives = hits
+            .iter()
+            .skip(1)
+            .take(MAX_ALTERNATIVES)
+            .map(|h| Candidate {
+                id: h.entry.id.clone(),
+                score: score(h.matched_tags.len()),
+                matched_tags: h.matched_tags.clone(),
+            })
+            .collect();
+        let unmatched: Vec<&str> = said
+            .iter()
+            .filter(|w| !best.matched_tags.contains(w))
+            .map(String::as_str)
+            .collect();
+        let mut reason = format!(
+            "matched {}/{} task words ({}){}",
+            best.matched_tags.len(),
+            total,
+            best.matched_tags.join(", "),
+            how
+        );
+        if !unmatched.is_empty() {
+            reason.push_str(&format!("; not matched: {}", unmatched.join(", ")));
+        }
+        return Ok(TaskMatch {
+            entry: best.entry,
+            score: best_score,
+            reason,
+            alternatives,
+        });
+    }
+
+    let filters: Vec<String> = [
+        ("robot type", &spec.robot_type),
+        ("environment type", &spec.environment_type),
+        ("framework", &spec.framework),
+        ("model", &spec.robot_model),
+    ]
+    .iter()
+    .filter_map(|(name, v)| v.as_ref().map(|v| format!("{name} `{v}`")))
+    .collect();
+    let why = rejected.unwrap_or_else(|| {
+        format!(
+            "no entry{} matches any of the task words ({})",
+            if filters.is_empty() {
+                String::new()
+            } else {
+                format!(" with {}", filters.join(", "))
+            },
+            tags.join(", ")
+        )
+    });
+    Err(MatchError::NoMatch {
+        why,
+        hint: format!(
+            "robot types in the registry: {}; environment types: {}",
+            registry.robot_types().join(", "),
+            registry.distinct("env_type").join(", ")
+        ),
+    })
+}
+
+/// The words of a description that some entry of the registry can match.
+fn known_words(said: &[String], registry: &Registry) -> Vec<String> {
+    said.iter()
+        .filter(|w| {
+            let one = std::slice::from_ref(*w);
+            registry
+                .entries()
+                .iter()
+                .any(|e| !matching_tags(e, one).is_empty())
+        })
+        .cloned()
+        .collect()
+}

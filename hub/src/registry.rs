@@ -1,0 +1,453 @@
+//! The environment registry: YAML catalogs loaded, combined, looked up and searched.
+
+use crate::entry::EnvEntry;
+use crate::tags::{stem, stems_match, tag_stems};
+use envhub_core::canonical_framework;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// The catalog that ships with envhub, compiled in so the binary works from anywhere.
+const DEFAULT_REGISTRY: &str = include_str!("../../configs/env_registry.yaml");
+
+/// The name under which the built-in catalog appears in lists of registry files.
+pub const DEFAULT_REGISTRY_NAME: &str = "@default";
+
+/// An error loading a registry file or looking something up in it.
+#[derive(Debug, thiserror::Error)]
+pub enum RegistryError {
+    /// The file could not be read.
+    #[error(
+        "cannot read registry `{path}`: {source}\nhint: pass an existing YAML file, or `{DEFAULT_REGISTRY_NAME}` for the built-in catalog"
+    )]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The YAML is malformed or does not fit the format.
+    #[error("{path}:{line}:{column}: {message}\nhint: {hint}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// What is wrong, with the field's path (`environments[3].task_tags`).
+        message: String,
+        /// How to fix it.
+        hint: String,
+    },
+    /// A field has a value that is not allowed.
+    #[error("{path}:{line}: `environments[{index}].{field}`: {message}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// 1-based line of the entry (0 if unknown).
+        line: usize,
+        /// Index of the entry.
+        index: usize,
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// Two entries of one file share an id.
+    #[error(
+        "{path}:{line}: duplicate id `{id}` (first defined at line {first_line})\nhint: ids must be unique within a file; to override an entry of another registry, put it in a later file"
+    )]
+    DuplicateId {
+        /// The file.
+        path: String,
+        /// The id.
+        id: String,
+        /// Line of the second definition.
+        line: usize,
+        /// Line of the first definition.
+        first_line: usize,
+    },
+    /// No entry has this id.
+    #[error("unknown environment id `{id}`{}\nhint: `envhub envs` lists every id", did_you_mean(.closest))]
+    UnknownId {
+        /// The id asked for.
+        id: String,
+        /// The closest ids that exist.
+        closest: Vec<String>,
+    },
+}
+
+fn did_you_mean(closest: &[String]) -> String {
+    match closest {
+        [] => String::new(),
+        ids => format!(
+            "; did you mean {}?",
+            ids.iter()
+                .map(|c| format!("`{c}`"))
+                .collect::<Vec<_>>()
+                .join(" or ")
+        ),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RegistryFile {
+    environments: Vec<EnvEntry>,
+}
+
+/// Filters for [`Registry::search`]. Every filter is a case-insensitive substring; empty
+/// filters are ignored; all given filters must hold.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SearchQuery {
+    /// Robot type (`quad` matches `quadruped`).
+    pub robot_type: Option<String>,
+    /// Environment type.
+    pub env_type: Option<String>,
+    /// Framework (`gym` matches `gymnasium`; aliases such as `isaaclab` are understood).
+    pub framework: Option<String>,
+    /// Robot model.
+    pub robot_model: Option<String>,
+    /// Action type.
+    pub action_type: Option<String>,
+    /// Task words: an entry must match at least one; results are sorted by how many match.
+    pub tags: Vec<String>,
+}
+
+/// One search result.
+#[derive(Clone, Debug)]
+pub struct SearchHit<'a> {
+    /// The entry.
+    pub entry: &'a EnvEntry,
+    /// The query tags it matched (as given in the query).
+    pub matched_tags: Vec<String>,
+}
+
+/// A searchable catalog of environments, in file order.
+#[derive(Clone, Debug, Default)]
+pub struct Registry {
+    entries: Vec<EnvEntry>,
+    sources: Vec<String>,
+}
+
+impl Registry {
+    /// The built-in catalog (`configs/env_registry.yaml`).
+    pub fn builtin() -> Registry {
+        let mut registry = Registry::default();
+        registry
+            .add_yaml(DEFAULT_REGISTRY, &builtin_name(), &builtin_dir())
+            .expect("the built-in registry is valid (checked by tests)");
+        registry
+    }
+
+    /// Loads and combines registry files, in order. `@default` stands for the built-in
+    /// catalog. An id that appears in a later file replaces the earlier entry in place (so a
+    /// user's file can override a default entry without reordering the catalog); within one
+    /// file, a repeated id is an error.
+    pub fn load<P: AsRef<Path>>(paths: &[P]) -> Result<Registry, RegistryError> {
+        let mut registry = Registry::default();
+        for path in paths {
+            let path = path.as_ref();
+            if path == Path::new(DEFAULT_REGISTRY_NAME) {
+                registry.add_yaml(DEFAULT_REGISTRY, &builtin_name(), &builtin_dir())?;
+                continue;
+            }
+            let text = std::fs::read_to_string(path).map_err(|source| RegistryError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
+            let dir = path.parent().unwrap_or(Path::new("."));
+            registry.add_yaml(&text, &path.display().to_string(), dir)?;
+        }
+        Ok(registry)
+    }
+
+    /// Parses one registry file's text and merges it in. `base_dir` anchors relative
+    /// `asset_path`s; `name` is used in error messages.
+    pub fn add_yaml(
+        &mut self,
+        text: &str,
+        name: &str,
+        base_dir: &Path,
+    ) -> Result<(), RegistryError> {
+        let entries = parse(text, name)?;
+        let mut seen = std::collections::HashSet::new();
+        for (index, mut entry) in entries.into_iter().enumerate() {
+            validate(&entry, index, text, name)?;
+            if !seen.insert(entry.id.clone()) {
+                let lines = id_lines(text, &entry.id);
+                return Err(RegistryError::DuplicateId {
+                    path: name.to_string(),
+                    id: entry.id,
+                    line: lines.get(1).copied().unwrap_or(0),
+                    first_line: lines.first().copied().unwrap_or(0),
+                });
+            }
+            if let Some(asset) = &entry.asset_path
+                && asset.is_relative()
+            {
+                entry.asset_path = Some(base_dir.join(asset));
+            }
+            match self.entries.iter_mut().find(|e| e.id == entry.id) {
+                Some(existing) => {
+                    tracing::debug!(id = %entry.id, file = name, "registry entry overridden");
+                    *existing = entry;
+                }
+                None => self.entries.push(entry),
+            }
+        }
+        self.sources.push(name.to_string());
+        Ok(())
+    }
+
+    /// The files this registry was built from, in order.
+    pub fn sources(&self) -> &[String] {
+        &self.sources
+    }
+
+    /// The entry with this id, or an error naming the closest ids.
+    pub fn get(&self, id: &str) -> Result<&EnvEntry, RegistryError> {
+        self.entries
+            .iter()
+            .find(|e| e.id == id)
+            .ok_or_else(|| RegistryError::UnknownId {
+                id: id.to_string(),
+                closest: self.closest_ids(id),
+            })
+    }
+
+    /// Up to three ids close to `id` (by spelling, or matching its `env_id`).
+    pub fn closest_ids(&self, id: &str) -> Vec<String> {
+        let by_env_id: Vec<String> = self
+            .entries
+            .iter()
+            .filter(|e| e.env_id.eq_ignore_ascii_case(id))
+            .map(|e| e.id.clone())
+            .collect();
+        if !by_env_id.is_empty() {
+            return by_env_id;
+        }
+        envhub_core::closest(id, self.entries.iter().map(|e| e.id.as_str()), 3)
+    }
+
+    /// Every entry, in file order.
+    pub fn entries(&self) -> &[EnvEntry] {
+        &self.entries
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether the registry is empty.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Distinct values of a field (`framework`, `robot_type`, `robot_model`, `env_type`,
+    /// `action_type`, `obs_type`), sorted.
+    pub fn distinct(&self, field: &str) -> Vec<String> {
+        let mut values: Vec<String> = self
+            .entries
+            .iter()
+            .map(|e| e.field(field).to_string())
+            .filter(|v| !v.is_empty())
+            .collect();
+        values.sort();
+        values.dedup();
+        values
+    }
+
+    /// Distinct frameworks, sorted.
+    pub fn frameworks(&self) -> Vec<String> {
+        self.distinct("framework")
+    }
+
+    /// Distinct robot types, sorted.
+    pub fn robot_types(&self) -> Vec<String> {
+        self.distinct("robot_type")
+    }
+
+    /// Entries that pass every filter of `query`; with tags, only entries matching at least
+    /// one tag, sorted by the number matched (ties keep file order).
+    pub fn search(&self, query: &SearchQuery) -> Vec<SearchHit<'_>> {
+        let filters = [
+            ("robot_type", &query.robot_type),
+            ("env_type", &query.env_type),
+            ("robot_model", &query.robot_model),
+            ("action_type", &query.action_type),
+        ];
+        let mut hits: Vec<SearchHit<'_>> = self
+            .entries
+            .iter()
+            .filter(|e| {
+                filters.iter().all(|(field, value)| match value {
+                    Some(v) if !v.trim().is_empty() => contains_ci(e.field(field), v),
+                    _ => true,
+                })
+            })
+            .filter(|e| match &query.framework {
+                Some(f) if !f.trim().is_empty() => framework_matches(&e.framework, f),
+                _ => true,
+            })
+            .map(|e| SearchHit {
+                entry: e,
+                matched_tags: matching_tags(e, &query.tags),
+            })
+            .collect();
+        let tags: Vec<&String> = query.tags.iter().filter(|t| !t.trim().is_empty()).collect();
+        if !tags.is_empty() {
+            hits.retain(|h| !h.matched_tags.is_empty());
+            // Stable sort: equal scores stay in file order.
+            hits.sort_by_key(|h| std::cmp::Reverse(h.matched_tags.len()));
+        }
+        hits
+    }
+}
+
+fn builtin_name() -> String {
+    format!("configs/env_registry.yaml ({DEFAULT_REGISTRY_NAME})")
+}
+
+/// Where the built-in catalog's relative asset paths point: the `configs` folder of the
+/// source tree the binary was built from.
+fn builtin_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
+}
+
+fn contains_ci(haystack: &str, needle: &str) -> bool {
+    haystack
+        .to_lowercase()
+        .contains(&needle.trim().to_lowercase())
+}
+
+/// Substring match as RoboSmith does (`gym` finds `gymnasium`), plus aliases
+/// (`isaaclab` finds `isaac_lab`, `mjcf` finds `custom_mjcf`).
+fn framework_matches(entry_framework: &str, query: &str) -> bool {
+    if contains_ci(entry_framework, query) {
+        return true;
+    }
+    match (
+        canonical_framework(query),
+        canonical_framework(entry_framework),
+    ) {
+        (Some(q), Some(e)) => q == e,
+        _ => false,
+    }
+}
+
+/// The query tags an entry matches, through its tags' stems and its robot model.
+pub(crate) fn matching_tags(entry: &EnvEntry, tags: &[String]) -> Vec<String> {
+    let mut offered: Vec<String> = entry.task_tags.iter().flat_map(|t| tag_stems(t)).collect();
+    offered.extend(tag_stems(&entry.robot_model));
+    let mut matched = Vec::new();
+    for tag in tags {
+        let tag = tag.trim();
+        if tag.is_empty() || matched.iter().any(|m: &String| m.eq_ignore_ascii_case(tag)) {
+            continue;
+        }
+        let query_stems = tag_stems(tag);
+        let whole = stem(tag);
+        let hit = if query_stems.len() > 1 {
+            // A compound query tag (`pick-and-place`) matches an entry's identical compound.
+            offered.contains(&whole)
+        } else {
+            offered.iter().any(|o| stems_match(o, &whole))
+        };
+        if hit {
+            matched.push(tag.to_lowercase());
+        }
+    }
+    matched
+}
+
+fn parse(text: &str, name: &str) -> Result<Vec<EnvEntry>, RegistryError> {
+    serde_norway::from_str::<RegistryFile>(text)
+        .map(|f| f.environments)
+        .map_err(|err| {
+            let (line, column) = err
+                .location()
+                .map(|l| (l.line(), l.column()))
+                .unwrap_or((0, 0));
+            let mut message = err.to_string();
+            if let Some(at) = message.rfind(" at line ") {
+                message.truncate(at);
+            }
+            let hint = if message.contains("unknown field") {
+                "remove or rename the field; the valid ones are listed above"
+            } else if message.contains("missing field") {
+                "every entry needs `id`, `name`, `framework`, `env_id`, `robot_type` and `env_type`"
+            } else if message.contains("invalid type") {
+                "`task_tags` is a list of words, `kwargs` a mapping, `max_episode_steps` a positive integer, other fields are text"
+            } else {
+                "the file must be a YAML mapping with an `environments:` list of entries"
+            };
+            RegistryError::Parse {
+                path: name.to_string(),
+                line,
+                column,
+                message,
+                hint: hint.to_string(),
+            }
+        })
+}
+
+fn validate(entry: &EnvEntry, index: usize, text: &str, name: &str) -> Result<(), RegistryError> {
+    let line = id_lines(text, &entry.id).first().copied().unwrap_or(0);
+    let invalid = |field: &'static str, message: String| RegistryError::Invalid {
+        path: name.to_string(),
+        line,
+        index,
+        field,
+        message,
+    };
+    if entry.id.trim().is_empty() || entry.id.chars().any(char::is_whitespace) {
+        return Err(invalid(
+            "id",
+            format!(
+                "`{}` is not a valid id; use letters, digits and dashes (`my-env`)",
+                entry.id
+            ),
+        ));
+    }
+    for (field, value) in [
+        ("name", &entry.name),
+        ("framework", &entry.framework),
+        ("env_id", &entry.env_id),
+        ("robot_type", &entry.robot_type),
+        ("env_type", &entry.env_type),
+    ] {
+        if value.trim().is_empty() {
+            return Err(invalid(
+                field,
+                format!("must not be empty (entry `{}`)", entry.id),
+            ));
+        }
+    }
+    if entry.max_episode_steps == Some(0) {
+        return Err(invalid(
+            "max_episode_steps",
+            format!(
+                "must be a positive integer (entry `{}`); leave it out to keep the framework's default",
+                entry.id
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// 1-based lines where `id: <id>` is written (block style, with or without quotes).
+fn id_lines(text: &str, id: &str) -> Vec<usize> {
+    text.lines()
+        .enumerate()
+        .filter_map(|(i, line)| {
+            let rest = line.trim_start().trim_start_matches("- ").trim_start();
+            let value = rest.strip_prefix("id:")?;
+            let value = value.split(" #").next().unwrap_or("").trim();
+            let value = value.trim_matches(|c| c == '"' || c == '\'');
+            (value == id).then_some(i + 1)
+        })
+        .collect()
+}
