@@ -1,0 +1,59 @@
+//! `ClassicEnv`: an `Env` whose whole simulator state is a few numbers that can be read and set.
+
+use envhub_core::{Env, EnvConfig, EnvError};
+
+/// A classic-control env. Its full internal state is a short vector of `f64`, the same numbers
+/// as Gymnasium's `env.unwrapped.state`, so a state can be saved, restored, or copied from
+/// Gymnasium to compare the two implementations step by step.
+pub trait ClassicEnv: Env {
+    /// The Gymnasium id (`CartPole-v1`).
+    fn env_id(&self) -> &'static str;
+
+    /// Names of the state variables, in the order `state` lists them.
+    fn state_names(&self) -> &'static [&'static str];
+
+    /// The current state, in the order of `state_names`; empty before the first `reset` or
+    /// `set_state`.
+    fn state(&self) -> &[f64];
+
+    /// Replaces the state, as assigning a float64 array to `env.unwrapped.state` does in
+    /// Gymnasium; the next `step` starts from it. The values are not range-checked (Gymnasium
+    /// does not check them either). Fails only on a wrong number of values.
+    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError>;
+}
+
+/// `state` as an array of `N`, or an error naming the expected variables.
+pub(crate) fn state_array<const N: usize>(
+    env_id: &str,
+    names: &[&str],
+    state: &[f64],
+) -> Result<[f64; N], EnvError> {
+    state.try_into().map_err(|_| EnvError::InvalidReset {
+        env_id: env_id.to_string(),
+        reason: format!(
+            "`set_state` expects {N} values ({}), got {}",
+            names.join(", "),
+            state.len()
+        ),
+    })
+}
+
+/// The error of `step` before any `reset`.
+pub(crate) fn not_reset(env_id: &str) -> EnvError {
+    EnvError::Simulator {
+        env_id: env_id.to_string(),
+        reason: "`step` called before `reset`\nhint: call `reset` (or `set_state`) first".into(),
+    }
+}
+
+/// Classic-control envs do not render: any `render_mode` is refused rather than ignored.
+pub(crate) fn check_render_mode(env_id: &str, config: &EnvConfig) -> Result<(), EnvError> {
+    match &config.render_mode {
+        None => Ok(()),
+        Some(mode) => Err(EnvError::RenderMode {
+            env_id: env_id.to_string(),
+            mode: mode.clone(),
+            supported: vec!["(none: native classic-control envs do not render)".into()],
+        }),
+    }
+}

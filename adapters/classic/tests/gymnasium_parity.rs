@@ -1,0 +1,237 @@
+//! Parity with Gymnasium itself (envpool's `*_align_test.py` idea, driven from Rust).
+//!
+//! `tests/python/classic_reference.py` records trajectories of Gymnasium's own envs: for each
+//! run the seeded initial state, then per step the state before it, the action, and the
+//! observation, reward and `terminated` after it, with a fresh initial state whenever an
+//! episode ends. This test replays them: the same seed must give the same initial states (NumPy's
+//! generator is reproduced bit for bit), and the same actions the same observations (within
+//! float32 rounding), rewards (within 1e-9 relative) and terminations.
+//!
+//! With the same C library as NumPy (glibc on Linux), every step is bit-identical (the summary
+//! printed with `--nocapture` counts any that are not); the tolerances leave room for another
+//! libm. The envs run free from the seeded initial state. Where Rust's and NumPy's `sin`/`cos` differ
+//! in the last bit, the state before a step may differ by a rounding error; the test checks it
+//! is one, then copies Gymnasium's state in (`set_state`) so chaotic envs (Acrobot) cannot
+//! amplify it over hundreds of steps.
+//!
+//! Python: `$ENVHUB_PYTHON`, else `<repo>/.venv/bin/python` (`make test` creates it). If it
+//! cannot import gymnasium the test fails, unless `ENVHUB_SKIP_PYTHON_TESTS=1`.
+
+use envhub_classic::ClassicControl;
+use envhub_core::{EnvConfig, Info, ResetOptions};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Observations: float32 rounding.
+const OBS_TOL: f64 = 1e-6;
+/// Rewards, relative (absolute for rewards near 0).
+const REWARD_TOL: f64 = 1e-9;
+/// The state before a step, where a last-bit difference in `sin`/`cos` may have crept in.
+const STATE_TOL: f64 = 1e-9;
+
+fn close(got: f64, want: f64, tol: f64) -> bool {
+    (got - want).abs() <= tol * want.abs().max(1.0)
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .expect("a list of numbers")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Runs the reference script, or says why it cannot (`None` when skipping is allowed).
+fn reference() -> Option<Value> {
+    let root = repo_root();
+    let python = std::env::var_os("ENVHUB_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join(".venv/bin/python"));
+    let probe = Command::new(&python)
+        .args(["-c", "import gymnasium"])
+        .output();
+    let problem = match probe {
+        Err(e) => Some(format!("cannot run `{}`: {e}", python.display())),
+        Ok(out) if !out.status.success() => Some(format!(
+            "`{}` cannot import gymnasium: {}",
+            python.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+                .trim()
+        )),
+        Ok(_) => None,
+    };
+    if let Some(problem) = problem {
+        if std::env::var("ENVHUB_SKIP_PYTHON_TESTS").as_deref() == Ok("1") {
+            println!("skipped the gymnasium parity test (ENVHUB_SKIP_PYTHON_TESTS=1): {problem}");
+            return None;
+        }
+        panic!(
+            "{problem}\nhint: run `make test` (it creates `.venv` with gymnasium), or set \
+             ENVHUB_PYTHON to a Python with gymnasium 1.4; ENVHUB_SKIP_PYTHON_TESTS=1 skips \
+             this test"
+        );
+    }
+    let script = root.join("tests/python/classic_reference.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .current_dir(&root)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run `{}`: {e}", script.display()));
+    assert!(
+        out.status.success(),
+        "`{}` failed:\n{}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(serde_json::from_slice(&out.stdout).expect("the reference script prints JSON"))
+}
+
+/// What one run of one env showed, for the summary.
+#[derive(Default)]
+struct Tally {
+    steps: usize,
+    terminations: usize,
+    resets: usize,
+    resyncs: usize,
+    max_state_diff: f64,
+    /// Steps whose observation or reward is not bit-identical to Gymnasium's.
+    inexact: usize,
+}
+
+#[test]
+fn matches_gymnasium() {
+    let Some(reference) = reference() else {
+        return;
+    };
+    let version = reference["gymnasium"].as_str().unwrap_or("?");
+    assert!(
+        version.starts_with("1.4."),
+        "the reference is gymnasium {version}; these envs follow gymnasium 1.4\n\
+         hint: install gymnasium==1.4.* in the Python the test runs"
+    );
+
+    let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
+    for run in reference["runs"].as_array().unwrap() {
+        let env_id = run["env_id"].as_str().unwrap();
+        let seed = run["seed"].as_u64().unwrap();
+        let at = format!("{env_id} seed {seed} kwargs {}", run["kwargs"]);
+        let config = EnvConfig {
+            extra: serde_json::from_value(run["kwargs"].clone()).unwrap(),
+            ..EnvConfig::default()
+        };
+        let options: ResetOptions = serde_json::from_value(run["options"].clone()).unwrap();
+        let tally = tallies.entry(env_id.to_string()).or_default();
+
+        let mut env = ClassicControl.make_classic(env_id, &config).unwrap();
+        let mut obs = vec![0u8; env.observation_space().byte_len()];
+        let mut info = Info::default();
+        // Checks an observation; returns whether it is bit-identical.
+        let check_obs = |obs: &[u8], want: &Value, what: &str| {
+            let got: Vec<f64> = obs
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()) as f64)
+                .collect();
+            let want = floats(want);
+            assert_eq!(got.len(), want.len(), "{what}");
+            for (g, w) in got.iter().zip(&want) {
+                assert!(close(*g, *w, OBS_TOL), "{what}: obs {got:?} != {want:?}");
+            }
+            got == want
+        };
+
+        env.reset(Some(seed), &options, &mut obs, &mut info)
+            .unwrap();
+        assert_eq!(
+            env.state(),
+            floats(&run["reset_state"]),
+            "{at}: seeded initial state"
+        );
+        check_obs(&obs, &run["reset_obs"], &format!("{at}: reset"));
+
+        for (i, step) in run["steps"].as_array().unwrap().iter().enumerate() {
+            let at = format!("{at} step {i}");
+            let want_state = floats(&step["state"]);
+            if env.state() != want_state {
+                let diff = env
+                    .state()
+                    .iter()
+                    .zip(&want_state)
+                    .map(|(g, w)| (g - w).abs() / w.abs().max(1.0))
+                    .fold(0.0, f64::max);
+                assert!(
+                    diff <= STATE_TOL,
+                    "{at}: state {:?} != {want_state:?}",
+                    env.state()
+                );
+                // MountainCarContinuous's float32 arithmetic is reproduced exactly.
+                assert_ne!(
+                    step["state_dtype"], "float32",
+                    "{at}: float32 state differs"
+                );
+                tally.max_state_diff = tally.max_state_diff.max(diff);
+                tally.resyncs += 1;
+                env.set_state(&want_state).unwrap();
+            }
+
+            let action: Vec<u8> = match &step["action"] {
+                Value::Number(n) => n.as_i64().unwrap().to_le_bytes().to_vec(),
+                list => floats(list)
+                    .iter()
+                    .flat_map(|a| (*a as f32).to_le_bytes())
+                    .collect(),
+            };
+            let t = env.step(&action, &mut obs, &mut info).unwrap();
+            let exact_obs = check_obs(&obs, &step["obs"], &at);
+            let reward = step["reward"].as_f64().unwrap();
+            tally.inexact += (!exact_obs || t.reward != reward) as usize;
+            assert!(
+                close(t.reward, reward, REWARD_TOL),
+                "{at}: reward {} != {reward}",
+                t.reward
+            );
+            assert_eq!(
+                t.terminated,
+                step["terminated"].as_bool().unwrap(),
+                "{at}: terminated"
+            );
+            tally.steps += 1;
+            tally.terminations += t.terminated as usize;
+
+            if let Some(reset_state) = step.get("reset_state") {
+                env.reset(None, &options, &mut obs, &mut info).unwrap();
+                assert_eq!(
+                    env.state(),
+                    floats(reset_state),
+                    "{at}: initial state after reset(seed=None)"
+                );
+                check_obs(&obs, &step["reset_obs"], &format!("{at}: reset"));
+                tally.resets += 1;
+            }
+        }
+    }
+
+    println!("gymnasium {version} parity:");
+    for (env_id, t) in &tallies {
+        println!(
+            "  {env_id}: {} steps ({} not bit-identical), {} terminations, {} resets, \
+             {} states resynced (max diff {:e})",
+            t.steps, t.inexact, t.terminations, t.resets, t.resyncs, t.max_state_diff
+        );
+    }
+    assert_eq!(tallies.len(), 5, "every env has reference runs");
+    for (env_id, t) in &tallies {
+        assert!(t.steps >= 300, "{env_id}");
+        if env_id != "Pendulum-v1" {
+            assert!(t.terminations > 0, "{env_id}: no termination exercised");
+        }
+    }
+}

@@ -1,0 +1,177 @@
+//! A worker's envs as one batch: reset, step with autoreset, results written into the blocks
+//! of a response. Used by the worker loop and, without any IPC, by in-process benchmarks.
+
+use crate::layout::{ResponseBlocksMut, env_flag};
+use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions};
+
+/// The envs one worker hosts.
+pub struct EnvBatch {
+    envs: Vec<Box<dyn Env>>,
+    mode: AutoresetMode,
+    obs_bytes: usize,
+    act_bytes: usize,
+    /// next_step mode: the env finished last step and resets on this one.
+    pending_reset: Vec<bool>,
+    infos: Vec<Info>,
+    has_reset: bool,
+}
+
+impl EnvBatch {
+    /// A batch of envs (all with the same spaces) under an autoreset mode.
+    pub fn new(envs: Vec<Box<dyn Env>>, mode: AutoresetMode) -> EnvBatch {
+        let obs_bytes = envs.first().map_or(0, |e| e.observation_space().byte_len());
+        let act_bytes = envs.first().map_or(0, |e| e.action_space().byte_len());
+        let n = envs.len();
+        EnvBatch {
+            envs,
+            mode,
+            obs_bytes,
+            act_bytes,
+            pending_reset: vec![false; n],
+            infos: vec![Info::default(); n],
+            has_reset: false,
+        }
+    }
+
+    /// Number of envs.
+    pub fn len(&self) -> usize {
+        self.envs.len()
+    }
+
+    /// Whether the batch is empty.
+    pub fn is_empty(&self) -> bool {
+        self.envs.is_empty()
+    }
+
+    /// Resets the envs whose flag has [`env_flag::SELECTED`], seeding those with
+    /// [`env_flag::SEEDED`]. Returns the info section.
+    pub fn reset(
+        &mut self,
+        flags: &[u8],
+        seeds: &[u64],
+        options: &ResetOptions,
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let ob = self.obs_bytes;
+        for i in 0..self.envs.len() {
+            let selected = flags[i] & env_flag::SELECTED != 0;
+            if selected {
+                let seed = (flags[i] & env_flag::SEEDED != 0).then_some(seeds[i]);
+                self.infos[i].clear();
+                self.envs[i].reset(
+                    seed,
+                    options,
+                    &mut out.obs[i * ob..(i + 1) * ob],
+                    &mut self.infos[i],
+                )?;
+                self.pending_reset[i] = false;
+            } else {
+                self.infos[i].clear();
+            }
+            out.rewards[i] = 0.0;
+            out.terminated[i] = 0;
+            out.truncated[i] = 0;
+            out.final_mask[i] = 0;
+        }
+        self.has_reset = true;
+        Ok(info_section(&self.infos))
+    }
+
+    /// Whether a reset has happened (stepping before one is an error).
+    pub fn has_reset(&self) -> bool {
+        self.has_reset
+    }
+
+    /// Steps the selected envs, applying the autoreset mode. Unselected envs keep their
+    /// slots untouched except for the flags, which are cleared.
+    pub fn step(
+        &mut self,
+        flags: &[u8],
+        actions: &[u8],
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let (ob, ab) = (self.obs_bytes, self.act_bytes);
+        let no_options = ResetOptions::new();
+        for i in 0..self.envs.len() {
+            out.final_mask[i] = 0;
+            self.infos[i].clear();
+            if flags[i] & env_flag::SELECTED == 0 {
+                out.rewards[i] = 0.0;
+                out.terminated[i] = 0;
+                out.truncated[i] = 0;
+                continue;
+            }
+            let obs = &mut out.obs[i * ob..(i + 1) * ob];
+            if self.pending_reset[i] {
+                // next_step: this step only resets, the action is ignored (Gymnasium 1.x).
+                self.envs[i].reset(None, &no_options, obs, &mut self.infos[i])?;
+                self.pending_reset[i] = false;
+                out.rewards[i] = 0.0;
+                out.terminated[i] = 0;
+                out.truncated[i] = 0;
+                continue;
+            }
+            let t = self.envs[i].step(&actions[i * ab..(i + 1) * ab], obs, &mut self.infos[i])?;
+            out.rewards[i] = t.reward;
+            out.terminated[i] = t.terminated as u8;
+            out.truncated[i] = t.truncated as u8;
+            if t.terminated || t.truncated {
+                match self.mode {
+                    AutoresetMode::NextStep => self.pending_reset[i] = true,
+                    AutoresetMode::SameStep => {
+                        out.final_obs[i * ob..(i + 1) * ob].copy_from_slice(obs);
+                        out.final_mask[i] = 1;
+                        let final_info = std::mem::take(&mut self.infos[i]);
+                        self.envs[i].reset(None, &no_options, obs, &mut self.infos[i])?;
+                        if !final_info.is_empty() {
+                            self.infos[i]
+                                .insert("final_info", InfoValue::Text(info_object(&final_info)));
+                        }
+                    }
+                    AutoresetMode::Disabled => {}
+                }
+            }
+        }
+        Ok(info_section(&self.infos))
+    }
+
+    /// Closes every env.
+    pub fn close(&mut self) {
+        for env in &mut self.envs {
+            env.close();
+        }
+    }
+}
+
+/// `[{...}, {...}]` with one object per env, or nothing when no env reported info.
+fn info_section(infos: &[Info]) -> Vec<u8> {
+    if infos.iter().all(Info::is_empty) {
+        return Vec::new();
+    }
+    let mut out = String::from("[");
+    for (i, info) in infos.iter().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        out.push_str(&info_object(info));
+    }
+    out.push(']');
+    out.into_bytes()
+}
+
+fn info_object(info: &Info) -> String {
+    let map: serde_json::Map<String, serde_json::Value> = info
+        .iter()
+        .map(|(k, v)| {
+            let value = match v {
+                // A nested info (same_step `final_info`) travels as JSON text; unwrap it.
+                InfoValue::Text(t) if k == "final_info" => {
+                    serde_json::from_str(t).unwrap_or_default()
+                }
+                other => serde_json::to_value(other).unwrap_or_default(),
+            };
+            (k.to_string(), value)
+        })
+        .collect();
+    serde_json::Value::Object(map).to_string()
+}

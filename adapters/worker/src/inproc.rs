@@ -1,0 +1,79 @@
+//! `inproc`: the ceiling without IPC — the same envs, split over threads as they would be
+//! over workers, stepped through the same batch code straight into local buffers.
+
+use crate::serve::make_envs;
+use anyhow::Context;
+use envhub_shm::{Layout, WorkerJob, env_flag};
+use rand::SeedableRng;
+use std::time::Instant;
+
+/// Distinct random action batches cycled through (sampling is not what is measured).
+const ACTION_POOL: usize = 64;
+
+pub(crate) fn run(job_json: &str, threads: usize, steps: usize) -> anyhow::Result<()> {
+    let job: WorkerJob = serde_json::from_str(job_json).context("invalid job")?;
+    let threads = threads.clamp(1, job.num_envs.max(1));
+    let barrier = std::sync::Barrier::new(threads + 1);
+    let (total, seconds) = std::thread::scope(|scope| -> anyhow::Result<(usize, f64)> {
+        let mut handles = Vec::new();
+        for t in 0..threads {
+            let mut part = job.clone();
+            part.num_envs = job.num_envs / threads + usize::from(t < job.num_envs % threads);
+            let barrier = &barrier;
+            handles.push(scope.spawn(move || -> Result<usize, String> {
+                let (mut batch, spec) = make_envs(&part)?;
+                let n = part.num_envs;
+                let layout = Layout::new(
+                    n,
+                    spec.observation_space.byte_len(),
+                    spec.action_space.byte_len(),
+                    false,
+                );
+                let mut words = vec![0u64; layout.resp_info.div_ceil(8) + 1];
+                let flags = vec![env_flag::SELECTED; n];
+                let seeds: Vec<u64> = (0..n as u64).collect();
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(t as u64);
+                let actions: Vec<Vec<u8>> = (0..ACTION_POOL)
+                    .map(|_| {
+                        (0..n)
+                            .flat_map(|_| spec.action_space.sample(&mut rng))
+                            .collect()
+                    })
+                    .collect();
+                let buf: &mut [u8] = bytemuck_cast(&mut words);
+                let mut out = layout.response_mut(buf);
+                let seeded = vec![env_flag::SELECTED | env_flag::SEEDED; n];
+                batch
+                    .reset(&seeded, &seeds, &Default::default(), &mut out)
+                    .map_err(|e| e.to_string())?;
+                barrier.wait();
+                for s in 0..steps {
+                    batch
+                        .step(&flags, &actions[s % ACTION_POOL], &mut out)
+                        .map_err(|e| e.to_string())?;
+                }
+                Ok(n * steps)
+            }));
+        }
+        barrier.wait();
+        let start = Instant::now();
+        let mut total = 0;
+        for h in handles {
+            total += h
+                .join()
+                .map_err(|_| anyhow::anyhow!("a stepping thread panicked"))?
+                .map_err(anyhow::Error::msg)?;
+        }
+        Ok((total, start.elapsed().as_secs_f64()))
+    })?;
+    println!(
+        "{}",
+        serde_json::json!({"steps": total, "seconds": seconds, "steps_per_sec": total as f64 / seconds})
+    );
+    Ok(())
+}
+
+fn bytemuck_cast(words: &mut [u64]) -> &mut [u8] {
+    // SAFETY: u64 → u8 reinterpretation; u8 has no alignment or validity requirements.
+    unsafe { std::slice::from_raw_parts_mut(words.as_mut_ptr().cast::<u8>(), words.len() * 8) }
+}

@@ -1,0 +1,93 @@
+//! `envhub-worker`: hosts one adapter's envs in its own process and serves them over shared
+//! memory. Started by the hub (embedded in a client, or the `envhub serve` daemon); not meant
+//! to be run by hand, except `envhub-worker describe` to see what it can host.
+
+mod adapters;
+mod inproc;
+mod null_env;
+mod serve;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "envhub-worker", version, about = "envhub worker process")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print the adapters this binary hosts, with availability, as JSON.
+    Describe,
+    /// Serve a job (JSON) over shared memory until closed or the owner exits.
+    Serve {
+        /// The job, as JSON.
+        #[arg(long)]
+        job: String,
+    },
+    /// Step a job's envs in this process, without IPC, on several threads; print steps/s.
+    Inproc {
+        /// The job, as JSON (`channel` is ignored).
+        #[arg(long)]
+        job: String,
+        /// Threads (the envs are split among them like among workers).
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// Steps per env.
+        #[arg(long, default_value_t = 1000)]
+        steps: usize,
+    },
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Describe => describe(),
+        Command::Serve { job } => serve::run(&job),
+        Command::Inproc {
+            job,
+            threads,
+            steps,
+        } => inproc::run(&job, threads, steps),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("envhub-worker: error: {err:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn describe() -> anyhow::Result<()> {
+    let list: Vec<serde_json::Value> = adapters::all()
+        .iter()
+        .map(|a| {
+            serde_json::json!({
+                "name": a.name(),
+                "frameworks": a.frameworks(),
+                "requires": a.requires(),
+                "description": a.description(),
+                "availability": a.availability(),
+                "envs": a.list_envs(),
+            })
+        })
+        .collect();
+    println!("{}", serde_json::to_string(&list)?);
+    Ok(())
+}
+
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = std::env::var("ENVHUB_LOG")
+        .ok()
+        .or_else(|| std::env::var("RUST_LOG").ok())
+        .unwrap_or_else(|| "warn".to_string());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::new(filter))
+        .with_writer(std::io::stderr)
+        .try_init();
+}
