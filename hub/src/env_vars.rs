@@ -9,3 +9,9 @@ pub const ENVHUB_REGISTRY: &str = "ENVHUB_REGISTRY";
 
 /// Log filter for the CLI and workers (as `RUST_LOG`, which is also honoured), e.g. `debug`.
 pub const ENVHUB_LOG: &str = "ENVHUB_LOG";
+
+/// Path of the `envhub-worker` binary (default: next to `envhub`, then `PATH`).
+pub const ENVHUB_WORKER: &str = "ENVHUB_WORKER";
+
+/// iceoryx2 namespace (file prefix) for this process's sessions; tests set a unique one.
+pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";

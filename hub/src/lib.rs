@@ -5,14 +5,30 @@
 //! memory. It is small (tens to hundreds of entries), so search is a linear scan that keeps
 //! file order as the tie-breaker, which makes results predictable for people.
 
+mod catalog;
 mod entry;
+mod env;
 pub mod env_vars;
+mod error;
+mod hub;
 mod matching;
 mod registry;
+mod routing;
 mod settings;
 mod tags;
+mod vec_env;
+mod worker_binary;
+mod worker_link;
 
+pub use catalog::AdapterInfo;
 pub use entry::EnvEntry;
+pub use env::{Env, Step};
+pub use envhub_core::{AutoresetMode, EnvConfig, ResetOptions, Space};
+pub use error::HubError;
+pub use hub::{Hub, make, make_vec};
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
 pub use registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery};
+pub use routing::{Route, merge_config};
 pub use settings::{CONFIG_FILE_NAME, OneOrMany, Settings, SettingsError};
+pub use vec_env::{Batch, SessionOptions, VecEnv};
+pub use worker_binary::worker_binary;

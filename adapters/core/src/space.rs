@@ -296,34 +296,49 @@ impl Space {
                 got: bytes.len(),
             });
         }
+        if let Some(dtype) = self.dtype() {
+            // A leaf: the common case on the hot path, checked without allocating.
+            return self.validate_leaf(dtype, bytes, String::new);
+        }
         for (path, offset, leaf) in self.leaves() {
             let dtype = leaf.dtype().expect("leaves have a dtype");
-            let data = &bytes[offset..offset + leaf.byte_len()];
-            for i in 0..leaf.num_elements() {
-                let v = dtype.read(data, i);
-                if dtype.is_float() && !v.is_finite() {
-                    return Err(SpaceError::NotFinite {
-                        index: i,
-                        path,
-                        value: v,
-                    });
-                }
-                let (lo, hi) = leaf.bounds(i);
-                // Bounds are checked at the dtype's precision: a float32 box of [-2, 2] must
-                // accept the float32 nearest to 2.0.
-                let (lo, hi) = if dtype == DType::Float32 {
-                    (lo as f32 as f64, hi as f32 as f64)
-                } else {
-                    (lo, hi)
-                };
-                if v < lo || v > hi {
-                    return Err(SpaceError::OutOfRange {
-                        index: i,
-                        path,
-                        value: v,
-                        space: leaf.to_string(),
-                    });
-                }
+            leaf.validate_leaf(dtype, &bytes[offset..offset + leaf.byte_len()], || {
+                path.clone()
+            })?;
+        }
+        Ok(())
+    }
+
+    fn validate_leaf(
+        &self,
+        dtype: DType,
+        data: &[u8],
+        path: impl Fn() -> String,
+    ) -> Result<(), SpaceError> {
+        for i in 0..self.num_elements() {
+            let v = dtype.read(data, i);
+            if dtype.is_float() && !v.is_finite() {
+                return Err(SpaceError::NotFinite {
+                    index: i,
+                    path: path(),
+                    value: v,
+                });
+            }
+            let (lo, hi) = self.bounds(i);
+            // Bounds are checked at the dtype's precision: a float32 box of [-2, 2] must
+            // accept the float32 nearest to 2.0.
+            let (lo, hi) = if dtype == DType::Float32 {
+                (lo as f32 as f64, hi as f32 as f64)
+            } else {
+                (lo, hi)
+            };
+            if v < lo || v > hi {
+                return Err(SpaceError::OutOfRange {
+                    index: i,
+                    path: path(),
+                    value: v,
+                    space: self.to_string(),
+                });
             }
         }
         Ok(())

@@ -94,6 +94,11 @@ impl ClientChannel {
         &self.layout
     }
 
+    /// Sets the layout once the worker has reported its spaces.
+    pub fn set_layout(&mut self, layout: Layout) {
+        self.layout = layout;
+    }
+
     fn send(
         &mut self,
         command: u32,

@@ -1,12 +1,15 @@
 //! Command-line parsing and dispatch. Each subcommand lives in its own file.
 
+mod adapters;
+mod bench;
 mod envs;
 mod match_cmd;
+mod run;
 mod show;
 mod table;
 
 use clap::{Parser, Subcommand};
-use envhub::{Registry, Settings};
+use envhub::{Hub, Registry, Settings};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -35,6 +38,12 @@ enum Command {
     Show(show::Args),
     /// Find the environment that best fits a task description.
     Match(match_cmd::Args),
+    /// List the adapters (simulators) and whether they can run here.
+    Adapters(adapters::Args),
+    /// Run a random-policy rollout through the hub.
+    Run(run::Args),
+    /// Measure throughput through the hub against in-process stepping, and the round trip.
+    Bench(bench::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -64,6 +73,9 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Envs(args) => envs::run(&registry()?, &args),
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
+        Command::Adapters(args) => adapters::run(&Hub::new(registry()?), &args),
+        Command::Run(args) => run::run(&Hub::new(registry()?), &args),
+        Command::Bench(args) => bench::run(&Hub::new(registry()?), &args),
     }
 }
 

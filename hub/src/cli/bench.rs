@@ -1,0 +1,157 @@
+//! `envhub bench`: throughput through the hub next to the same envs stepped in-process, and
+//! the data plane's round trip with an env that does no work — all in one run.
+
+use super::Outcome;
+use envhub::{Hub, VecEnv};
+use envhub_core::EnvConfig;
+use envhub_shm::{ChannelName, WorkerJob};
+use rand::SeedableRng;
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args, Debug)]
+pub(crate) struct Args {
+    /// Registry id (`gym-cartpole`).
+    id: String,
+    /// Envs in the batch.
+    #[arg(long, default_value_t = 8)]
+    num_envs: usize,
+    /// Worker processes (and in-process threads).
+    #[arg(long, default_value_t = 1)]
+    workers: usize,
+    /// Seconds to measure each throughput for.
+    #[arg(long, default_value_t = 2.0)]
+    seconds: f64,
+    /// Round trips to time with the no-op env.
+    #[arg(long, default_value_t = 20_000)]
+    round_trips: usize,
+    /// Print the figures as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Random action batches cycled through, so sampling is not what is measured.
+const ACTION_POOL: usize = 64;
+
+fn hub_throughput(env: &mut VecEnv, seconds: f64) -> anyhow::Result<f64> {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let pool: Vec<Vec<u8>> = (0..ACTION_POOL)
+        .map(|_| env.sample_actions(&mut rng))
+        .collect();
+    env.reset(Some(0))?;
+    for a in pool.iter().cycle().take(200) {
+        env.step(a)?;
+    }
+    let (start, mut batches) = (Instant::now(), 0usize);
+    while start.elapsed().as_secs_f64() < seconds {
+        for a in &pool {
+            env.step(a)?;
+        }
+        batches += pool.len();
+    }
+    Ok((batches * env.num_envs()) as f64 / start.elapsed().as_secs_f64())
+}
+
+fn inproc_throughput(
+    env: &VecEnv,
+    workers: usize,
+    seconds: f64,
+    hub_rate: f64,
+) -> anyhow::Result<f64> {
+    let route = env.route();
+    let job = WorkerJob {
+        adapter: route.adapter.clone(),
+        env_id: route.env_id.clone(),
+        config: route.config.clone(),
+        env_offset: 0,
+        num_envs: env.num_envs(),
+        channel: ChannelName {
+            prefix: String::new(),
+            service: String::new(),
+        },
+        owner_pid: std::process::id(),
+        spin_us: 0,
+    };
+    // Aim for about the same duration as the hub measurement.
+    let steps = ((hub_rate * seconds) / env.num_envs() as f64).max(1000.0) as usize;
+    let out = std::process::Command::new(envhub::worker_binary())
+        .args([
+            "inproc",
+            "--job",
+            &serde_json::to_string(&job)?,
+            "--threads",
+            &workers.to_string(),
+            "--steps",
+            &steps.to_string(),
+        ])
+        .output()?;
+    anyhow::ensure!(
+        out.status.success(),
+        "in-process run failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+    Ok(v["steps_per_sec"].as_f64().unwrap_or(0.0))
+}
+
+fn round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
+    let config = EnvConfig {
+        num_envs: 1,
+        workers: Some(1),
+        ..EnvConfig::default()
+    };
+    let mut env = hub.make_vec_direct("null", "Null-v0", &config)?;
+    env.reset(Some(0))?;
+    let action = vec![0u8; env.action_space().byte_len()];
+    for _ in 0..1000 {
+        env.step(&action)?;
+    }
+    let mut times = Vec::with_capacity(n);
+    for _ in 0..n {
+        let t = Instant::now();
+        env.step(&action)?;
+        times.push(t.elapsed());
+    }
+    env.close();
+    times.sort();
+    let us = |d: Duration| d.as_secs_f64() * 1e6;
+    Ok((us(times[n / 2]), us(times[(n * 99 / 100).min(n - 1)])))
+}
+
+pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
+    let config = EnvConfig {
+        workers: Some(args.workers),
+        ..EnvConfig::default()
+    };
+    let mut env = hub.make_vec(&args.id, args.num_envs, &config)?;
+    let hub_rate = hub_throughput(&mut env, args.seconds)?;
+    let inproc_rate = inproc_throughput(&env, args.workers, args.seconds, hub_rate)?;
+    env.close();
+    let (p50, p99) = round_trip(hub, args.round_trips.max(100))?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "id": args.id,
+                "num_envs": args.num_envs,
+                "workers": args.workers,
+                "hub_steps_per_sec": hub_rate,
+                "inproc_steps_per_sec": inproc_rate,
+                "roundtrip_p50_us": p50,
+                "roundtrip_p99_us": p99,
+            })
+        );
+    } else {
+        println!(
+            "{} with {} envs on {} workers",
+            args.id, args.num_envs, args.workers
+        );
+        println!("  through the hub   {hub_rate:>12.0} steps/s");
+        println!(
+            "  in-process        {inproc_rate:>12.0} steps/s  (same envs, {} threads, no IPC)",
+            args.workers
+        );
+        println!("  hub / in-process  {:>12.2}", hub_rate / inproc_rate);
+        println!("  round trip        p50 {p50:.1} µs, p99 {p99:.1} µs  (no-op env)");
+    }
+    Ok(Outcome::Done)
+}

@@ -1,0 +1,113 @@
+//! `Hub`: the registry, the adapter catalog and the routing, and what starts sessions.
+//!
+//! Embedded by default: the client process owns its workers. The `envhub serve` daemon
+//! runs the same hub for many clients.
+
+use crate::catalog::{self, AdapterInfo};
+use crate::env::Env;
+use crate::error::HubError;
+use crate::registry::Registry;
+use crate::routing::{Route, route};
+use crate::settings::Settings;
+use crate::vec_env::{SessionOptions, VecEnv};
+use envhub_core::{AutoresetMode, EnvConfig};
+
+/// The hub logic: resolves registry ids to adapters and starts worker sessions.
+pub struct Hub {
+    registry: Registry,
+    options: SessionOptions,
+}
+
+impl Hub {
+    /// A hub over `registry` with default session options.
+    pub fn new(registry: Registry) -> Hub {
+        Hub {
+            registry,
+            options: SessionOptions::default(),
+        }
+    }
+
+    /// A hub configured the usual way (`envhub.yaml`, `ENVHUB_*`; see [`Settings`]).
+    pub fn from_env() -> Result<Hub, HubError> {
+        let settings = Settings::discover(None).map_err(|e| HubError::InvalidConfig {
+            what: "config file",
+            reason: e.to_string(),
+        })?;
+        Ok(Hub::new(settings.registry(&[])?))
+    }
+
+    /// Replaces the session options (timeouts, restart policy, namespace).
+    pub fn with_options(mut self, options: SessionOptions) -> Hub {
+        self.options = options;
+        self
+    }
+
+    /// The session options.
+    pub fn options(&self) -> &SessionOptions {
+        &self.options
+    }
+
+    /// The registry.
+    pub fn registry(&self) -> &Registry {
+        &self.registry
+    }
+
+    /// Every adapter with its availability.
+    pub fn adapters(&self) -> Result<&'static [AdapterInfo], HubError> {
+        catalog::adapters()
+    }
+
+    /// The adapter and config that would run `id` with `config`.
+    pub fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
+        let entry = self.registry.get(id)?;
+        route(entry, catalog::adapters()?, config)
+    }
+
+    /// A batch of `num_envs` envs of registry entry `id`.
+    pub fn make_vec(
+        &self,
+        id: &str,
+        num_envs: usize,
+        config: &EnvConfig,
+    ) -> Result<VecEnv, HubError> {
+        let mut config = config.clone();
+        config.num_envs = num_envs;
+        let route = self.route(id, &config)?;
+        VecEnv::start(id, route, self.options.clone())
+    }
+
+    /// One env of registry entry `id`, in its own worker.
+    pub fn make(&self, id: &str, config: &EnvConfig) -> Result<Env, HubError> {
+        let mut config = config.clone();
+        config.num_envs = 1;
+        config.workers = Some(1);
+        config.autoreset_mode = AutoresetMode::Disabled;
+        let route = self.route(id, &config)?;
+        Ok(Env::new(VecEnv::start(id, route, self.options.clone())?))
+    }
+
+    /// A batch of envs of an adapter's env id, bypassing the registry.
+    pub fn make_vec_direct(
+        &self,
+        adapter: &str,
+        env_id: &str,
+        config: &EnvConfig,
+    ) -> Result<VecEnv, HubError> {
+        let route = Route {
+            adapter: adapter.to_string(),
+            env_id: env_id.to_string(),
+            config: config.clone(),
+        };
+        VecEnv::start(env_id, route, self.options.clone())
+    }
+}
+
+/// One env of registry entry `id` on the embedded hub, configured from the environment.
+pub fn make(id: &str, config: &EnvConfig) -> Result<Env, HubError> {
+    Hub::from_env()?.make(id, config)
+}
+
+/// `num_envs` envs of registry entry `id` on the embedded hub.
+pub fn make_vec(id: &str, num_envs: usize, config: &EnvConfig) -> Result<VecEnv, HubError> {
+    Hub::from_env()?.make_vec(id, num_envs, config)
+}

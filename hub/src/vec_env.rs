@@ -1,0 +1,684 @@
+//! `VecEnv`: a batch of envs spread over worker processes, stepped through shared memory.
+
+use crate::error::HubError;
+use crate::routing::Route;
+use crate::worker_link::{WorkerLink, split_envs};
+use envhub_core::{AutoresetMode, DType, Space};
+use envhub_shm::{ChannelName, Response, WaitPolicy, WorkerJob, status};
+use std::time::Duration;
+
+/// How a session behaves, beyond what `EnvConfig` says about the envs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionOptions {
+    /// A worker that takes longer than this for one request is treated as hung and killed.
+    pub step_timeout: Duration,
+    /// Time allowed for a worker to create its envs and report ready.
+    pub start_timeout: Duration,
+    /// Restart a worker that died; its envs come back truncated, with `worker_restarted`
+    /// in their info.
+    pub restart_on_crash: bool,
+    /// Spin this long on a response before blocking (a cheap env answers in microseconds).
+    pub spin: Duration,
+    /// iceoryx2 namespace (file prefix) of the session's channels.
+    pub namespace: String,
+}
+
+impl Default for SessionOptions {
+    fn default() -> Self {
+        SessionOptions {
+            step_timeout: Duration::from_secs(60),
+            start_timeout: Duration::from_secs(60),
+            restart_on_crash: false,
+            spin: Duration::from_micros(50),
+            namespace: std::env::var(crate::env_vars::ENVHUB_NAMESPACE)
+                .unwrap_or_else(|_| "envhub_".to_string()),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Phase {
+    Created,
+    Running,
+    Closed,
+}
+
+/// The results of a reset or step, for every env of the batch (or, from
+/// [`VecEnv::recv`], for the envs listed in `env_ids`).
+#[derive(Debug)]
+pub struct Batch<'a> {
+    /// The envs these results belong to, in order.
+    pub env_ids: &'a [usize],
+    /// Observations, `observation_space().byte_len()` bytes per env, contiguous.
+    pub obs: &'a [u8],
+    /// Rewards.
+    pub rewards: &'a [f64],
+    /// Terminated flags.
+    pub terminated: &'a [bool],
+    /// Truncated flags.
+    pub truncated: &'a [bool],
+    /// Per-env info (`Null` where an env reported none).
+    pub infos: &'a [serde_json::Value],
+    /// same_step autoreset: `Some(final observation)` for envs that finished this step.
+    pub final_obs: &'a [Option<Vec<u8>>],
+}
+
+impl Batch<'_> {
+    /// Observations as `f32` (when the observation space is a `float32` box).
+    pub fn obs_f32(&self) -> &[f32] {
+        bytemuck::cast_slice(self.obs)
+    }
+}
+
+/// Buffers the results are gathered into when they span several workers.
+#[derive(Default)]
+struct Gathered {
+    env_ids: Vec<usize>,
+    obs: Vec<u64>,
+    obs_len: usize,
+    rewards: Vec<f64>,
+    terminated: Vec<bool>,
+    truncated: Vec<bool>,
+    infos: Vec<serde_json::Value>,
+    final_obs: Vec<Option<Vec<u8>>>,
+}
+
+impl Gathered {
+    fn clear(&mut self) {
+        self.env_ids.clear();
+        self.obs_len = 0;
+        self.rewards.clear();
+        self.terminated.clear();
+        self.truncated.clear();
+        self.infos.clear();
+        self.final_obs.clear();
+    }
+
+    fn push_obs(&mut self, bytes: &[u8]) {
+        let end = self.obs_len + bytes.len();
+        if self.obs.len() * 8 < end {
+            self.obs.resize(end.div_ceil(8), 0);
+        }
+        let all: &mut [u8] = bytemuck::cast_slice_mut(&mut self.obs);
+        all[self.obs_len..end].copy_from_slice(bytes);
+        self.obs_len = end;
+    }
+
+    fn obs_bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.obs)[..self.obs_len]
+    }
+}
+
+/// A batch of `num_envs` envs of one kind, hosted by worker processes and stepped in lock
+/// step ([`VecEnv::step`]) or asynchronously ([`VecEnv::send`] / [`VecEnv::recv`]).
+pub struct VecEnv {
+    id: String,
+    route: Route,
+    session: String,
+    options: SessionOptions,
+    workers: Vec<WorkerLink>,
+    observation_space: Space,
+    action_space: Space,
+    num_envs: usize,
+    phase: Phase,
+    gathered: Gathered,
+    /// Whether the last results are viewed straight in the one worker's sample.
+    direct: bool,
+}
+
+fn session_name() -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    format!(
+        "{}-{}-{nanos:x}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+impl VecEnv {
+    /// Starts the workers of a routed entry. `id` names the session in errors.
+    pub fn start(id: &str, route: Route, options: SessionOptions) -> Result<VecEnv, HubError> {
+        let num_envs = route.config.num_envs;
+        if num_envs == 0 {
+            return Err(HubError::InvalidConfig {
+                what: "num_envs",
+                reason: "must be at least 1".into(),
+            });
+        }
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let workers = route.config.workers.unwrap_or_else(|| cores.min(num_envs));
+        if workers == 0 || workers > num_envs {
+            return Err(HubError::InvalidConfig {
+                what: "workers",
+                reason: format!(
+                    "{workers} workers for {num_envs} envs; use between 1 and {num_envs} (each worker hosts at least one env)"
+                ),
+            });
+        }
+        let session = session_name();
+        // Spinning only pays when every spinner has a core: the client plus its workers.
+        let spin = if workers < cores {
+            options.spin
+        } else {
+            Duration::ZERO
+        };
+        let policy = WaitPolicy {
+            spin,
+            tick: Duration::from_millis(5),
+        };
+        let mut links = Vec::with_capacity(workers);
+        for (index, (env_offset, count)) in split_envs(num_envs, workers).into_iter().enumerate() {
+            let mut config = route.config.clone();
+            config.num_envs = count;
+            let job = WorkerJob {
+                adapter: route.adapter.clone(),
+                env_id: route.env_id.clone(),
+                config,
+                env_offset,
+                num_envs: count,
+                channel: ChannelName {
+                    prefix: options.namespace.clone(),
+                    service: String::new(),
+                },
+                owner_pid: std::process::id(),
+                spin_us: spin.as_micros() as u64,
+            };
+            links.push(WorkerLink::start(
+                index,
+                job,
+                &session,
+                0,
+                policy,
+                options.start_timeout,
+            )?);
+        }
+        let observation_space = links[0].spec.observation_space.clone();
+        let action_space = links[0].spec.action_space.clone();
+        Ok(VecEnv {
+            id: id.to_string(),
+            route,
+            session,
+            options,
+            workers: links,
+            observation_space,
+            action_space,
+            num_envs,
+            phase: Phase::Created,
+            gathered: Gathered::default(),
+            direct: false,
+        })
+    }
+
+    /// Number of envs.
+    pub fn num_envs(&self) -> usize {
+        self.num_envs
+    }
+
+    /// Number of worker processes.
+    pub fn num_workers(&self) -> usize {
+        self.workers.len()
+    }
+
+    /// Pids of the worker processes, in env order.
+    pub fn worker_pids(&self) -> Vec<u32> {
+        self.workers.iter().map(WorkerLink::pid).collect()
+    }
+
+    /// Observation space of one env.
+    pub fn observation_space(&self) -> &Space {
+        &self.observation_space
+    }
+
+    /// Action space of one env.
+    pub fn action_space(&self) -> &Space {
+        &self.action_space
+    }
+
+    /// The registry id (or env id) this batch was made from.
+    pub fn id(&self) -> &str {
+        &self.id
+    }
+
+    /// The adapter and config that run it.
+    pub fn route(&self) -> &Route {
+        &self.route
+    }
+
+    /// The episode limit applied, if any.
+    pub fn max_episode_steps(&self) -> Option<u32> {
+        self.workers[0].spec.max_episode_steps
+    }
+
+    /// Autoreset mode.
+    pub fn autoreset_mode(&self) -> AutoresetMode {
+        self.route.config.autoreset_mode
+    }
+
+    fn check_open(&self) -> Result<(), HubError> {
+        if self.phase == Phase::Closed {
+            return Err(HubError::InvalidState(format!(
+                "`{}` is closed; make a new env",
+                self.id
+            )));
+        }
+        if self.workers.iter().any(|w| w.pending) {
+            return Err(HubError::InvalidState(
+                "results of an earlier `send` have not been received; call `recv` first".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Resets every env; env `i` is seeded with `seed + i` (no seed: each continues its own
+    /// random stream, or draws one from the OS on its first reset).
+    pub fn reset(&mut self, seed: Option<u64>) -> Result<Batch<'_>, HubError> {
+        let seeds: Vec<Option<u64>> = (0..self.num_envs)
+            .map(|i| seed.map(|s| s + i as u64))
+            .collect();
+        self.reset_with(&seeds, None, &Default::default())
+    }
+
+    /// Resets the envs where `mask` is true (all if `None`), each with its seed, passing
+    /// `options` to every env's reset. Unselected envs keep their state; their slots in the
+    /// results are not meaningful.
+    pub fn reset_with(
+        &mut self,
+        seeds: &[Option<u64>],
+        mask: Option<&[bool]>,
+        options: &envhub_core::ResetOptions,
+    ) -> Result<Batch<'_>, HubError> {
+        self.check_open()?;
+        if seeds.len() != self.num_envs || mask.is_some_and(|m| m.len() != self.num_envs) {
+            return Err(HubError::InvalidAction {
+                reason: format!(
+                    "reset got {} seeds and {} mask entries for {} envs",
+                    seeds.len(),
+                    mask.map_or(self.num_envs, <[bool]>::len),
+                    self.num_envs
+                ),
+                hint: "pass one seed (or None) and one mask flag per env".into(),
+            });
+        }
+        let options_json = if options.is_empty() {
+            String::new()
+        } else {
+            serde_json::to_string(options).expect("options serialize")
+        };
+        for w in &mut self.workers {
+            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            w.response = None;
+            w.channel.send_reset(
+                &seeds[range.clone()],
+                mask.map(|m| &m[range]),
+                &options_json,
+            )?;
+            w.pending = true;
+        }
+        let all: Vec<usize> = (0..self.workers.len()).collect();
+        self.collect(&all)?;
+        self.phase = Phase::Running;
+        Ok(self.batch())
+    }
+
+    /// Validates a batch of actions (`n` actions back to back) against the action space.
+    fn validate_actions(&self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
+        let ab = self.action_space.byte_len();
+        if actions.len() != env_ids.len() * ab {
+            return Err(HubError::InvalidAction {
+                reason: format!(
+                    "got {} bytes of actions for {} envs; each action of {} is {} bytes",
+                    actions.len(),
+                    env_ids.len(),
+                    self.action_space,
+                    ab
+                ),
+                hint: format!("pass an array of shape {}", self.batch_shape(env_ids.len())),
+            });
+        }
+        for (k, &env) in env_ids.iter().enumerate() {
+            self.action_space
+                .validate(&actions[k * ab..(k + 1) * ab])
+                .map_err(|e| HubError::InvalidAction {
+                    reason: format!("env {env}: {e}"),
+                    hint: format!("actions must lie in {}", self.action_space),
+                })?;
+        }
+        Ok(())
+    }
+
+    fn batch_shape(&self, n: usize) -> String {
+        let mut shape = vec![n];
+        shape.extend(self.action_space.shape().unwrap_or_default());
+        let dtype = self
+            .action_space
+            .dtype()
+            .map_or("bytes".to_string(), |d| d.to_string());
+        format!("{shape:?} of {dtype}")
+    }
+
+    /// Checks a typed action buffer against the action space's dtype.
+    fn typed<T: bytemuck::Pod>(&self, dtype: DType, actions: &[T]) -> Result<Vec<u8>, HubError> {
+        match self.action_space.dtype() {
+            Some(d) if d == dtype => Ok(bytemuck::cast_slice(actions).to_vec()),
+            other => Err(HubError::InvalidAction {
+                reason: format!(
+                    "actions are {dtype} but {} takes {}",
+                    self.action_space,
+                    other.map_or("a composite value".to_string(), |d| d.to_string())
+                ),
+                hint: format!("pass an array of shape {}", self.batch_shape(self.num_envs)),
+            }),
+        }
+    }
+
+    /// Steps every env with `actions` (one per env, back to back in the action space's layout).
+    pub fn step(&mut self, actions: &[u8]) -> Result<Batch<'_>, HubError> {
+        self.check_steppable()?;
+        self.validate_all(actions)?;
+        let ab = self.action_space.byte_len();
+        for w in &mut self.workers {
+            let (lo, n) = (w.job.env_offset, w.job.num_envs);
+            w.response = None;
+            w.channel
+                .send_step(&actions[lo * ab..(lo + n) * ab], None)?;
+            w.pending = true;
+        }
+        let workers: Vec<usize> = (0..self.workers.len()).collect();
+        self.collect(&workers)?;
+        Ok(self.batch())
+    }
+
+    fn check_steppable(&self) -> Result<(), HubError> {
+        self.check_open()?;
+        if self.phase == Phase::Created {
+            return Err(HubError::InvalidState(format!(
+                "`{}` must be reset before it is stepped",
+                self.id
+            )));
+        }
+        Ok(())
+    }
+
+    fn validate_all(&self, actions: &[u8]) -> Result<(), HubError> {
+        let ab = self.action_space.byte_len();
+        if actions.len() != self.num_envs * ab {
+            return Err(HubError::InvalidAction {
+                reason: format!(
+                    "got {} bytes of actions for {} envs; each action of {} is {} bytes",
+                    actions.len(),
+                    self.num_envs,
+                    self.action_space,
+                    ab
+                ),
+                hint: format!("pass an array of shape {}", self.batch_shape(self.num_envs)),
+            });
+        }
+        for (env, action) in actions.chunks_exact(ab.max(1)).enumerate() {
+            self.action_space
+                .validate(action)
+                .map_err(|e| HubError::InvalidAction {
+                    reason: format!("env {env}: {e}"),
+                    hint: format!("actions must lie in {}", self.action_space),
+                })?;
+        }
+        Ok(())
+    }
+
+    /// [`VecEnv::step`] with `float32` actions (a continuous box).
+    pub fn step_f32(&mut self, actions: &[f32]) -> Result<Batch<'_>, HubError> {
+        let bytes = self.typed(DType::Float32, actions)?;
+        self.step(&bytes)
+    }
+
+    /// [`VecEnv::step`] with `int64` actions (discrete).
+    pub fn step_i64(&mut self, actions: &[i64]) -> Result<Batch<'_>, HubError> {
+        let bytes = self.typed(DType::Int64, actions)?;
+        self.step(&bytes)
+    }
+
+    /// Sends actions to the envs in `env_ids` (one action each, in that order) without
+    /// waiting. Envs of a worker not named keep their state. Collect with [`VecEnv::recv`].
+    pub fn send(&mut self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
+        self.check_steppable()?;
+        if let Some(&bad) = env_ids.iter().find(|&&e| e >= self.num_envs) {
+            return Err(HubError::InvalidAction {
+                reason: format!("env id {bad} is out of range"),
+                hint: format!("env ids go from 0 to {}", self.num_envs - 1),
+            });
+        }
+        self.validate_actions(actions, env_ids)?;
+        let ab = self.action_space.byte_len();
+        for w in &mut self.workers {
+            let (lo, n) = (w.job.env_offset, w.job.num_envs);
+            let mut selected = vec![false; n];
+            let mut block = vec![0u8; n * ab];
+            let mut any = false;
+            for (k, &env) in env_ids.iter().enumerate() {
+                if (lo..lo + n).contains(&env) {
+                    selected[env - lo] = true;
+                    block[(env - lo) * ab..(env - lo + 1) * ab]
+                        .copy_from_slice(&actions[k * ab..(k + 1) * ab]);
+                    any = true;
+                }
+            }
+            if any {
+                w.response = None;
+                w.channel.send_step(&block, Some(&selected))?;
+                w.pending = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// Waits until at least one worker with work in flight has answered and returns the
+    /// results of every worker that has (EnvPool's async `recv`).
+    pub fn recv(&mut self) -> Result<Batch<'_>, HubError> {
+        if !self.workers.iter().any(|w| w.pending) {
+            return Err(HubError::InvalidState(
+                "nothing was sent; call `send` first".into(),
+            ));
+        }
+        let timeout = self.options.step_timeout;
+        let started = std::time::Instant::now();
+        let mut ready = Vec::new();
+        loop {
+            for i in 0..self.workers.len() {
+                if self.workers[i].pending {
+                    match self.workers[i].poll() {
+                        Ok(Some(r)) => {
+                            self.workers[i].response = Some(r);
+                            ready.push(i);
+                        }
+                        Ok(None) => {}
+                        Err(e) => {
+                            self.recover(i, e)?;
+                            ready.push(i);
+                        }
+                    }
+                }
+            }
+            if !ready.is_empty() || self.workers.iter().all(|w| !w.pending) {
+                break;
+            }
+            // Block briefly on the first pending worker; the others' answers queue meanwhile.
+            let i = self
+                .workers
+                .iter()
+                .position(|w| w.pending)
+                .expect("one is pending");
+            if started.elapsed() >= timeout {
+                let err = self.workers[i].hung(timeout);
+                self.recover(i, err)?;
+                ready.push(i);
+                continue;
+            }
+            match self.workers[i].wait_for(Duration::from_millis(1)) {
+                Ok(Some(r)) => {
+                    self.workers[i].response = Some(r);
+                    ready.push(i);
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    self.recover(i, e)?;
+                    ready.push(i);
+                }
+            }
+        }
+        self.collect_ready(&ready)?;
+        Ok(self.batch())
+    }
+
+    /// Handles a worker failure: restarts it if allowed, else closes the session and errs.
+    fn recover(&mut self, i: usize, err: HubError) -> Result<(), HubError> {
+        if !matches!(err, HubError::WorkerDied { .. }) || !self.options.restart_on_crash {
+            if matches!(err, HubError::WorkerDied { .. }) {
+                self.fail();
+            }
+            return Err(err);
+        }
+        tracing::warn!(worker = i, error = %err, "restarting worker");
+        let policy = WaitPolicy {
+            spin: self.options.spin,
+            tick: Duration::from_millis(5),
+        };
+        self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
+        let n = self.workers[i].job.num_envs;
+        let seeds = vec![None; n];
+        self.workers[i].channel.send_reset(&seeds, None, "")?;
+        self.workers[i].pending = true;
+        let r = self.workers[i].wait(self.options.step_timeout)?;
+        self.workers[i].response = Some(r);
+        Ok(())
+    }
+
+    /// Waits for the listed workers and gathers their results.
+    fn collect(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        let timeout = self.options.step_timeout;
+        for &i in workers {
+            if !self.workers[i].pending {
+                continue;
+            }
+            match self.workers[i].wait(timeout) {
+                Ok(r) => self.workers[i].response = Some(r),
+                Err(e) => self.recover(i, e)?,
+            }
+        }
+        self.collect_ready(workers)
+    }
+
+    /// Gathers the responses of `workers` into the batch buffers.
+    fn collect_ready(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        for &i in workers {
+            if let Some(r) = &self.workers[i].response
+                && r.header().status == status::ERROR
+            {
+                let message = r.error().unwrap_or_default();
+                return Err(HubError::EnvFailed { worker: i, message });
+            }
+        }
+        let ob = self.observation_space.byte_len();
+        self.gathered.clear();
+        self.direct = workers.len() == 1 && self.workers.len() == 1;
+        for &i in workers {
+            let w = &mut self.workers[i];
+            let restarted = std::mem::take(&mut w.restarted);
+            let restarts = w.restarts;
+            let Some(r) = &w.response else { continue };
+            let b = r.blocks();
+            let infos = parse_infos(r);
+            for k in 0..w.job.num_envs {
+                self.gathered.env_ids.push(w.job.env_offset + k);
+                if !self.direct {
+                    self.gathered.push_obs(&b.obs[k * ob..(k + 1) * ob]);
+                }
+                self.gathered.rewards.push(b.rewards[k]);
+                self.gathered.terminated.push(b.terminated[k] != 0);
+                self.gathered
+                    .truncated
+                    .push(b.truncated[k] != 0 || restarted);
+                let mut info = infos
+                    .as_ref()
+                    .and_then(|v| v.get(k).cloned())
+                    .unwrap_or(serde_json::Value::Null);
+                if restarted {
+                    let mut map = info.as_object().cloned().unwrap_or_default();
+                    map.insert("worker_restarted".into(), true.into());
+                    map.insert("worker_restarts".into(), restarts.into());
+                    info = serde_json::Value::Object(map);
+                }
+                self.gathered.infos.push(info);
+                self.gathered.final_obs.push(
+                    (b.final_mask[k] != 0 && !b.final_obs.is_empty())
+                        .then(|| b.final_obs[k * ob..(k + 1) * ob].to_vec()),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn batch(&self) -> Batch<'_> {
+        let obs = if self.direct {
+            let r = self.workers[0]
+                .response
+                .as_ref()
+                .expect("a response was collected");
+            let n = self.workers[0].job.num_envs * self.observation_space.byte_len();
+            &r.blocks().obs[..n]
+        } else {
+            self.gathered.obs_bytes()
+        };
+        Batch {
+            env_ids: &self.gathered.env_ids,
+            obs,
+            rewards: &self.gathered.rewards,
+            terminated: &self.gathered.terminated,
+            truncated: &self.gathered.truncated,
+            infos: &self.gathered.infos,
+            final_obs: &self.gathered.final_obs,
+        }
+    }
+
+    /// Random actions for every env, drawn from the action space.
+    pub fn sample_actions(&self, rng: &mut impl rand::Rng) -> Vec<u8> {
+        let mut out = vec![0u8; self.num_envs * self.action_space.byte_len()];
+        for chunk in out.chunks_mut(self.action_space.byte_len()) {
+            self.action_space.sample_into(rng, chunk);
+        }
+        out
+    }
+
+    fn fail(&mut self) {
+        self.phase = Phase::Closed;
+        for w in &mut self.workers {
+            w.response = None;
+        }
+        self.workers.clear();
+    }
+
+    /// Closes the envs and stops the workers. Further calls are errors; closing twice is fine.
+    pub fn close(&mut self) {
+        if self.phase == Phase::Closed {
+            return;
+        }
+        self.phase = Phase::Closed;
+        for w in &mut self.workers {
+            w.close();
+        }
+        self.workers.clear();
+    }
+}
+
+impl Drop for VecEnv {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+/// The per-env infos of a response, if any env reported info.
+fn parse_infos(r: &Response) -> Option<Vec<serde_json::Value>> {
+    serde_json::from_str(r.info_json()?).ok()
+}

@@ -1,0 +1,275 @@
+//! One worker process as its owner sees it: started, watched, waited for, killed, restarted.
+
+use crate::error::HubError;
+use crate::worker_binary::worker_binary;
+use envhub_shm::{
+    ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy,
+    WorkerJob, WorkerReply,
+};
+use std::io::BufRead;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A running worker and the client's end of its channel.
+pub(crate) struct WorkerLink {
+    pub index: usize,
+    pub job: WorkerJob,
+    pub spec: ReadySpec,
+    pub channel: ClientChannel,
+    child: Child,
+    watch: ProcessWatch,
+    generation: u32,
+    /// A request is in flight.
+    pub pending: bool,
+    /// The latest response (holding it keeps its shared-memory sample alive).
+    pub response: Option<Response>,
+    /// The worker was restarted since the last results were read.
+    pub restarted: bool,
+    /// Restarts so far.
+    pub restarts: u32,
+}
+
+impl WorkerLink {
+    /// Creates the channel, starts the worker and waits for it to report ready.
+    pub fn start(
+        index: usize,
+        mut job: WorkerJob,
+        session: &str,
+        generation: u32,
+        policy: WaitPolicy,
+        start_timeout: Duration,
+    ) -> Result<WorkerLink, HubError> {
+        job.channel.service = format!("envhub/{session}/{index}/{generation}");
+        let node_name = format!("client-{}-{index}", std::process::id());
+        // The request size grows to the real layout on first use (power-of-two allocation).
+        let placeholder = Layout::new(job.num_envs, 0, 0, false);
+        let mut channel = ClientChannel::create(&job.channel, &node_name, placeholder, policy)?;
+        let path = worker_binary();
+        let mut child = Command::new(&path)
+            .arg("serve")
+            .arg("--job")
+            .arg(serde_json::to_string(&job).expect("a job serializes"))
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| HubError::WorkerBinary {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?;
+        let pid = child.id();
+        let reply = read_reply(&mut child, start_timeout);
+        let spec = match reply {
+            Ok(WorkerReply::Ready(spec)) => spec,
+            Ok(WorkerReply::Error(message)) => {
+                let _ = child.wait();
+                return Err(HubError::MakeFailed(message));
+            }
+            Err(why) => {
+                let _ = child.kill();
+                let status = child.wait().map(|s| s.to_string()).unwrap_or_default();
+                return Err(HubError::WorkerDied {
+                    worker: index,
+                    envs: env_range(&job),
+                    pid,
+                    why: format!("failed to start: {why} ({status})"),
+                });
+            }
+        };
+        let watch = ProcessWatch::new(pid).map_err(|e| HubError::WorkerDied {
+            worker: index,
+            envs: env_range(&job),
+            pid,
+            why: format!("vanished right after starting: {e}"),
+        })?;
+        channel.set_layout(Layout::new(
+            job.num_envs,
+            spec.observation_space.byte_len(),
+            spec.action_space.byte_len(),
+            job.config.autoreset_mode == envhub_core::AutoresetMode::SameStep,
+        ));
+        tracing::debug!(worker = index, pid, envs = %env_range(&job), "worker ready");
+        Ok(WorkerLink {
+            index,
+            job,
+            spec,
+            channel,
+            child,
+            watch,
+            generation,
+            pending: false,
+            response: None,
+            restarted: false,
+            restarts: 0,
+        })
+    }
+
+    /// The worker's pid.
+    pub fn pid(&self) -> u32 {
+        self.spec.pid
+    }
+
+    /// Waits for the response to the request in flight. A worker that exits, or does not
+    /// answer within `timeout` (then it is killed), is reported as [`HubError::WorkerDied`].
+    pub fn wait(&mut self, timeout: Duration) -> Result<Response, HubError> {
+        match self.wait_for(timeout)? {
+            Some(response) => Ok(response),
+            None => Err(self.hung(timeout)),
+        }
+    }
+
+    /// Waits at most `slice` for the response: `None` if it has not come yet. A worker that
+    /// exited is an error.
+    pub fn wait_for(&mut self, slice: Duration) -> Result<Option<Response>, HubError> {
+        const SLICE_OVER: &str = "slice over";
+        let deadline = Instant::now() + slice;
+        let watch = &self.watch;
+        let result = self.channel.receive(|| {
+            if watch.exited() {
+                Err(DataPlaneError::PeerGone("exited".into()))
+            } else if Instant::now() >= deadline {
+                Err(DataPlaneError::PeerGone(SLICE_OVER.into()))
+            } else {
+                Ok(())
+            }
+        });
+        match result {
+            Ok(response) => {
+                self.pending = false;
+                Ok(Some(response))
+            }
+            Err(DataPlaneError::PeerGone(why)) if why == SLICE_OVER => Ok(None),
+            Err(DataPlaneError::PeerGone(_)) => Err(self.exited()),
+            Err(e) => {
+                self.pending = false;
+                Err(e.into())
+            }
+        }
+    }
+
+    /// The response if it has arrived; a dead worker is an error.
+    pub fn poll(&mut self) -> Result<Option<Response>, HubError> {
+        if let Some(r) = self.channel.try_receive()? {
+            self.pending = false;
+            return Ok(Some(r));
+        }
+        if self.watch.exited() {
+            return Err(self.exited());
+        }
+        Ok(None)
+    }
+
+    /// Kills a worker that did not answer within `timeout` and describes it.
+    pub fn hung(&mut self, timeout: Duration) -> HubError {
+        self.pending = false;
+        envhub_shm::kill(self.pid());
+        let _ = self.child.wait();
+        HubError::WorkerDied {
+            worker: self.index,
+            envs: env_range(&self.job),
+            pid: self.pid(),
+            why: format!("did not answer within {timeout:?} (step timeout) and was killed"),
+        }
+    }
+
+    fn exited(&mut self) -> HubError {
+        self.pending = false;
+        let why = match self.child.wait() {
+            Ok(status) => format!("died ({status})"),
+            Err(e) => format!("died (status unknown: {e})"),
+        };
+        HubError::WorkerDied {
+            worker: self.index,
+            envs: env_range(&self.job),
+            pid: self.pid(),
+            why,
+        }
+    }
+
+    /// Starts a replacement worker for the same envs.
+    pub fn restart(
+        &mut self,
+        session: &str,
+        policy: WaitPolicy,
+        start_timeout: Duration,
+    ) -> Result<(), HubError> {
+        let fresh = WorkerLink::start(
+            self.index,
+            self.job.clone(),
+            session,
+            self.generation + 1,
+            policy,
+            start_timeout,
+        )?;
+        let restarts = self.restarts + 1;
+        *self = fresh;
+        self.restarts = restarts;
+        self.restarted = true;
+        Ok(())
+    }
+
+    /// Asks the worker to close and waits briefly; kills it if it does not exit.
+    pub fn close(&mut self) {
+        self.response = None;
+        if self.channel.send_close().is_ok() {
+            let _ = self.wait(Duration::from_secs(2));
+        }
+        let deadline = Instant::now() + Duration::from_secs(2);
+        loop {
+            match self.child.try_wait() {
+                Ok(Some(_)) => return,
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(2))
+                }
+                _ => {
+                    let _ = self.child.kill();
+                    let _ = self.child.wait();
+                    return;
+                }
+            }
+        }
+    }
+}
+
+impl Drop for WorkerLink {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+fn env_range(job: &WorkerJob) -> String {
+    format!("{}..{}", job.env_offset, job.env_offset + job.num_envs)
+}
+
+/// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.
+fn read_reply(child: &mut Child, timeout: Duration) -> Result<WorkerReply, String> {
+    let stdout = child.stdout.take().ok_or("no stdout")?;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let read = std::io::BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(read.map(|_| line));
+    });
+    match rx.recv_timeout(timeout) {
+        Ok(Ok(line)) if line.trim().is_empty() => Err("it exited before reporting ready".into()),
+        Ok(Ok(line)) => serde_json::from_str(&line)
+            .map_err(|e| format!("unreadable reply `{}`: {e}", line.trim())),
+        Ok(Err(e)) => Err(format!("cannot read its reply: {e}")),
+        Err(_) => Err(format!("it did not report ready within {timeout:?}")),
+    }
+}
+
+/// Splits `num_envs` over `workers` as evenly as possible: (offset, count) per worker.
+pub(crate) fn split_envs(num_envs: usize, workers: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::with_capacity(workers);
+    let mut offset = 0;
+    for w in 0..workers {
+        let count = num_envs / workers + usize::from(w < num_envs % workers);
+        out.push((offset, count));
+        offset += count;
+    }
+    out
+}
