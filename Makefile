@@ -34,11 +34,12 @@ $(VENV_STAMP): requirements-dev.txt
 venv: $(VENV_STAMP)
 
 build:
-	$(CARGO) build --release --workspace
+	$(CARGO) build --release --workspace --bins
 
 demo: build
-	./target/release/envhub envs --robot quadruped
-	./target/release/envhub match "a quadruped runs forward" --robot quadruped
+	./target/release/envhub match "balance a pole on a cart"
+	./target/release/envhub run gym-cartpole --num-envs 64 --steps 1000000
+	./target/release/envhub run gym-pendulum --num-envs 8 --steps 200000
 
 lint:
 	$(CARGO) fmt --all -- --check
@@ -48,6 +49,8 @@ fmt:
 	$(CARGO) fmt --all
 
 rust-test: $(VENV_STAMP)
+	# End-to-end tests start the real binaries: build them first.
+	$(CARGO) build --workspace --bins
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
 		$(CARGO) nextest run --workspace $${CI:+--profile ci}; \
 	else \

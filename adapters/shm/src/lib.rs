@@ -25,7 +25,7 @@ pub use layout::{
     env_flag, status,
 };
 pub use process::{ProcessWatch, die_with_parent, kill};
-pub use transport::{ChannelName, MAX_BORROWED_RESPONSES, cleanup_dead_nodes};
+pub use transport::{ChannelName, MAX_BORROWED_RESPONSES, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
 
 /// A failure of the data plane itself.

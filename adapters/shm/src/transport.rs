@@ -234,3 +234,27 @@ pub(crate) fn worker_ports(
         _services: (req, resp, req_events, resp_events),
     })
 }
+
+/// Removes everything a namespace left in shared memory, including iceoryx2's per-namespace
+/// management file. Only for a namespace no live process uses any more (test teardown).
+pub fn remove_namespace(prefix: &str) -> Result<(), DataPlaneError> {
+    cleanup_dead_nodes(prefix)?;
+    let config = config(prefix)?;
+    let mut alive = false;
+    Node::<Ipc>::list(&config, |state| {
+        if matches!(state, iceoryx2::node::NodeState::Alive(_)) {
+            alive = true;
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(iox("node list"))?;
+    if alive {
+        return Err(DataPlaneError::Protocol(format!(
+            "namespace `{prefix}` is still in use"
+        )));
+    }
+    // SAFETY: no live node uses this namespace (checked above), so nothing maps the segment.
+    unsafe { iceoryx2::testing::remove_global_mgmt_segment::<Ipc>(&config) }
+        .map_err(iox("remove namespace"))?;
+    Ok(())
+}

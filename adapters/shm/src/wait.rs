@@ -56,7 +56,9 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
             if start.elapsed() >= policy.spin {
                 break;
             }
-            std::hint::spin_loop();
+            // Yield rather than spin: when the peer shares this core, a plain spin would keep
+            // it from running at all until the time slice ends (tens of microseconds).
+            std::thread::yield_now();
         }
     }
     let mut next_check = Instant::now() + policy.tick;

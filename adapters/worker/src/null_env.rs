@@ -1,4 +1,5 @@
-//! `null`: an env that does no work, for measuring the data plane alone.
+//! `null`: an env that does no work, for measuring the data plane alone — and, through its
+//! options, for misbehaving on purpose in failure tests (`sleep_ms`, `exit_after`).
 
 use envhub_core::{
     Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec, Info, ResetOptions, Space,
@@ -6,6 +7,7 @@ use envhub_core::{
 };
 
 const ENV_ID: &str = "Null-v0";
+const OPTIONS: &[&str] = &["sleep_ms", "exit_after", "error_after"];
 
 /// Adapter with one env, `Null-v0`: CartPole-sized spaces, no computation.
 pub struct NullAdapter;
@@ -43,21 +45,30 @@ impl EnvAdapter for NullAdapter {
         if env_id != ENV_ID {
             return Err(self.unknown_env(env_id));
         }
-        config.extra_keys(env_id, &[])?;
+        config.extra_keys(env_id, OPTIONS)?;
         let (observation_space, action_space) = spaces();
         Ok(EnvSpec {
             env_id: ENV_ID.to_string(),
             observation_space,
             action_space,
             max_episode_steps: None,
-            options: Vec::new(),
+            options: OPTIONS.iter().map(|o| o.to_string()).collect(),
         })
     }
 
     fn make(&self, env_id: &str, config: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
         self.spec(env_id, config)?;
+        let keys = config.extra_keys(env_id, OPTIONS)?;
         let (obs, act) = spaces();
-        Ok(Box::new(NullEnv { obs, act, t: 0 }))
+        Ok(Box::new(NullEnv {
+            obs,
+            act,
+            t: 0,
+            sleep: std::time::Duration::from_millis(keys.u64("sleep_ms", 0)?),
+            exit_after: keys.u64("exit_after", 0)?,
+            error_after: keys.u64("error_after", 0)?,
+            steps: 0,
+        }))
     }
 }
 
@@ -65,6 +76,13 @@ struct NullEnv {
     obs: Space,
     act: Space,
     t: u32,
+    /// Sleep this long in every step (a slow or hung simulator).
+    sleep: std::time::Duration,
+    /// Exit the process abruptly at this step, counted over the env's life (0: never).
+    exit_after: u64,
+    /// Fail the step with an error at this step (0: never).
+    error_after: u64,
+    steps: u64,
 }
 
 impl Env for NullEnv {
@@ -94,6 +112,20 @@ impl Env for NullEnv {
         obs: &mut [u8],
         _info: &mut Info,
     ) -> Result<Transition, EnvError> {
+        self.steps += 1;
+        if !self.sleep.is_zero() {
+            std::thread::sleep(self.sleep);
+        }
+        if self.exit_after == self.steps {
+            // A simulator that segfaults gives no warning either.
+            std::process::abort();
+        }
+        if self.error_after == self.steps {
+            return Err(EnvError::Simulator {
+                env_id: ENV_ID.to_string(),
+                reason: format!("failed on purpose at step {}", self.steps),
+            });
+        }
         self.t = self.t.wrapping_add(1);
         // The step count in the first float, so a test can see the env really stepped.
         obs[..4].copy_from_slice(&(self.t as f32).to_le_bytes());

@@ -1,0 +1,252 @@
+//! Workers that die, hang or fail: the client gets an error quickly, never a hang, and the
+//! hub and other sessions keep working.
+
+use envhub::{EnvConfig, HubError};
+use envhub_e2e::{TestHub, shm_files};
+use std::time::{Duration, Instant};
+
+fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
+    let mut config = EnvConfig {
+        workers: Some(workers),
+        ..EnvConfig::default()
+    };
+    for (k, v) in extra {
+        config.extra.insert(k.to_string(), (*v).into());
+    }
+    config
+}
+
+fn sigkill(pid: u32) {
+    let status = std::process::Command::new("kill")
+        .args(["-9", &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+#[test]
+fn kill_9_mid_rollout_errors_within_a_second_and_hub_lives_on() {
+    let t = TestHub::new("kill9");
+    let mut env = t
+        .hub
+        .make_vec(
+            "gym-cartpole",
+            4,
+            &EnvConfig {
+                workers: Some(2),
+                ..EnvConfig::default()
+            },
+        )
+        .unwrap();
+    // A second session that must not notice.
+    let mut other = t
+        .hub
+        .make_vec("gym-pendulum", 2, &EnvConfig::default())
+        .unwrap();
+    other.reset(Some(0)).unwrap();
+    env.reset(Some(0)).unwrap();
+    let actions = vec![0u8; 4 * 8];
+    for _ in 0..50 {
+        env.step(&actions).unwrap();
+    }
+    let victim = env.worker_pids()[1];
+    sigkill(victim);
+    let start = Instant::now();
+    let err = loop {
+        match env.step(&actions) {
+            Ok(_) => assert!(
+                start.elapsed() < Duration::from_secs(1),
+                "no error within 1 s"
+            ),
+            Err(e) => break e,
+        }
+    };
+    let took = start.elapsed();
+    assert!(took < Duration::from_secs(1), "detected after {took:?}");
+    match &err {
+        HubError::WorkerDied {
+            worker, pid, why, ..
+        } => {
+            assert_eq!((*worker, *pid), (1, victim));
+            assert!(why.contains("signal 9") || why.contains("SIGKILL"), "{why}");
+        }
+        other => panic!("expected WorkerDied, got {other}"),
+    }
+    assert!(err.to_string().contains("hint:"));
+    // The session is closed for good; the other one and new ones work.
+    assert!(matches!(env.step(&actions), Err(HubError::InvalidState(_))));
+    let action = vec![0u8; 2 * 4];
+    other.step(&action).unwrap();
+    let mut fresh = t
+        .hub
+        .make_vec("gym-cartpole", 2, &EnvConfig::default())
+        .unwrap();
+    fresh.reset(Some(1)).unwrap();
+    fresh.step(&[0u8; 16]).unwrap();
+}
+
+#[test]
+fn hung_worker_is_killed_after_the_step_timeout() {
+    let t = TestHub::with("hang", |o| o.step_timeout = Duration::from_millis(300));
+    let mut env = t
+        .hub
+        .make_vec_direct("null", "Null-v0", &null_config(&[("sleep_ms", 5_000)], 1))
+        .unwrap();
+    env.reset(None).unwrap();
+    let pid = env.worker_pids()[0];
+    let start = Instant::now();
+    let err = env.step(&[0u8; 8]).unwrap_err();
+    let took = start.elapsed();
+    assert!(
+        took >= Duration::from_millis(300) && took < Duration::from_secs(2),
+        "{took:?}"
+    );
+    assert!(err.to_string().contains("step timeout"), "{err}");
+    assert!(
+        !std::path::Path::new(&format!("/proc/{pid}")).exists() || is_zombie_free(pid),
+        "the hung worker was killed"
+    );
+}
+
+fn is_zombie_free(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).map_or(true, |s| s.contains(") Z"))
+}
+
+#[test]
+fn restart_on_crash_truncates_the_affected_envs() {
+    let t = TestHub::with("restart", |o| o.restart_on_crash = true);
+    let mut env = t
+        .hub
+        .make_vec(
+            "gym-cartpole",
+            4,
+            &EnvConfig {
+                workers: Some(2),
+                ..EnvConfig::default()
+            },
+        )
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+    let actions = vec![0u8; 4 * 8];
+    env.step(&actions).unwrap();
+    let old = env.worker_pids();
+    sigkill(old[0]);
+    // The next step notices, restarts worker 0 and reports its envs truncated.
+    let b = env.step(&actions).unwrap();
+    assert_eq!(b.truncated[..2], [true, true]);
+    assert_eq!(b.infos[0]["worker_restarted"], true);
+    assert_eq!(b.infos[0]["worker_restarts"], 1);
+    assert!(
+        !b.infos[2]
+            .get("worker_restarted")
+            .is_some_and(|v| v == true)
+    );
+    let new = env.worker_pids();
+    assert_ne!(new[0], old[0]);
+    assert_eq!(new[1], old[1]);
+    for _ in 0..20 {
+        let b = env.step(&actions).unwrap();
+        assert!(b.infos.iter().all(|i| i.get("worker_restarted").is_none()));
+    }
+}
+
+#[test]
+fn crash_inside_the_simulator_is_an_error_not_a_hang() {
+    let t = TestHub::new("abort");
+    let mut env = t
+        .hub
+        .make_vec_direct("null", "Null-v0", &null_config(&[("exit_after", 3)], 1))
+        .unwrap();
+    env.reset(None).unwrap();
+    env.step(&[0u8; 8]).unwrap();
+    env.step(&[0u8; 8]).unwrap();
+    let start = Instant::now();
+    let err = env.step(&[0u8; 8]).unwrap_err();
+    assert!(start.elapsed() < Duration::from_secs(1));
+    assert!(matches!(err, HubError::WorkerDied { .. }), "{err}");
+}
+
+#[test]
+fn env_errors_reach_the_client_and_the_worker_survives() {
+    let t = TestHub::new("enverror");
+    let mut env = t
+        .hub
+        .make_vec_direct("null", "Null-v0", &null_config(&[("error_after", 2)], 1))
+        .unwrap();
+    env.reset(None).unwrap();
+    env.step(&[0u8; 8]).unwrap();
+    let err = env.step(&[0u8; 8]).unwrap_err().to_string();
+    assert!(err.contains("failed on purpose at step 2"), "{err}");
+    env.step(&[0u8; 8]).unwrap();
+}
+
+#[test]
+fn dead_clients_leave_nothing_behind() {
+    let t = TestHub::new("stale");
+    let ns = t.namespace.clone();
+    let mut client = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "failures::child_that_gets_killed", "--nocapture"])
+        .env("E2E_CHILD_NAMESPACE", &ns)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = client.id();
+    // Wait until the child's session is up (it prints a line), then kill it hard.
+    let mut out = std::io::BufReader::new(client.stdout.take().unwrap());
+    let mut said = String::new();
+    for _ in 0..20 {
+        let mut line = String::new();
+        if std::io::BufRead::read_line(&mut out, &mut line).unwrap() == 0 || line.contains("ready")
+        {
+            said.push_str(&line);
+            break;
+        }
+        said.push_str(&line);
+    }
+    assert!(said.contains("ready"), "child said {said:?}");
+    assert!(
+        !shm_files(&ns).is_empty(),
+        "the child's session lives in /dev/shm"
+    );
+    sigkill(pid);
+    client.wait().unwrap();
+    // Its worker notices its owner is gone and exits; then the dead nodes are cleaned.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        envhub_shm::cleanup_dead_nodes(&ns).unwrap();
+        let _ = envhub_shm::remove_namespace(&ns);
+        if shm_files(&ns).is_empty() {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "left behind: {:?}",
+            shm_files(&ns)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // A new session in the same namespace works.
+    let mut env = t
+        .hub
+        .make_vec("gym-cartpole", 1, &EnvConfig::default())
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+}
+
+/// Helper process for `dead_clients_leave_nothing_behind`; does nothing in a normal run.
+#[test]
+fn child_that_gets_killed() {
+    let Ok(ns) = std::env::var("E2E_CHILD_NAMESPACE") else {
+        return;
+    };
+    let hub = envhub::Hub::new(envhub::Registry::builtin()).with_options(envhub::SessionOptions {
+        namespace: ns,
+        ..envhub::SessionOptions::default()
+    });
+    let mut env = hub
+        .make_vec("gym-cartpole", 2, &EnvConfig::default())
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+    println!("ready");
+    std::thread::sleep(Duration::from_secs(30));
+}

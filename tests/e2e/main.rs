@@ -1,0 +1,7 @@
+//! End-to-end tests: real worker processes, real iceoryx2 shared memory.
+
+mod bad_input;
+mod classic_rollouts;
+mod cli;
+mod concurrency;
+mod failures;
