@@ -69,7 +69,7 @@ impl Env {
             reward: 0.0,
             terminated: false,
             truncated: false,
-            info: &b.infos[0],
+            info: b.info(0),
         })
     }
 
@@ -81,7 +81,7 @@ impl Env {
             reward: b.rewards[0],
             terminated: b.terminated[0],
             truncated: b.truncated[0],
-            info: &b.infos[0],
+            info: b.info(0),
         })
     }
 

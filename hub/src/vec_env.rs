@@ -44,7 +44,8 @@ enum Phase {
 }
 
 /// The results of a reset or step, for every env of the batch (or, from
-/// [`VecEnv::recv`], for the envs listed in `env_ids`).
+/// [`VecEnv::recv`], for the envs listed in `env_ids`). With one worker, the observations,
+/// rewards and flags are viewed in place in its shared-memory sample.
 #[derive(Debug)]
 pub struct Batch<'a> {
     /// The envs these results belong to, in order.
@@ -57,16 +58,32 @@ pub struct Batch<'a> {
     pub terminated: &'a [bool],
     /// Truncated flags.
     pub truncated: &'a [bool],
-    /// Per-env info (`Null` where an env reported none).
-    pub infos: &'a [serde_json::Value],
-    /// same_step autoreset: `Some(final observation)` for envs that finished this step.
-    pub final_obs: &'a [Option<Vec<u8>>],
+    infos: &'a [serde_json::Value],
+    final_obs: &'a [Option<Vec<u8>>],
 }
 
-impl Batch<'_> {
+static NO_INFO: serde_json::Value = serde_json::Value::Null;
+
+impl<'a> Batch<'a> {
     /// Observations as `f32` (when the observation space is a `float32` box).
-    pub fn obs_f32(&self) -> &[f32] {
+    pub fn obs_f32(&self) -> &'a [f32] {
         bytemuck::cast_slice(self.obs)
+    }
+
+    /// The info of the `k`-th env of the batch (`Null` if it reported none).
+    pub fn info(&self, k: usize) -> &'a serde_json::Value {
+        self.infos.get(k).unwrap_or(&NO_INFO)
+    }
+
+    /// Whether any env reported info.
+    pub fn has_info(&self) -> bool {
+        !self.infos.is_empty()
+    }
+
+    /// same_step autoreset: the final observation of the `k`-th env if its episode ended
+    /// in this step.
+    pub fn final_obs(&self, k: usize) -> Option<&'a [u8]> {
+        self.final_obs.get(k).and_then(Option::as_deref)
     }
 }
 
@@ -160,12 +177,9 @@ impl VecEnv {
             });
         }
         let session = session_name();
-        // Spinning only pays when every spinner has a core: the client plus its workers.
-        let spin = if workers < cores {
-            options.spin
-        } else {
-            Duration::ZERO
-        };
+        // Spinning yields the core on every round, so it costs nothing when another process
+        // needs the core, and saves a wake-up (tens of µs on a VM) when the answer is close.
+        let spin = options.spin;
         let policy = WaitPolicy {
             spin,
             tick: Duration::from_millis(5),
@@ -404,28 +418,24 @@ impl VecEnv {
     }
 
     fn validate_all(&self, actions: &[u8]) -> Result<(), HubError> {
-        let ab = self.action_space.byte_len();
-        if actions.len() != self.num_envs * ab {
-            return Err(HubError::InvalidAction {
-                reason: format!(
-                    "got {} bytes of actions for {} envs; each action of {} is {} bytes",
-                    actions.len(),
-                    self.num_envs,
-                    self.action_space,
-                    ab
-                ),
-                hint: format!("pass an array of shape {}", self.batch_shape(self.num_envs)),
-            });
-        }
-        for (env, action) in actions.chunks_exact(ab.max(1)).enumerate() {
-            self.action_space
-                .validate(action)
-                .map_err(|e| HubError::InvalidAction {
+        self.action_space
+            .validate_batch(actions, self.num_envs)
+            .map_err(|(env, e)| match e {
+                envhub_core::SpaceError::Length { .. } => HubError::InvalidAction {
+                    reason: format!(
+                        "got {} bytes of actions for {} envs; each action of {} is {} bytes",
+                        actions.len(),
+                        self.num_envs,
+                        self.action_space,
+                        self.action_space.byte_len()
+                    ),
+                    hint: format!("pass an array of shape {}", self.batch_shape(self.num_envs)),
+                },
+                e => HubError::InvalidAction {
                     reason: format!("env {env}: {e}"),
                     hint: format!("actions must lie in {}", self.action_space),
-                })?;
-        }
-        Ok(())
+                },
+            })
     }
 
     /// [`VecEnv::step`] with `float32` actions (a continuous box).
@@ -583,62 +593,103 @@ impl VecEnv {
         let ob = self.observation_space.byte_len();
         self.gathered.clear();
         self.direct = workers.len() == 1 && self.workers.len() == 1;
+        let any_info = workers.iter().any(|&i| {
+            let w = &self.workers[i];
+            w.restarted || w.response.as_ref().is_some_and(|r| r.header().info_len > 0)
+        });
+        let any_final = workers.iter().any(|&i| {
+            self.workers[i]
+                .response
+                .as_ref()
+                .is_some_and(|r| r.blocks().final_mask.iter().any(|&f| f != 0))
+        });
         for &i in workers {
             let w = &mut self.workers[i];
             let restarted = std::mem::take(&mut w.restarted);
             let restarts = w.restarts;
             let Some(r) = &w.response else { continue };
             let b = r.blocks();
-            let infos = parse_infos(r);
-            for k in 0..w.job.num_envs {
-                self.gathered.env_ids.push(w.job.env_offset + k);
-                if !self.direct {
-                    self.gathered.push_obs(&b.obs[k * ob..(k + 1) * ob]);
-                }
-                self.gathered.rewards.push(b.rewards[k]);
-                self.gathered.terminated.push(b.terminated[k] != 0);
+            let n = w.job.num_envs;
+            if as_bools(b.terminated).is_none() || as_bools(b.truncated).is_none() {
+                return Err(HubError::DataPlane(envhub_shm::DataPlaneError::Protocol(
+                    format!("worker {i} sent done flags other than 0 and 1"),
+                )));
+            }
+            self.gathered
+                .env_ids
+                .extend(w.job.env_offset..w.job.env_offset + n);
+            if !self.direct {
+                self.gathered.push_obs(&b.obs[..n * ob]);
+                self.gathered.rewards.extend_from_slice(b.rewards);
+                self.gathered
+                    .terminated
+                    .extend(b.terminated.iter().map(|&t| t != 0));
                 self.gathered
                     .truncated
-                    .push(b.truncated[k] != 0 || restarted);
-                let mut info = infos
-                    .as_ref()
-                    .and_then(|v| v.get(k).cloned())
-                    .unwrap_or(serde_json::Value::Null);
-                if restarted {
-                    let mut map = info.as_object().cloned().unwrap_or_default();
-                    map.insert("worker_restarted".into(), true.into());
-                    map.insert("worker_restarts".into(), restarts.into());
-                    info = serde_json::Value::Object(map);
+                    .extend(b.truncated.iter().map(|&t| t != 0 || restarted));
+            }
+            if any_info {
+                let infos = parse_infos(r);
+                for k in 0..n {
+                    let mut info = infos
+                        .as_ref()
+                        .and_then(|v| v.get(k).cloned())
+                        .unwrap_or_default();
+                    if restarted {
+                        let mut map = info.as_object().cloned().unwrap_or_default();
+                        map.insert("worker_restarted".into(), true.into());
+                        map.insert("worker_restarts".into(), restarts.into());
+                        info = serde_json::Value::Object(map);
+                    }
+                    self.gathered.infos.push(info);
                 }
-                self.gathered.infos.push(info);
-                self.gathered.final_obs.push(
-                    (b.final_mask[k] != 0 && !b.final_obs.is_empty())
-                        .then(|| b.final_obs[k * ob..(k + 1) * ob].to_vec()),
-                );
+            }
+            if any_final {
+                for k in 0..n {
+                    self.gathered.final_obs.push(
+                        (b.final_mask[k] != 0).then(|| b.final_obs[k * ob..(k + 1) * ob].to_vec()),
+                    );
+                }
+            }
+            if self.direct && restarted {
+                // A restart must show in the flags, which the direct view cannot change.
+                self.direct = false;
+                self.gathered.push_obs(&b.obs[..n * ob]);
+                self.gathered.rewards.extend_from_slice(b.rewards);
+                self.gathered
+                    .terminated
+                    .extend(b.terminated.iter().map(|&t| t != 0));
+                self.gathered.truncated.extend(std::iter::repeat_n(true, n));
             }
         }
         Ok(())
     }
 
     fn batch(&self) -> Batch<'_> {
-        let obs = if self.direct {
-            let r = self.workers[0]
-                .response
-                .as_ref()
-                .expect("a response was collected");
-            let n = self.workers[0].job.num_envs * self.observation_space.byte_len();
-            &r.blocks().obs[..n]
-        } else {
-            self.gathered.obs_bytes()
-        };
+        let g = &self.gathered;
+        if self.direct {
+            let w = &self.workers[0];
+            let r = w.response.as_ref().expect("a response was collected");
+            let b = r.blocks();
+            let n = w.job.num_envs;
+            return Batch {
+                env_ids: &g.env_ids,
+                obs: &b.obs[..n * self.observation_space.byte_len()],
+                rewards: b.rewards,
+                terminated: as_bools(b.terminated).expect("checked when collected"),
+                truncated: as_bools(b.truncated).expect("checked when collected"),
+                infos: &g.infos,
+                final_obs: &g.final_obs,
+            };
+        }
         Batch {
-            env_ids: &self.gathered.env_ids,
-            obs,
-            rewards: &self.gathered.rewards,
-            terminated: &self.gathered.terminated,
-            truncated: &self.gathered.truncated,
-            infos: &self.gathered.infos,
-            final_obs: &self.gathered.final_obs,
+            env_ids: &g.env_ids,
+            obs: g.obs_bytes(),
+            rewards: &g.rewards,
+            terminated: &g.terminated,
+            truncated: &g.truncated,
+            infos: &g.infos,
+            final_obs: &g.final_obs,
         }
     }
 
@@ -676,6 +727,16 @@ impl Drop for VecEnv {
     fn drop(&mut self) {
         self.close();
     }
+}
+
+/// Views flag bytes as `bool`s, if every byte is 0 or 1 (the worker writes nothing else;
+/// a corrupted sample is caught when the response is collected).
+fn as_bools(flags: &[u8]) -> Option<&[bool]> {
+    flags.iter().all(|&f| f <= 1).then(|| {
+        // SAFETY: every byte is 0 or 1, the two valid bit patterns of `bool`, which has the
+        // size and alignment of `u8`.
+        unsafe { std::slice::from_raw_parts(flags.as_ptr().cast::<bool>(), flags.len()) }
+    })
 }
 
 /// The per-env infos of a response, if any env reported info.

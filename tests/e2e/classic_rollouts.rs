@@ -129,7 +129,7 @@ fn same_step_autoreset_reports_final_observation() {
         let b = env.step(&action).unwrap();
         let done = step % 5 == 0;
         assert_eq!(b.truncated, &[done, done], "step {step}");
-        assert_eq!(b.final_obs[0].is_some(), done, "step {step}");
+        assert_eq!(b.final_obs(0).is_some(), done, "step {step}");
     }
 }
 

@@ -134,19 +134,15 @@ fn restart_on_crash_truncates_the_affected_envs() {
     // The next step notices, restarts worker 0 and reports its envs truncated.
     let b = env.step(&actions).unwrap();
     assert_eq!(b.truncated[..2], [true, true]);
-    assert_eq!(b.infos[0]["worker_restarted"], true);
-    assert_eq!(b.infos[0]["worker_restarts"], 1);
-    assert!(
-        !b.infos[2]
-            .get("worker_restarted")
-            .is_some_and(|v| v == true)
-    );
+    assert_eq!(b.info(0)["worker_restarted"], true);
+    assert_eq!(b.info(0)["worker_restarts"], 1);
+    assert!(!b.info(2).get("worker_restarted").is_some_and(|v| v == true));
     let new = env.worker_pids();
     assert_ne!(new[0], old[0]);
     assert_eq!(new[1], old[1]);
     for _ in 0..20 {
         let b = env.step(&actions).unwrap();
-        assert!(b.infos.iter().all(|i| i.get("worker_restarted").is_none()));
+        assert!(!b.has_info());
     }
 }
 
