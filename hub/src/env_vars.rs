@@ -15,3 +15,6 @@ pub const ENVHUB_WORKER: &str = "ENVHUB_WORKER";
 
 /// iceoryx2 namespace (file prefix) for this process's sessions; tests set a unique one.
 pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
+
+/// Control socket of a hub daemon (`envhub serve`) to use instead of the embedded hub.
+pub const ENVHUB_HUB: &str = "ENVHUB_HUB";

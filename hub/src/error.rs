@@ -89,6 +89,9 @@ pub enum HubError {
     /// The shared-memory layer failed.
     #[error(transparent)]
     DataPlane(#[from] DataPlaneError),
+    /// The hub daemon reported an error (its message, with the hint).
+    #[error("{0}")]
+    Remote(String),
     /// Talking to the hub daemon failed.
     #[error(
         "hub daemon at `{socket}`: {reason}\nhint: start it with `envhub serve`, or unset ENVHUB_HUB to use the embedded hub"

@@ -4,18 +4,22 @@
 //! runs the same hub for many clients.
 
 use crate::catalog::{self, AdapterInfo};
+use crate::daemon_client::DaemonClient;
 use crate::env::Env;
 use crate::error::HubError;
+use crate::launcher::Launcher;
 use crate::registry::Registry;
 use crate::routing::{Route, route};
 use crate::settings::Settings;
 use crate::vec_env::{SessionOptions, VecEnv};
 use envhub_core::{AutoresetMode, EnvConfig};
 
-/// The hub logic: resolves registry ids to adapters and starts worker sessions.
+/// The hub logic: resolves registry ids to adapters and starts worker sessions — here
+/// (embedded), or through a hub daemon (`envhub serve`) when connected to one.
 pub struct Hub {
     registry: Registry,
     options: SessionOptions,
+    launcher: Launcher,
 }
 
 impl Hub {
@@ -24,16 +28,48 @@ impl Hub {
         Hub {
             registry,
             options: SessionOptions::default(),
+            launcher: Launcher::Local,
         }
     }
 
-    /// A hub configured the usual way (`envhub.yaml`, `ENVHUB_*`; see [`Settings`]).
+    /// A hub that routes and starts workers through the daemon listening on `socket`.
+    /// `registry` serves local lookups; routing uses the daemon's own registry.
+    pub fn connect(socket: &std::path::Path, registry: Registry) -> Result<Hub, HubError> {
+        Ok(Hub {
+            registry,
+            options: SessionOptions::default(),
+            launcher: Launcher::Daemon(DaemonClient::connect(socket)?),
+        })
+    }
+
+    /// The daemon this hub is connected to, if any.
+    pub fn daemon(&self) -> Option<&DaemonClient> {
+        match &self.launcher {
+            Launcher::Daemon(d) => Some(d),
+            Launcher::Local => None,
+        }
+    }
+
+    /// A hub configured the usual way (`envhub.yaml`, `ENVHUB_*`; see [`Settings`]):
+    /// connected to the daemon `ENVHUB_HUB` names, else embedded.
     pub fn from_env() -> Result<Hub, HubError> {
         let settings = Settings::discover(None).map_err(|e| HubError::InvalidConfig {
             what: "config file",
             reason: e.to_string(),
         })?;
-        Ok(Hub::new(settings.registry(&[])?))
+        Hub::from_settings(&settings, &[])
+    }
+
+    /// A hub over `settings` and the registry files `explicit` (see [`Settings::registry`]).
+    pub fn from_settings(
+        settings: &Settings,
+        explicit: &[std::path::PathBuf],
+    ) -> Result<Hub, HubError> {
+        let registry = settings.registry(explicit)?;
+        match std::env::var_os(crate::env_vars::ENVHUB_HUB).filter(|s| !s.is_empty()) {
+            Some(socket) => Hub::connect(std::path::Path::new(&socket), registry),
+            None => Ok(Hub::new(registry)),
+        }
     }
 
     /// Replaces the session options (timeouts, restart policy, namespace).
@@ -53,12 +89,18 @@ impl Hub {
     }
 
     /// Every adapter with its availability.
-    pub fn adapters(&self) -> Result<&'static [AdapterInfo], HubError> {
-        catalog::adapters()
+    pub fn adapters(&self) -> Result<Vec<AdapterInfo>, HubError> {
+        match &self.launcher {
+            Launcher::Daemon(d) => d.adapters(),
+            Launcher::Local => Ok(catalog::adapters()?.to_vec()),
+        }
     }
 
     /// The adapter and config that would run `id` with `config`.
     pub fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
+        if let Launcher::Daemon(d) = &self.launcher {
+            return d.route(id, config);
+        }
         let entry = self.registry.get(id)?;
         route(entry, catalog::adapters()?, config)
     }
@@ -73,7 +115,7 @@ impl Hub {
         let mut config = config.clone();
         config.num_envs = num_envs;
         let route = self.route(id, &config)?;
-        VecEnv::start(id, route, self.options.clone())
+        VecEnv::start(id, route, self.options.clone(), &self.launcher)
     }
 
     /// One env of registry entry `id`, in its own worker.
@@ -83,7 +125,12 @@ impl Hub {
         config.workers = Some(1);
         config.autoreset_mode = AutoresetMode::Disabled;
         let route = self.route(id, &config)?;
-        Ok(Env::new(VecEnv::start(id, route, self.options.clone())?))
+        Ok(Env::new(VecEnv::start(
+            id,
+            route,
+            self.options.clone(),
+            &self.launcher,
+        )?))
     }
 
     /// A batch of envs of an adapter's env id, bypassing the registry.
@@ -98,7 +145,7 @@ impl Hub {
             env_id: env_id.to_string(),
             config: config.clone(),
         };
-        VecEnv::start(env_id, route, self.options.clone())
+        VecEnv::start(env_id, route, self.options.clone(), &self.launcher)
     }
 }
 

@@ -6,11 +6,14 @@
 //! file order as the tie-breaker, which makes results predictable for people.
 
 mod catalog;
+mod daemon;
+mod daemon_client;
 mod entry;
 mod env;
 pub mod env_vars;
 mod error;
 mod hub;
+mod launcher;
 mod matching;
 mod registry;
 mod routing;
@@ -21,6 +24,8 @@ mod worker_binary;
 mod worker_link;
 
 pub use catalog::AdapterInfo;
+pub use daemon::{default_socket, serve};
+pub use daemon_client::DaemonClient;
 pub use entry::EnvEntry;
 pub use env::{Env, Step};
 pub use envhub_core::{AutoresetMode, EnvConfig, ResetOptions, Space};

@@ -6,7 +6,7 @@ use crate::error::HubError;
 use envhub_core::{Availability, EnvConfig, FRAMEWORKS, canonical_framework};
 
 /// An entry resolved to an adapter and a complete config.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Route {
     /// The adapter that runs it.
     pub adapter: String,

@@ -1,6 +1,7 @@
 //! `VecEnv`: a batch of envs spread over worker processes, stepped through shared memory.
 
 use crate::error::HubError;
+use crate::launcher::Launcher;
 use crate::routing::Route;
 use crate::worker_link::{WorkerLink, split_envs};
 use envhub_core::{AutoresetMode, DType, Space};
@@ -158,7 +159,12 @@ fn session_name() -> String {
 
 impl VecEnv {
     /// Starts the workers of a routed entry. `id` names the session in errors.
-    pub fn start(id: &str, route: Route, options: SessionOptions) -> Result<VecEnv, HubError> {
+    pub(crate) fn start(
+        id: &str,
+        route: Route,
+        options: SessionOptions,
+        launcher: &Launcher,
+    ) -> Result<VecEnv, HubError> {
         let num_envs = route.config.num_envs;
         if num_envs == 0 {
             return Err(HubError::InvalidConfig {
@@ -208,6 +214,7 @@ impl VecEnv {
                 0,
                 policy,
                 options.start_timeout,
+                launcher,
             )?);
         }
         let observation_space = links[0].spec.observation_space.clone();

@@ -1,13 +1,10 @@
 //! One worker process as its owner sees it: started, watched, waited for, killed, restarted.
 
 use crate::error::HubError;
-use crate::worker_binary::worker_binary;
+use crate::launcher::{Launcher, WorkerProcess};
 use envhub_shm::{
-    ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy,
-    WorkerJob, WorkerReply,
+    ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy, WorkerJob,
 };
-use std::io::BufRead;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// A running worker and the client's end of its channel.
@@ -16,7 +13,8 @@ pub(crate) struct WorkerLink {
     pub job: WorkerJob,
     pub spec: ReadySpec,
     pub channel: ClientChannel,
-    child: Child,
+    process: WorkerProcess,
+    launcher: Launcher,
     watch: ProcessWatch,
     generation: u32,
     /// A request is in flight.
@@ -38,44 +36,23 @@ impl WorkerLink {
         generation: u32,
         policy: WaitPolicy,
         start_timeout: Duration,
+        launcher: &Launcher,
     ) -> Result<WorkerLink, HubError> {
         job.channel.service = format!("envhub/{session}/{index}/{generation}");
         let node_name = format!("client-{}-{index}", std::process::id());
         // The request size grows to the real layout on first use (power-of-two allocation).
         let placeholder = Layout::new(job.num_envs, 0, 0, false);
         let mut channel = ClientChannel::create(&job.channel, &node_name, placeholder, policy)?;
-        let path = worker_binary();
-        let mut child = Command::new(&path)
-            .arg("serve")
-            .arg("--job")
-            .arg(serde_json::to_string(&job).expect("a job serializes"))
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .map_err(|e| HubError::WorkerBinary {
-                path: path.display().to_string(),
-                reason: e.to_string(),
-            })?;
-        let pid = child.id();
-        let reply = read_reply(&mut child, start_timeout);
-        let spec = match reply {
-            Ok(WorkerReply::Ready(spec)) => spec,
-            Ok(WorkerReply::Error(message)) => {
-                let _ = child.wait();
-                return Err(HubError::MakeFailed(message));
-            }
-            Err(why) => {
-                let _ = child.kill();
-                let status = child.wait().map(|s| s.to_string()).unwrap_or_default();
-                return Err(HubError::WorkerDied {
-                    worker: index,
-                    envs: env_range(&job),
-                    pid,
-                    why: format!("failed to start: {why} ({status})"),
-                });
-            }
-        };
+        let (process, spec) = launcher.launch(&job, start_timeout).map_err(|e| match e {
+            HubError::WorkerDied { pid, why, envs, .. } => HubError::WorkerDied {
+                worker: index,
+                envs,
+                pid,
+                why,
+            },
+            other => other,
+        })?;
+        let pid = process.pid();
         let watch = ProcessWatch::new(pid).map_err(|e| HubError::WorkerDied {
             worker: index,
             envs: env_range(&job),
@@ -94,7 +71,8 @@ impl WorkerLink {
             job,
             spec,
             channel,
-            child,
+            process,
+            launcher: launcher.clone(),
             watch,
             generation,
             pending: false,
@@ -162,8 +140,7 @@ impl WorkerLink {
     /// Kills a worker that did not answer within `timeout` and describes it.
     pub fn hung(&mut self, timeout: Duration) -> HubError {
         self.pending = false;
-        envhub_shm::kill(self.pid());
-        let _ = self.child.wait();
+        self.process.kill();
         HubError::WorkerDied {
             worker: self.index,
             envs: env_range(&self.job),
@@ -174,9 +151,9 @@ impl WorkerLink {
 
     fn exited(&mut self) -> HubError {
         self.pending = false;
-        let why = match self.child.wait() {
-            Ok(status) => format!("died ({status})"),
-            Err(e) => format!("died (status unknown: {e})"),
+        let why = match self.process.exit_status(Duration::from_millis(500)) {
+            Some(status) => format!("died ({status})"),
+            None => "died (exit status unknown)".to_string(),
         };
         HubError::WorkerDied {
             worker: self.index,
@@ -200,6 +177,7 @@ impl WorkerLink {
             self.generation + 1,
             policy,
             start_timeout,
+            &self.launcher,
         )?;
         let restarts = self.restarts + 1;
         *self = fresh;
@@ -214,52 +192,22 @@ impl WorkerLink {
         if self.channel.send_close().is_ok() {
             let _ = self.wait(Duration::from_secs(2));
         }
-        let deadline = Instant::now() + Duration::from_secs(2);
-        loop {
-            match self.child.try_wait() {
-                Ok(Some(_)) => return,
-                Ok(None) if Instant::now() < deadline => {
-                    std::thread::sleep(Duration::from_millis(2))
-                }
-                _ => {
-                    let _ = self.child.kill();
-                    let _ = self.child.wait();
-                    return;
-                }
-            }
+        if self.process.exit_status(Duration::from_secs(2)).is_none() {
+            self.process.kill();
         }
     }
 }
 
 impl Drop for WorkerLink {
     fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
+        if !self.watch.exited() {
+            self.process.kill();
         }
     }
 }
 
 fn env_range(job: &WorkerJob) -> String {
     format!("{}..{}", job.env_offset, job.env_offset + job.num_envs)
-}
-
-/// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.
-fn read_reply(child: &mut Child, timeout: Duration) -> Result<WorkerReply, String> {
-    let stdout = child.stdout.take().ok_or("no stdout")?;
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let mut line = String::new();
-        let read = std::io::BufReader::new(stdout).read_line(&mut line);
-        let _ = tx.send(read.map(|_| line));
-    });
-    match rx.recv_timeout(timeout) {
-        Ok(Ok(line)) if line.trim().is_empty() => Err("it exited before reporting ready".into()),
-        Ok(Ok(line)) => serde_json::from_str(&line)
-            .map_err(|e| format!("unreadable reply `{}`: {e}", line.trim())),
-        Ok(Err(e)) => Err(format!("cannot read its reply: {e}")),
-        Err(_) => Err(format!("it did not report ready within {timeout:?}")),
-    }
 }
 
 /// Splits `num_envs` over `workers` as evenly as possible: (offset, count) per worker.

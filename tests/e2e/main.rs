@@ -4,4 +4,5 @@ mod bad_input;
 mod classic_rollouts;
 mod cli;
 mod concurrency;
+mod daemon;
 mod failures;

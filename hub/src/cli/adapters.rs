@@ -15,8 +15,8 @@ pub(crate) struct Args {
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
-    let adapters: Vec<_> = hub
-        .adapters()?
+    let all = hub.adapters()?;
+    let adapters: Vec<_> = all
         .iter()
         .filter(|a| args.all || a.availability.is_available())
         .collect();

@@ -5,6 +5,7 @@ mod bench;
 mod envs;
 mod match_cmd;
 mod run;
+mod serve;
 mod show;
 mod table;
 
@@ -44,6 +45,9 @@ enum Command {
     Run(run::Args),
     /// Measure throughput through the hub against in-process stepping, and the round trip.
     Bench(bench::Args),
+    /// Run the hub as a daemon that several client processes share (set ENVHUB_HUB to its
+    /// socket in the clients).
+    Serve(serve::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -69,13 +73,15 @@ pub fn run() -> ExitCode {
 fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
     let settings = Settings::discover(cli.config.as_deref())?;
     let registry = || -> anyhow::Result<Registry> { Ok(settings.registry(&cli.registries)?) };
+    let hub = || -> anyhow::Result<Hub> { Ok(Hub::from_settings(&settings, &cli.registries)?) };
     match cli.command {
         Command::Envs(args) => envs::run(&registry()?, &args),
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
-        Command::Adapters(args) => adapters::run(&Hub::new(registry()?), &args),
-        Command::Run(args) => run::run(&Hub::new(registry()?), &args),
-        Command::Bench(args) => bench::run(&Hub::new(registry()?), &args),
+        Command::Adapters(args) => adapters::run(&hub()?, &args),
+        Command::Run(args) => run::run(&hub()?, &args),
+        Command::Bench(args) => bench::run(&hub()?, &args),
+        Command::Serve(args) => serve::run(Hub::new(registry()?), &args),
     }
 }
 

@@ -1,0 +1,165 @@
+//! `envhub serve`: the hub as a daemon that many client processes share.
+//!
+//! Control only: clients ask it to route ids and start workers, then talk to those workers
+//! directly over shared memory; the daemon is never on the per-step path. Each client
+//! connection owns the workers started through it, and closing it (the client exits or
+//! crashes) stops them. A client that crashes does not disturb the daemon or other clients.
+
+use crate::error::HubError;
+use crate::hub::Hub;
+use crate::launcher::launch_local;
+use envhub_core::EnvConfig;
+use envhub_shm::WorkerJob;
+use serde_json::{Value, json};
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::process::Child;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+/// The default control socket: `$XDG_RUNTIME_DIR/envhub.sock`, else `/tmp/envhub-<uid>.sock`.
+pub fn default_socket() -> PathBuf {
+    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(dir) => Path::new(&dir).join("envhub.sock"),
+        // SAFETY: getuid has no preconditions.
+        None => std::env::temp_dir().join(format!("envhub-{}.sock", unsafe { libc::getuid() })),
+    }
+}
+
+/// Binds `socket` (replacing a stale one, refusing a live one) and serves clients until the
+/// process is stopped. `on_ready` runs once the socket accepts connections.
+pub fn serve(socket: &Path, hub: Hub, on_ready: impl FnOnce()) -> Result<(), HubError> {
+    let fail = |reason: String| HubError::Daemon {
+        socket: socket.display().to_string(),
+        reason,
+    };
+    if socket.exists() {
+        if UnixStream::connect(socket).is_ok() {
+            return Err(fail("another hub is already serving here".into()));
+        }
+        std::fs::remove_file(socket)
+            .map_err(|e| fail(format!("cannot remove the stale socket: {e}")))?;
+    }
+    let listener = UnixListener::bind(socket).map_err(|e| fail(format!("cannot listen: {e}")))?;
+    // Resolve the adapter catalog once, before clients ask.
+    hub.adapters()?;
+    let hub = Arc::new(hub);
+    let workers = Arc::new(AtomicUsize::new(0));
+    on_ready();
+    for stream in listener.incoming() {
+        let Ok(stream) = stream else { continue };
+        let (hub, workers) = (hub.clone(), workers.clone());
+        std::thread::spawn(move || {
+            if let Err(e) = Connection::new(hub, workers).run(stream) {
+                tracing::debug!(error = %e, "client connection ended");
+            }
+        });
+    }
+    Ok(())
+}
+
+struct Connection {
+    hub: Arc<Hub>,
+    workers: Arc<AtomicUsize>,
+    children: HashMap<u32, Child>,
+}
+
+impl Connection {
+    fn new(hub: Arc<Hub>, workers: Arc<AtomicUsize>) -> Connection {
+        Connection {
+            hub,
+            workers,
+            children: HashMap::new(),
+        }
+    }
+
+    fn run(mut self, stream: UnixStream) -> std::io::Result<()> {
+        let mut writer = stream.try_clone()?;
+        let reader = BufReader::new(stream);
+        for line in reader.lines() {
+            let line = line?;
+            let reply = match serde_json::from_str::<Value>(&line) {
+                Ok(request) => match self.handle(&request) {
+                    Ok(ok) => json!({ "ok": ok }),
+                    Err(e) => json!({ "err": e.to_string() }),
+                },
+                Err(e) => json!({ "err": format!("unreadable request: {e}") }),
+            };
+            let mut text = reply.to_string();
+            text.push('\n');
+            writer.write_all(text.as_bytes())?;
+        }
+        Ok(())
+    }
+
+    fn handle(&mut self, request: &Value) -> Result<Value, HubError> {
+        let bad = |what: &str| HubError::InvalidConfig {
+            what: "daemon request",
+            reason: format!("missing or invalid `{what}`"),
+        };
+        match request["op"].as_str().unwrap_or_default() {
+            "ping" => Ok(json!("pong")),
+            "adapters" => {
+                Ok(serde_json::to_value(self.hub.adapters()?).expect("adapters serialize"))
+            }
+            "status" => Ok(json!({"workers": self.workers.load(Ordering::Relaxed)})),
+            "route" => {
+                let id = request["id"].as_str().ok_or_else(|| bad("id"))?;
+                let config: EnvConfig =
+                    serde_json::from_value(request["config"].clone()).map_err(|e| {
+                        HubError::InvalidConfig {
+                            what: "config",
+                            reason: e.to_string(),
+                        }
+                    })?;
+                Ok(serde_json::to_value(self.hub.route(id, &config)?).expect("routes serialize"))
+            }
+            "launch" => {
+                let job: WorkerJob =
+                    serde_json::from_value(request["job"].clone()).map_err(|_| bad("job"))?;
+                let timeout =
+                    Duration::from_millis(request["start_timeout_ms"].as_u64().unwrap_or(60_000));
+                let (child, spec) = launch_local(&job, timeout)?;
+                self.children.insert(child.id(), child);
+                self.workers.fetch_add(1, Ordering::Relaxed);
+                Ok(serde_json::to_value(spec).expect("specs serialize"))
+            }
+            "exit_status" => {
+                let pid = request["pid"].as_u64().ok_or_else(|| bad("pid"))? as u32;
+                let child = self.children.get_mut(&pid).ok_or_else(|| bad("pid"))?;
+                match child.try_wait() {
+                    Ok(Some(status)) => {
+                        // Reaped and reported: the worker is gone for good.
+                        self.children.remove(&pid);
+                        self.workers.fetch_sub(1, Ordering::Relaxed);
+                        Ok(json!(status.to_string()))
+                    }
+                    _ => Ok(Value::Null),
+                }
+            }
+            other => Err(HubError::InvalidConfig {
+                what: "daemon request",
+                reason: format!(
+                    "unknown op `{other}`; valid: ping, adapters, status, route, launch, exit_status"
+                ),
+            }),
+        }
+    }
+}
+
+impl Drop for Connection {
+    fn drop(&mut self) {
+        // The client is gone: its workers go too (they would notice on their own, but the
+        // daemon must reap them either way).
+        for (_, mut child) in self.children.drain() {
+            if matches!(child.try_wait(), Ok(None)) {
+                let _ = child.kill();
+            }
+            let _ = child.wait();
+            self.workers.fetch_sub(1, Ordering::Relaxed);
+        }
+    }
+}

@@ -1,0 +1,120 @@
+//! The client side of the hub daemon's control socket: JSON lines over a Unix socket.
+//!
+//! The connection lives as long as the sessions started through it: when it closes (the
+//! client exits or crashes), the daemon stops that client's workers.
+
+use crate::catalog::AdapterInfo;
+use crate::error::HubError;
+use crate::routing::Route;
+use envhub_core::EnvConfig;
+use envhub_shm::{ReadySpec, WorkerJob};
+use serde_json::{Value, json};
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixStream;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// A connection to `envhub serve`.
+pub struct DaemonClient {
+    socket: PathBuf,
+    conn: Mutex<(BufReader<UnixStream>, UnixStream)>,
+}
+
+impl std::fmt::Debug for DaemonClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DaemonClient")
+            .field("socket", &self.socket)
+            .finish()
+    }
+}
+
+impl DaemonClient {
+    /// Connects to the daemon listening on `socket`.
+    pub fn connect(socket: &Path) -> Result<Arc<DaemonClient>, HubError> {
+        let stream = UnixStream::connect(socket).map_err(|e| HubError::Daemon {
+            socket: socket.display().to_string(),
+            reason: format!("cannot connect: {e}"),
+        })?;
+        let reader = BufReader::new(stream.try_clone().map_err(|e| HubError::Daemon {
+            socket: socket.display().to_string(),
+            reason: e.to_string(),
+        })?);
+        let client = DaemonClient {
+            socket: socket.to_path_buf(),
+            conn: Mutex::new((reader, stream)),
+        };
+        client.call(json!({"op": "ping"}))?;
+        Ok(Arc::new(client))
+    }
+
+    fn fail(&self, reason: impl std::fmt::Display) -> HubError {
+        HubError::Daemon {
+            socket: self.socket.display().to_string(),
+            reason: reason.to_string(),
+        }
+    }
+
+    /// Sends one request and reads its reply: `{"ok": ...}` or `{"err": "..."}`.
+    fn call(&self, request: Value) -> Result<Value, HubError> {
+        let mut conn = self
+            .conn
+            .lock()
+            .map_err(|_| self.fail("connection poisoned"))?;
+        let (reader, writer) = &mut *conn;
+        let mut line = request.to_string();
+        line.push('\n');
+        writer
+            .write_all(line.as_bytes())
+            .map_err(|e| self.fail(format!("send: {e}")))?;
+        let mut reply = String::new();
+        let n = reader
+            .read_line(&mut reply)
+            .map_err(|e| self.fail(format!("receive: {e}")))?;
+        if n == 0 {
+            return Err(self.fail("the daemon closed the connection"));
+        }
+        let mut reply: Value = serde_json::from_str(&reply)
+            .map_err(|e| self.fail(format!("unreadable reply: {e}")))?;
+        if let Some(err) = reply.get("err") {
+            return Err(HubError::Remote(
+                err.as_str().unwrap_or("unknown error").to_string(),
+            ));
+        }
+        Ok(reply.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+    }
+
+    /// Asks the daemon to start a worker for `job`.
+    pub(crate) fn launch(
+        &self,
+        job: &WorkerJob,
+        start_timeout: Duration,
+    ) -> Result<ReadySpec, HubError> {
+        let ok = self.call(json!({"op": "launch", "job": job, "start_timeout_ms": start_timeout.as_millis() as u64}))?;
+        serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable ready spec: {e}")))
+    }
+
+    /// How a worker the daemon started has ended (`None`: still running).
+    pub(crate) fn exit_status(&self, pid: u32) -> Result<Option<String>, HubError> {
+        let ok = self.call(json!({"op": "exit_status", "pid": pid}))?;
+        Ok(ok.as_str().map(str::to_string))
+    }
+
+    /// Routes a registry id with the daemon's registry and adapters.
+    pub(crate) fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
+        let ok = self.call(json!({"op": "route", "id": id, "config": config}))?;
+        serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable route: {e}")))
+    }
+
+    /// The daemon's adapters.
+    pub fn adapters(&self) -> Result<Vec<AdapterInfo>, HubError> {
+        let ok = self.call(json!({"op": "adapters"}))?;
+        serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable adapters: {e}")))
+    }
+
+    /// Workers the daemon runs, over all clients.
+    pub fn worker_count(&self) -> Result<usize, HubError> {
+        let ok = self.call(json!({"op": "status"}))?;
+        Ok(ok["workers"].as_u64().unwrap_or(0) as usize)
+    }
+}

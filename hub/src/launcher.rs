@@ -1,0 +1,147 @@
+//! Starting worker processes: here (the embedded hub) or by the hub daemon on our behalf.
+
+use crate::daemon_client::DaemonClient;
+use crate::error::HubError;
+use crate::worker_binary::worker_binary;
+use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
+use std::io::BufRead;
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Who starts workers.
+#[derive(Clone)]
+pub(crate) enum Launcher {
+    /// This process spawns them as its children.
+    Local,
+    /// The hub daemon spawns them (they still watch this process and exit with it).
+    Daemon(Arc<DaemonClient>),
+}
+
+/// A started worker process.
+pub(crate) enum WorkerProcess {
+    /// Our child.
+    Local(Child),
+    /// The daemon's child.
+    Daemon {
+        /// Its pid.
+        pid: u32,
+        /// The daemon that started it.
+        daemon: Arc<DaemonClient>,
+    },
+}
+
+impl WorkerProcess {
+    /// Its pid.
+    pub fn pid(&self) -> u32 {
+        match self {
+            WorkerProcess::Local(child) => child.id(),
+            WorkerProcess::Daemon { pid, .. } => *pid,
+        }
+    }
+
+    /// Kills it (SIGKILL) and reaps it.
+    pub fn kill(&mut self) {
+        envhub_shm::kill(self.pid());
+        let _ = self.exit_status(Duration::from_secs(2));
+    }
+
+    /// How it ended, waiting up to `timeout` for it to end ("died (signal: 9 (SIGKILL))").
+    pub fn exit_status(&mut self, timeout: Duration) -> Option<String> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            let status = match self {
+                WorkerProcess::Local(child) => {
+                    child.try_wait().ok().flatten().map(|s| s.to_string())
+                }
+                WorkerProcess::Daemon { pid, daemon } => daemon.exit_status(*pid).ok().flatten(),
+            };
+            if status.is_some() || std::time::Instant::now() >= deadline {
+                return status;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+impl Launcher {
+    /// Starts a worker for `job` and waits until it reports ready.
+    pub fn launch(
+        &self,
+        job: &WorkerJob,
+        start_timeout: Duration,
+    ) -> Result<(WorkerProcess, ReadySpec), HubError> {
+        match self {
+            Launcher::Local => {
+                let (child, spec) = launch_local(job, start_timeout)?;
+                Ok((WorkerProcess::Local(child), spec))
+            }
+            Launcher::Daemon(daemon) => {
+                let spec = daemon.launch(job, start_timeout)?;
+                Ok((
+                    WorkerProcess::Daemon {
+                        pid: spec.pid,
+                        daemon: daemon.clone(),
+                    },
+                    spec,
+                ))
+            }
+        }
+    }
+}
+
+/// Spawns `envhub-worker serve` for `job` and reads its ready line.
+pub(crate) fn launch_local(
+    job: &WorkerJob,
+    start_timeout: Duration,
+) -> Result<(Child, ReadySpec), HubError> {
+    let path = worker_binary();
+    let mut child = Command::new(&path)
+        .arg("serve")
+        .arg("--job")
+        .arg(serde_json::to_string(job).expect("a job serializes"))
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .map_err(|e| HubError::WorkerBinary {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+    let pid = child.id();
+    match read_reply(&mut child, start_timeout) {
+        Ok(WorkerReply::Ready(spec)) => Ok((child, spec)),
+        Ok(WorkerReply::Error(message)) => {
+            let _ = child.wait();
+            Err(HubError::MakeFailed(message))
+        }
+        Err(why) => {
+            let _ = child.kill();
+            let status = child.wait().map(|s| s.to_string()).unwrap_or_default();
+            Err(HubError::WorkerDied {
+                worker: 0,
+                envs: format!("{}..{}", job.env_offset, job.env_offset + job.num_envs),
+                pid,
+                why: format!("failed to start: {why} ({status})"),
+            })
+        }
+    }
+}
+
+/// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.
+fn read_reply(child: &mut Child, timeout: Duration) -> Result<WorkerReply, String> {
+    let stdout = child.stdout.take().ok_or("no stdout")?;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let read = std::io::BufReader::new(stdout).read_line(&mut line);
+        let _ = tx.send(read.map(|_| line));
+    });
+    match rx.recv_timeout(timeout) {
+        Ok(Ok(line)) if line.trim().is_empty() => Err("it exited before reporting ready".into()),
+        Ok(Ok(line)) => serde_json::from_str(&line)
+            .map_err(|e| format!("unreadable reply `{}`: {e}", line.trim())),
+        Ok(Err(e)) => Err(format!("cannot read its reply: {e}")),
+        Err(_) => Err(format!("it did not report ready within {timeout:?}")),
+    }
+}

@@ -1,0 +1,209 @@
+//! `envhub serve`: one hub daemon shared by several client processes.
+
+use envhub::{EnvConfig, Hub, HubError, Registry, SessionOptions};
+use envhub_e2e::binary;
+use std::io::BufRead;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Daemon {
+    child: Child,
+    socket: PathBuf,
+    namespace: String,
+}
+
+impl Daemon {
+    fn start(name: &str) -> Daemon {
+        let dir = std::env::temp_dir().join(format!("e2e-daemon-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let socket = dir.join("hub.sock");
+        let namespace = format!("e2e_daemon_{name}_{}_", std::process::id());
+        let mut child = Command::new(binary("envhub"))
+            .args(["serve", "--socket", socket.to_str().unwrap()])
+            .env("ENVHUB_NAMESPACE", &namespace)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert!(line.contains("listening on"), "daemon said {line:?}");
+        Daemon {
+            child,
+            socket,
+            namespace,
+        }
+    }
+
+    fn hub(&self) -> Hub {
+        Hub::connect(&self.socket, Registry::builtin())
+            .unwrap()
+            .with_options(SessionOptions {
+                namespace: self.namespace.clone(),
+                ..SessionOptions::default()
+            })
+    }
+
+    fn alive(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = envhub_shm::remove_namespace(&self.namespace);
+    }
+}
+
+fn parent_of(pid: u32) -> u32 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    let after = &stat[stat.rfind(')').unwrap() + 2..];
+    after.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+#[test]
+fn several_clients_share_one_daemon() {
+    let mut d = Daemon::start("share");
+    let clients: Vec<Child> = (0..3)
+        .map(|k| {
+            Command::new(binary("envhub"))
+                .args([
+                    "run",
+                    "gym-cartpole",
+                    "--num-envs",
+                    "4",
+                    "--workers",
+                    "1",
+                    "--steps",
+                    "20000",
+                    "--json",
+                    "--seed",
+                    &k.to_string(),
+                ])
+                .env("ENVHUB_HUB", &d.socket)
+                .env("ENVHUB_NAMESPACE", &d.namespace)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for c in clients {
+        let out = c.wait_with_output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["steps"], 20000);
+    }
+    assert!(d.alive());
+
+    // Workers are the daemon's children, and the data plane still goes direct.
+    let hub = d.hub();
+    let mut env = hub
+        .make_vec(
+            "gym-pendulum",
+            2,
+            &EnvConfig {
+                workers: Some(2),
+                ..EnvConfig::default()
+            },
+        )
+        .unwrap();
+    for pid in env.worker_pids() {
+        assert_eq!(parent_of(pid), d.child.id());
+    }
+    env.reset(Some(0)).unwrap();
+    env.step_f32(&[0.5, -0.5]).unwrap();
+    assert_eq!(hub.daemon().unwrap().worker_count().unwrap(), 2);
+    env.close();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while hub.daemon().unwrap().worker_count().unwrap() != 0 {
+        assert!(Instant::now() < deadline, "closed workers are forgotten");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    // Errors travel back with their hints.
+    let err = hub
+        .make("gym-cartpol", &EnvConfig::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("did you mean `gym-cartpole`"), "{err}");
+}
+
+#[test]
+fn killed_worker_and_killed_client_leave_the_daemon_running() {
+    let mut d = Daemon::start("kill");
+    let hub = d.hub();
+    let mut env = hub
+        .make_vec(
+            "gym-cartpole",
+            2,
+            &EnvConfig {
+                workers: Some(1),
+                ..EnvConfig::default()
+            },
+        )
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+    let pid = env.worker_pids()[0];
+    Command::new("kill")
+        .args(["-9", &pid.to_string()])
+        .status()
+        .unwrap();
+    let start = Instant::now();
+    let err = env.step_i64(&[0, 1]).unwrap_err();
+    assert!(start.elapsed() < Duration::from_secs(1));
+    match err {
+        HubError::WorkerDied { why, .. } => assert!(why.contains("signal: 9"), "{why}"),
+        other => panic!("expected WorkerDied, got {other}"),
+    }
+    assert!(d.alive());
+
+    // A client killed mid-run: the daemon stops its workers and carries on.
+    let mut client = Command::new(binary("envhub"))
+        .args([
+            "run",
+            "gym-cartpole",
+            "--num-envs",
+            "2",
+            "--workers",
+            "2",
+            "--steps",
+            "100000000",
+        ])
+        .env("ENVHUB_HUB", &d.socket)
+        .env("ENVHUB_NAMESPACE", &d.namespace)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while hub.daemon().unwrap().worker_count().unwrap() < 2 {
+        assert!(Instant::now() < deadline, "the client's workers start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    client.kill().unwrap();
+    client.wait().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while hub.daemon().unwrap().worker_count().unwrap() != 0 {
+        assert!(
+            Instant::now() < deadline,
+            "the dead client's workers are stopped"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(d.alive());
+    let mut env = hub
+        .make_vec("gym-cartpole", 1, &EnvConfig::default())
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+    env.step_i64(&[1]).unwrap();
+}
