@@ -44,6 +44,10 @@ pub fn serve(socket: &Path, hub: Hub, on_ready: impl FnOnce()) -> Result<(), Hub
             .map_err(|e| fail(format!("cannot remove the stale socket: {e}")))?;
     }
     let listener = UnixListener::bind(socket).map_err(|e| fail(format!("cannot listen: {e}")))?;
+    // A restarted hub starts clean: remove what crashed processes left in shared memory.
+    if let Err(e) = envhub_shm::cleanup_dead_nodes(&hub.options().namespace) {
+        tracing::warn!(error = %e, "could not clean up dead nodes");
+    }
     // Resolve the adapter catalog once, before clients ask.
     hub.adapters()?;
     let hub = Arc::new(hub);
