@@ -190,33 +190,51 @@ impl VecEnv {
             spin,
             tick: Duration::from_millis(5),
         };
-        let mut links = Vec::with_capacity(workers);
-        for (index, (env_offset, count)) in split_envs(num_envs, workers).into_iter().enumerate() {
-            let mut config = route.config.clone();
-            config.num_envs = count;
-            let job = WorkerJob {
-                adapter: route.adapter.clone(),
-                env_id: route.env_id.clone(),
-                config,
-                env_offset,
-                num_envs: count,
-                channel: ChannelName {
-                    prefix: options.namespace.clone(),
-                    service: String::new(),
-                },
-                owner_pid: std::process::id(),
-                spin_us: spin.as_micros() as u64,
-            };
-            links.push(WorkerLink::start(
-                index,
-                job,
-                &session,
-                0,
-                policy,
-                options.start_timeout,
-                launcher,
-            )?);
-        }
+        let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
+            .into_iter()
+            .map(|(env_offset, count)| {
+                let mut config = route.config.clone();
+                config.num_envs = count;
+                WorkerJob {
+                    adapter: route.adapter.clone(),
+                    env_id: route.env_id.clone(),
+                    config,
+                    env_offset,
+                    num_envs: count,
+                    channel: ChannelName {
+                        prefix: options.namespace.clone(),
+                        service: String::new(),
+                    },
+                    owner_pid: std::process::id(),
+                    spin_us: spin.as_micros() as u64,
+                }
+            })
+            .collect();
+        // Workers start in parallel: a simulator that takes a while to load (MuJoCo, Python)
+        // costs its load time once, not once per worker.
+        let started: Vec<Result<WorkerLink, HubError>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = jobs
+                .into_iter()
+                .enumerate()
+                .map(|(index, job)| {
+                    let (session, start_timeout) = (&session, options.start_timeout);
+                    scope.spawn(move || {
+                        WorkerLink::start(index, job, session, 0, policy, start_timeout, launcher)
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(HubError::InvalidState(
+                            "a worker start thread panicked".into(),
+                        ))
+                    })
+                })
+                .collect()
+        });
+        let links = started.into_iter().collect::<Result<Vec<_>, _>>()?;
         let observation_space = links[0].spec.observation_space.clone();
         let action_space = links[0].spec.action_space.clone();
         Ok(VecEnv {

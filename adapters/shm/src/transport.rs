@@ -15,8 +15,9 @@ use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 use serde::{Deserialize, Serialize};
 
-/// The iceoryx2 service flavour: inter-process.
-pub type Ipc = ipc::Service;
+/// The iceoryx2 service flavour: inter-process, with ports that may move between threads (a
+/// client may create a session on one thread and step it on another, as Python does).
+pub type Ipc = ipc_threadsafe::Service;
 
 /// Event id meaning "a sample was published".
 pub(crate) const EVENT_DATA: usize = 0;
