@@ -16,8 +16,18 @@ VENV_STAMP := $(VENV)/.installed
 CARGO ?= cargo
 # Tests that drive Python (parity with Gymnasium) use the project's interpreter.
 export ENVHUB_PYTHON := $(abspath $(VPY))
+# The MuJoCo adapter links libmujoco 3.17.0, copied from the `mujoco` wheel in .venv/ into
+# MUJOCO_LIB_DIR (`.cargo/config.toml` points mujoco-rs there). Every cargo command below
+# builds the same feature set, so none of them rebuilds what another built.
+MUJOCO_VERSION := 3.17.0
+MUJOCO_LIB_DIR := .build/mujoco/lib
+MUJOCO_LIB := $(MUJOCO_LIB_DIR)/libmujoco.so.$(MUJOCO_VERSION)
+FEATURES := --features envhub-worker/mujoco
+# Offscreen rendering without a GPU: Mesa's software EGL (Debian packages).
+MESA_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
+MESA_STAMP := .build/mesa.installed
 
-.PHONY: help demo test lint fmt rust-test py-test build venv clean
+.PHONY: help demo test lint fmt rust-test py-test build venv setup clean
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -33,30 +43,48 @@ $(VENV_STAMP): requirements-dev.txt
 
 venv: $(VENV_STAMP)
 
-build:
-	$(CARGO) build --release --workspace --bins
+# libmujoco from the wheel, under both names the linker and the loader look for.
+$(MUJOCO_LIB): $(VENV_STAMP)
+	mkdir -p $(MUJOCO_LIB_DIR)
+	src=$$($(VPY) -c 'import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so.$(MUJOCO_VERSION)"))'); \
+	test -f "$$src" || { echo "error: $$src not found; the mujoco wheel should ship it (requirements-dev.txt pins mujoco==$(MUJOCO_VERSION))" >&2; exit 1; }; \
+	cp "$$src" $@.tmp && mv $@.tmp $@
+	cp $@ $(MUJOCO_LIB_DIR)/libmujoco.so
+
+# Mesa's software EGL for `render_mode="rgb_array"`, installed only where missing.
+$(MESA_STAMP):
+	mkdir -p $(dir $@)
+	if ! dpkg -s $(MESA_PACKAGES) >/dev/null 2>&1; then \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(MESA_PACKAGES); \
+	fi
+	touch $@
+
+setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
+
+build: setup
+	$(CARGO) build --release --workspace --bins $(FEATURES)
 
 demo: build
 	./target/release/envhub match "balance a pole on a cart"
 	./target/release/envhub run gym-cartpole --num-envs 64 --steps 1000000
 	./target/release/envhub run gym-pendulum --num-envs 8 --steps 200000
 
-lint:
+lint: setup
 	$(CARGO) fmt --all -- --check
-	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(CARGO) clippy --workspace --all-targets $(FEATURES) -- -D warnings
 
 fmt:
 	$(CARGO) fmt --all
 
-rust-test: $(VENV_STAMP)
+rust-test: setup
 	# End-to-end tests start the real binaries: build them first.
-	$(CARGO) build --workspace --bins
+	$(CARGO) build --workspace --bins $(FEATURES)
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		$(CARGO) nextest run --workspace $${CI:+--profile ci}; \
+		$(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		$(CARGO) test --workspace; \
+		$(CARGO) test --workspace $(FEATURES); \
 	fi
-	$(CARGO) test --workspace --doc
+	$(CARGO) test --workspace --doc $(FEATURES)
 
 py-test: $(VENV_STAMP)
 	$(VPY) -m pytest tests/python -q -p no:cacheprovider
@@ -65,4 +93,4 @@ test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV)
+	rm -rf $(VENV) .build

@@ -159,6 +159,34 @@ impl ExtraKeys<'_> {
         }
     }
 
+    /// A `[low, high]` option (a list of two numbers; `"inf"` and `"-inf"` stand for the
+    /// infinities JSON lacks), or `default` when absent.
+    pub fn range(&self, key: &str, default: (f64, f64)) -> Result<(f64, f64), EnvError> {
+        let Some(v) = self.extra.get(key) else {
+            return Ok(default);
+        };
+        let bound = |b: &serde_json::Value| match b {
+            serde_json::Value::String(s) => match s.as_str() {
+                "inf" | "+inf" => Some(f64::INFINITY),
+                "-inf" => Some(f64::NEG_INFINITY),
+                _ => None,
+            },
+            b => b.as_f64(),
+        };
+        match v.as_array().map(Vec::as_slice) {
+            Some([lo, hi]) => match (bound(lo), bound(hi)) {
+                (Some(lo), Some(hi)) => Ok((lo, hi)),
+                _ => Err(self.invalid(key, format!("expected `[low, high]` numbers, got `{v}`"))),
+            },
+            _ => Err(self.invalid(key, format!("expected `[low, high]`, got `{v}`"))),
+        }
+    }
+
+    /// The raw value of `key`, for options of a shape the typed accessors do not cover.
+    pub fn value(&self, key: &str) -> Option<&serde_json::Value> {
+        self.extra.get(key)
+    }
+
     /// An error for `key` with the given reason, for checks the env does itself.
     pub fn error(&self, key: &str, reason: impl Into<String>) -> EnvError {
         self.invalid(key, reason.into())

@@ -6,6 +6,8 @@ use envhub_core::EnvAdapter;
 pub fn all() -> Vec<Box<dyn EnvAdapter>> {
     vec![
         Box::new(envhub_classic::ClassicControl),
+        Box::new(envhub_mujoco::Mujoco::default()),
+        Box::new(envhub_mujoco::CustomMjcf::default()),
         Box::new(crate::null_env::NullAdapter),
     ]
 }

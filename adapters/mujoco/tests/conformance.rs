@@ -1,0 +1,176 @@
+//! Conformance of every env of the `mujoco` adapter (and a `custom_mjcf` model) to the `Env`
+//! contract, the classic-control crate's checks: observations inside the observation space,
+//! same seed → same trajectory, reset after the episode ends, and `TimeLimit` truncation at
+//! `max_episode_steps`.
+
+use envhub_core::{Env, EnvAdapter, EnvConfig, Info, ResetOptions, TimeLimit};
+use envhub_mujoco::{CustomMjcf, Mujoco};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+type Step = (Vec<u8>, f64, bool, bool);
+
+/// Steps `env` with random actions, resetting when an episode ends; returns every observation,
+/// reward and end flag. Panics if an observation or action leaves its space.
+fn rollout(env: &mut dyn Env, seed: u64, steps: usize) -> Vec<Step> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut obs = vec![0u8; env.observation_space().byte_len()];
+    let mut info = Info::default();
+    let options = ResetOptions::new();
+    env.reset(Some(seed), &options, &mut obs, &mut info)
+        .unwrap();
+    assert!(env.observation_space().contains(&obs));
+    let mut out = vec![(obs.clone(), 0.0, false, false)];
+    for _ in 0..steps {
+        let action = env.action_space().sample(&mut rng);
+        assert!(env.action_space().contains(&action));
+        let t = env.step(&action, &mut obs, &mut info).unwrap();
+        assert!(
+            env.observation_space().contains(&obs) || t.terminated,
+            "{:?}",
+            env.observation_space().validate(&obs)
+        );
+        out.push((obs.clone(), t.reward, t.terminated, t.truncated));
+        if t.terminated || t.truncated {
+            env.reset(None, &options, &mut obs, &mut info).unwrap();
+            assert!(env.observation_space().contains(&obs));
+            out.push((obs.clone(), 0.0, false, false));
+        }
+    }
+    out
+}
+
+/// The contract checks for one env of `adapter`, with `steps` random steps per rollout.
+fn check_env(adapter: &dyn EnvAdapter, env_id: &str, config: &EnvConfig, steps: usize) {
+    let spec = adapter.spec(env_id, config).unwrap();
+    let limit = config.episode_limit(spec.max_episode_steps);
+    let make = || TimeLimit::new(adapter.make(env_id, config).unwrap(), limit);
+
+    let mut env = make();
+    assert_eq!(env.observation_space(), &spec.observation_space, "{env_id}");
+    assert_eq!(env.action_space(), &spec.action_space, "{env_id}");
+
+    let a = rollout(&mut env, 7, steps);
+    assert!(
+        a.iter().any(|s| s.2 || s.3),
+        "{env_id}: no episode ended in {steps} steps"
+    );
+    // Same seed, same trajectory (a fresh env, and the same env reseeded).
+    assert!(a == rollout(&mut make(), 7, steps), "{env_id}: fresh env");
+    assert!(a == rollout(&mut env, 7, steps), "{env_id}: reseeded env");
+    assert!(a != rollout(&mut env, 8, steps), "{env_id}: other seed");
+
+    // Truncation at exactly a short limit.
+    let mut env = TimeLimit::new(adapter.make(env_id, config).unwrap(), Some(5));
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut obs = vec![0u8; env.observation_space().byte_len()];
+    let mut info = Info::default();
+    env.reset(Some(3), &ResetOptions::new(), &mut obs, &mut info)
+        .unwrap();
+    for step in 1..=5 {
+        let action = env.action_space().sample(&mut rng);
+        let t = env.step(&action, &mut obs, &mut info).unwrap();
+        assert_eq!(t.truncated, step == 5, "{env_id}: step {step}/5");
+        if t.terminated {
+            break;
+        }
+    }
+}
+
+#[test]
+fn every_env_conforms() {
+    let adapter = Mujoco::default();
+    for env_id in adapter.list_envs() {
+        // Short episodes so that every env ends some within the rollout.
+        let config = EnvConfig {
+            max_episode_steps: Some(120),
+            ..EnvConfig::default()
+        };
+        check_env(&adapter, &env_id, &config, 300);
+    }
+}
+
+#[test]
+fn custom_model_conforms() {
+    let config = EnvConfig {
+        asset_path: Some(crate::custom_mjcf::planar_walker()),
+        max_episode_steps: Some(100),
+        ..EnvConfig::default()
+    };
+    check_env(&CustomMjcf::default(), "PlanarWalker-v0", &config, 250);
+}
+
+#[test]
+fn reset_options_start_from_the_given_state() {
+    let adapter = Mujoco::default();
+    let mut env = adapter
+        .make_mujoco("Hopper-v5", &EnvConfig::default())
+        .unwrap();
+    let mut obs = vec![0u8; env.observation_space().byte_len()];
+    let mut info = Info::default();
+    let qpos = vec![0.5, 1.3, 0.01, -0.02, 0.03, -0.04];
+    let options: ResetOptions = [("qpos".to_string(), serde_json::json!(qpos))].into();
+    env.reset(Some(0), &options, &mut obs, &mut info).unwrap();
+    assert_eq!(env.qpos(), qpos.as_slice());
+    assert_eq!(
+        info.get("x_position"),
+        Some(&envhub_core::InfoValue::Float(0.5))
+    );
+    // qvel was still drawn, as in a plain reset with that seed.
+    let mut plain = adapter
+        .make_mujoco("Hopper-v5", &EnvConfig::default())
+        .unwrap();
+    plain
+        .reset(Some(0), &ResetOptions::new(), &mut obs, &mut info)
+        .unwrap();
+    assert_eq!(env.qvel(), plain.qvel());
+
+    for (options, want) in [
+        (serde_json::json!({"qpos": [1.0]}), "`qpos` needs 6 values"),
+        (serde_json::json!({"qvel": "fast"}), "`qvel` must be a list"),
+        (serde_json::json!({"qpso": []}), "did you mean `qpos`?"),
+    ] {
+        let options: ResetOptions = serde_json::from_value(options).unwrap();
+        let err = env
+            .reset(None, &options, &mut obs, &mut info)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(want), "{err}");
+    }
+}
+
+#[test]
+fn options_are_validated() {
+    let adapter = Mujoco::default();
+    let mut config = EnvConfig::default();
+    config
+        .extra
+        .insert("ctrl_cost_weigth".into(), serde_json::json!(0.1));
+    let err = adapter.make("Ant-v5", &config).err().unwrap().to_string();
+    assert!(err.contains("did you mean `ctrl_cost_weight`"), "{err}");
+
+    let mut config = EnvConfig::default();
+    config
+        .extra
+        .insert("healthy_z_range".into(), serde_json::json!([0.2]));
+    let err = adapter.make("Ant-v5", &config).err().unwrap().to_string();
+    assert!(err.contains("expected `[low, high]`"), "{err}");
+
+    let spec = adapter.spec("Ant-v5", &EnvConfig::default()).unwrap();
+    assert_eq!(spec.observation_space.shape(), Some(vec![105]));
+    assert_eq!(spec.action_space.shape(), Some(vec![8]));
+    assert_eq!(spec.max_episode_steps, Some(1000));
+    let mut config = EnvConfig::default();
+    config.extra.insert(
+        "include_cfrc_ext_in_observation".into(),
+        serde_json::json!(false),
+    );
+    let spec = adapter.spec("Ant-v5", &config).unwrap();
+    assert_eq!(spec.observation_space.shape(), Some(vec![27]));
+    let err = adapter
+        .make("Ant-v4", &EnvConfig::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("did you mean `Ant-v5`"), "{err}");
+}

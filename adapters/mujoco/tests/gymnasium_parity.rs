@@ -1,0 +1,231 @@
+//! Parity with Gymnasium itself (envpool's `*_align_test.py` idea, driven from Rust).
+//!
+//! `tests/python/mujoco_reference.py` records trajectories of Gymnasium's own v5 envs: the
+//! seeded initial state, then per step the random action, the observation, reward, `terminated`
+//! and `truncated` (Gymnasium's `TimeLimit`), and a fresh initial state whenever an episode ends
+//! (reset without a seed). This test replays them: the same seed must give the same initial
+//! state (NumPy's generator is reproduced bit for bit), and the same actions the same
+//! observations and rewards within 1e-6 relative, and the same flags. Some runs start from a
+//! state set through `MujocoEnv.set_state`, which the Rust env takes as `qpos`/`qvel` reset
+//! options.
+//!
+//! Both sides step the same libmujoco build, so the simulator state is expected to stay
+//! bit-identical; what can differ in the last bits is NumPy's own arithmetic (its SIMD `sin`,
+//! `einsum`, BLAS norms) in observations and rewards. The summary printed with `--nocapture`
+//! counts the steps that are not bit-identical.
+//!
+//! Python: `$ENVHUB_PYTHON`, else `<repo>/.venv/bin/python` (`make test` creates it). If it
+//! cannot import gymnasium the test fails, unless `ENVHUB_SKIP_PYTHON_TESTS=1`.
+
+use envhub_core::{Env, EnvConfig, Info, ResetOptions};
+use envhub_mujoco::Mujoco;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// Observations and rewards, relative (absolute near 0).
+const TOL: f64 = 1e-6;
+
+fn close(got: f64, want: f64) -> bool {
+    (got - want).abs() <= TOL * want.abs().max(1.0)
+}
+
+fn floats(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .expect("a list of numbers")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// Runs the reference script, or says why it cannot (`None` when skipping is allowed).
+fn reference() -> Option<Value> {
+    let root = repo_root();
+    let python = std::env::var_os("ENVHUB_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join(".venv/bin/python"));
+    let probe = Command::new(&python)
+        .args(["-c", "import gymnasium, mujoco"])
+        .output();
+    let problem = match probe {
+        Err(e) => Some(format!("cannot run `{}`: {e}", python.display())),
+        Ok(out) if !out.status.success() => Some(format!(
+            "`{}` cannot import gymnasium and mujoco: {}",
+            python.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+                .trim()
+        )),
+        Ok(_) => None,
+    };
+    if let Some(problem) = problem {
+        if std::env::var("ENVHUB_SKIP_PYTHON_TESTS").as_deref() == Ok("1") {
+            println!("skipped the gymnasium parity test (ENVHUB_SKIP_PYTHON_TESTS=1): {problem}");
+            return None;
+        }
+        panic!(
+            "{problem}\nhint: run `make test` (it creates `.venv` with gymnasium[mujoco]), or \
+             set ENVHUB_PYTHON to a Python with gymnasium 1.4 and mujoco 3.17; \
+             ENVHUB_SKIP_PYTHON_TESTS=1 skips this test"
+        );
+    }
+    let script = root.join("tests/python/mujoco_reference.py");
+    let out = Command::new(&python)
+        .arg(&script)
+        .current_dir(&root)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run `{}`: {e}", script.display()));
+    assert!(
+        out.status.success(),
+        "`{}` failed:\n{}",
+        script.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(serde_json::from_slice(&out.stdout).expect("the reference script prints JSON"))
+}
+
+/// What the runs of one env showed, for the summary.
+#[derive(Default)]
+struct Tally {
+    steps: usize,
+    terminations: usize,
+    truncations: usize,
+    /// Steps whose observation or reward is not bit-identical to Gymnasium's.
+    inexact: usize,
+    max_diff: f64,
+}
+
+fn obs_f64(obs: &[u8]) -> Vec<f64> {
+    obs.chunks_exact(8)
+        .map(|b| f64::from_le_bytes(b.try_into().unwrap()))
+        .collect()
+}
+
+/// Checks an observation; returns the largest scaled difference (0 when bit-identical).
+fn check_obs(obs: &[u8], want: &Value, what: &str) -> f64 {
+    let got = obs_f64(obs);
+    let want = floats(want);
+    assert_eq!(got.len(), want.len(), "{what}: observation length");
+    let mut worst = 0.0f64;
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            close(*g, *w),
+            "{what}: obs[{i}] = {g} != {w}\n got {got:?}\nwant {want:?}"
+        );
+        worst = worst.max((g - w).abs() / w.abs().max(1.0));
+    }
+    worst
+}
+
+#[test]
+fn matches_gymnasium() {
+    let Some(reference) = reference() else {
+        return;
+    };
+    let version = reference["gymnasium"].as_str().unwrap_or("?");
+    assert!(
+        version.starts_with("1.4."),
+        "the reference is gymnasium {version}; these envs follow gymnasium 1.4\n\
+         hint: install gymnasium==1.4.* in the Python the test runs"
+    );
+
+    let adapter = Mujoco::default();
+    let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
+    for run in reference["runs"].as_array().unwrap() {
+        let env_id = run["env_id"].as_str().unwrap();
+        let seed = run["seed"].as_u64().unwrap();
+        let at = format!("{env_id} seed {seed} kwargs {}", run["kwargs"]);
+        let config = EnvConfig {
+            extra: serde_json::from_value(run["kwargs"].clone()).unwrap(),
+            ..EnvConfig::default()
+        };
+        let options: ResetOptions = match run.get("options") {
+            Some(o) => serde_json::from_value(o.clone()).unwrap(),
+            None => ResetOptions::new(),
+        };
+        let limit = run["max_episode_steps"].as_u64().map(|n| n as u32);
+        let tally = tallies.entry(env_id.to_string()).or_default();
+
+        // Truncation as `TimeLimit` applies it (counted here, to keep the state accessors).
+        let mut env = adapter.make_mujoco(env_id, &config).unwrap();
+        let mut elapsed = 0u32;
+        let mut obs = vec![0u8; env.observation_space().byte_len()];
+        let mut info = Info::default();
+
+        env.reset(Some(seed), &options, &mut obs, &mut info)
+            .unwrap();
+        let state = |env: &envhub_mujoco::MujocoEnv| (env.qpos().to_vec(), env.qvel().to_vec());
+        let (qpos, qvel) = state(&env);
+        assert_eq!(qpos, floats(&run["reset_qpos"]), "{at}: initial qpos");
+        assert_eq!(qvel, floats(&run["reset_qvel"]), "{at}: initial qvel");
+        check_obs(&obs, &run["reset_obs"], &format!("{at}: reset"));
+
+        for (i, step) in run["steps"].as_array().unwrap().iter().enumerate() {
+            let at = format!("{at} step {i}");
+            let action: Vec<u8> = floats(&step["action"])
+                .iter()
+                .flat_map(|a| (*a as f32).to_le_bytes())
+                .collect();
+            let mut t = env.step(&action, &mut obs, &mut info).unwrap();
+            elapsed += 1;
+            t.truncated |= limit.is_some_and(|l| elapsed >= l);
+            let diff = check_obs(&obs, &step["obs"], &at);
+            let reward = step["reward"].as_f64().unwrap();
+            assert!(
+                close(t.reward, reward),
+                "{at}: reward {} != {reward}",
+                t.reward
+            );
+            let diff = diff.max((t.reward - reward).abs() / reward.abs().max(1.0));
+            tally.inexact += usize::from(diff > 0.0);
+            tally.max_diff = tally.max_diff.max(diff);
+            assert_eq!(
+                t.terminated,
+                step["terminated"].as_bool().unwrap(),
+                "{at}: terminated"
+            );
+            assert_eq!(
+                t.truncated,
+                step["truncated"].as_bool().unwrap(),
+                "{at}: truncated"
+            );
+            tally.steps += 1;
+            tally.terminations += usize::from(t.terminated);
+            tally.truncations += usize::from(t.truncated && !t.terminated);
+
+            if step.get("reset_obs").is_some() {
+                elapsed = 0;
+                env.reset(None, &ResetOptions::new(), &mut obs, &mut info)
+                    .unwrap();
+                let (qpos, qvel) = state(&env);
+                assert_eq!(qpos, floats(&step["reset_qpos"]), "{at}: qpos after reset");
+                assert_eq!(qvel, floats(&step["reset_qvel"]), "{at}: qvel after reset");
+                check_obs(&obs, &step["reset_obs"], &format!("{at}: reset"));
+            }
+        }
+    }
+
+    println!("gymnasium {version} parity:");
+    for (env_id, t) in &tallies {
+        println!(
+            "  {env_id}: {} steps ({} not bit-identical, max diff {:e}), {} terminations, \
+             {} truncations",
+            t.steps, t.inexact, t.max_diff, t.terminations, t.truncations
+        );
+    }
+    assert_eq!(tallies.len(), 11, "every v5 env has reference runs");
+    for (env_id, t) in &tallies {
+        assert!(t.steps >= 1000, "{env_id}");
+        assert!(
+            t.terminations + t.truncations > 0,
+            "{env_id}: no episode ended"
+        );
+    }
+}
