@@ -18,3 +18,7 @@ pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
 
 /// Control socket of a hub daemon (`envhub serve`) to use instead of the embedded hub.
 pub const ENVHUB_HUB: &str = "ENVHUB_HUB";
+
+/// Python interpreter whose packages the adapters use (Gymnasium's MuJoCo assets) and that the
+/// parity tests compare against (default: the project's `.venv/bin/python`).
+pub const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
