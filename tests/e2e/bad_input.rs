@@ -130,7 +130,7 @@ fn unknown_framework_and_adapter() {
     let file = dir.join("r.yaml");
     std::fs::write(
         &file,
-        "environments:\n  - {id: odd, name: Odd, framework: bullet, env_id: X-v0, robot_type: arm, env_type: tabletop}\n  - {id: pinned, name: P, framework: gym, env_id: CartPole-v1, robot_type: custom, env_type: floor, adapter: nope}\n  - {id: nonnative, name: N, framework: gym, env_id: Hopper-v5, robot_type: custom, env_type: floor}\n",
+        "environments:\n  - {id: odd, name: Odd, framework: bullet, env_id: X-v0, robot_type: arm, env_type: tabletop}\n  - {id: pinned, name: P, framework: gym, env_id: CartPole-v1, robot_type: custom, env_type: floor, adapter: nope}\n  - {id: nonnative, name: N, framework: gym, env_id: NoSuchEnv-v0, robot_type: custom, env_type: floor}\n",
     )
     .unwrap();
     let hub = envhub::Hub::new(envhub::Registry::load(&[&file]).unwrap())
@@ -158,5 +158,5 @@ fn unknown_framework_and_adapter() {
         .err()
         .map(msg)
         .unwrap();
-    assert!(err.contains("no adapter can run `Hopper-v5`"), "{err}");
+    assert!(err.contains("no adapter can run `NoSuchEnv-v0`"), "{err}");
 }
