@@ -29,6 +29,7 @@ pub use daemon_client::DaemonClient;
 pub use entry::EnvEntry;
 pub use env::{Env, Step};
 pub use envhub_core::{AutoresetMode, EnvConfig, ResetOptions, Space};
+pub use envhub_shm::{MAX_BORROWED_RESPONSES, Response};
 pub use error::HubError;
 pub use hub::{Hub, make, make_vec};
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
@@ -36,4 +37,4 @@ pub use registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, Se
 pub use routing::{Route, merge_config};
 pub use settings::{CONFIG_FILE_NAME, OneOrMany, Settings, SettingsError};
 pub use vec_env::{Batch, SessionOptions, VecEnv};
-pub use worker_binary::worker_binary;
+pub use worker_binary::{set_default_worker_binary, worker_binary};

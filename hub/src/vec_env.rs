@@ -18,8 +18,11 @@ pub struct SessionOptions {
     /// Restart a worker that died; its envs come back truncated, with `worker_restarted`
     /// in their info.
     pub restart_on_crash: bool,
-    /// Spin this long on a response before blocking (a cheap env answers in microseconds).
+    /// Spin at least this long on a response before blocking (0: always block at once).
     pub spin: Duration,
+    /// Spin at most this long: the spin adapts to the usual wait up to this bound, so a
+    /// step of a millisecond is caught without a wake-up (tens of µs on a VM).
+    pub max_spin: Duration,
     /// iceoryx2 namespace (file prefix) of the session's channels.
     pub namespace: String,
 }
@@ -31,6 +34,7 @@ impl Default for SessionOptions {
             start_timeout: Duration::from_secs(60),
             restart_on_crash: false,
             spin: Duration::from_micros(50),
+            max_spin: Duration::from_millis(2),
             namespace: std::env::var(crate::env_vars::ENVHUB_NAMESPACE)
                 .unwrap_or_else(|_| "envhub_".to_string()),
         }
@@ -61,6 +65,7 @@ pub struct Batch<'a> {
     pub truncated: &'a [bool],
     infos: &'a [serde_json::Value],
     final_obs: &'a [Option<Vec<u8>>],
+    in_place: bool,
 }
 
 static NO_INFO: serde_json::Value = serde_json::Value::Null;
@@ -79,6 +84,12 @@ impl<'a> Batch<'a> {
     /// Whether any env reported info.
     pub fn has_info(&self) -> bool {
         !self.infos.is_empty()
+    }
+
+    /// Whether the observations are viewed in place in the worker's shared-memory response
+    /// (which [`VecEnv::take_response`] can then hand over), rather than gathered.
+    pub fn in_place(&self) -> bool {
+        self.in_place
     }
 
     /// same_step autoreset: the final observation of the `k`-th env if its episode ended
@@ -188,6 +199,7 @@ impl VecEnv {
         let spin = options.spin;
         let policy = WaitPolicy {
             spin,
+            max_spin: options.max_spin,
             tick: Duration::from_millis(5),
         };
         let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
@@ -207,6 +219,7 @@ impl VecEnv {
                     },
                     owner_pid: std::process::id(),
                     spin_us: spin.as_micros() as u64,
+                    max_spin_us: options.max_spin.as_micros() as u64,
                 }
             })
             .collect();
@@ -578,6 +591,7 @@ impl VecEnv {
         tracing::warn!(worker = i, error = %err, "restarting worker");
         let policy = WaitPolicy {
             spin: self.options.spin,
+            max_spin: self.options.max_spin,
             tick: Duration::from_millis(5),
         };
         self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
@@ -705,6 +719,7 @@ impl VecEnv {
                 truncated: as_bools(b.truncated).expect("checked when collected"),
                 infos: &g.infos,
                 final_obs: &g.final_obs,
+                in_place: true,
             };
         }
         Batch {
@@ -715,7 +730,25 @@ impl VecEnv {
             truncated: &g.truncated,
             infos: &g.infos,
             final_obs: &g.final_obs,
+            in_place: false,
         }
+    }
+
+    /// Takes the shared-memory response behind the last results out of the session, so that
+    /// views into it stay valid after later steps: the sample lives as long as the returned
+    /// [`Response`] (the Python client hands it to numpy this way). `None` unless the last
+    /// results were viewed in place (one worker, see [`Batch`]); then they were gathered into
+    /// the session's own buffers, which the next call overwrites.
+    ///
+    /// iceoryx2 lets a client hold at most [`envhub_shm::MAX_BORROWED_RESPONSES`] responses
+    /// per worker, the session's own latest one included: keep fewer than that taken, or
+    /// copy instead, or the next receive fails.
+    pub fn take_response(&mut self) -> Option<Response> {
+        if !self.direct {
+            return None;
+        }
+        self.direct = false;
+        self.workers.first_mut().and_then(|w| w.response.take())
     }
 
     /// Random actions for every env, drawn from the action space.

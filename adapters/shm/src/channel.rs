@@ -7,7 +7,7 @@ use crate::layout::{
     status,
 };
 use crate::transport::{ChannelName, Ipc, Ports, client_ports, node, worker_ports};
-use crate::wait::{WaitPolicy, next_sample};
+use crate::wait::{AdaptiveSpin, WaitPolicy, next_sample};
 use iceoryx2::node::Node;
 use iceoryx2::sample::Sample;
 
@@ -29,6 +29,8 @@ pub struct ClientChannel {
     layout: Layout,
     seq: u64,
     policy: WaitPolicy,
+    spin: AdaptiveSpin,
+    sent_at: std::time::Instant,
     _node: Node<Ipc>,
 }
 
@@ -85,6 +87,8 @@ impl ClientChannel {
             layout,
             seq: 0,
             policy,
+            spin: AdaptiveSpin::default(),
+            sent_at: std::time::Instant::now(),
             _node: node,
         })
     }
@@ -178,11 +182,13 @@ impl ClientChannel {
             let sample = next_sample(
                 &self.ports.subscriber,
                 &self.ports.listener,
-                self.policy,
+                self.spin.budget(&self.policy),
+                self.policy.tick,
                 &mut alive,
             )?;
             // A response to an earlier request (one abandoned after an error) is skipped.
             if sample.user_header().seq == self.seq {
+                self.spin.observe(self.sent_at.elapsed());
                 return Ok(Response {
                     sample,
                     layout: self.layout,
@@ -249,6 +255,7 @@ pub struct WorkerChannel {
     ports: Ports<ResponseHeader, RequestHeader>,
     layout: Layout,
     policy: WaitPolicy,
+    spin: AdaptiveSpin,
     _node: Node<Ipc>,
 }
 
@@ -270,6 +277,7 @@ impl WorkerChannel {
             ports,
             layout,
             policy,
+            spin: AdaptiveSpin::default(),
             _node: node,
         })
     }
@@ -281,12 +289,15 @@ impl WorkerChannel {
         alive: impl FnMut() -> Result<(), DataPlaneError>,
         handle: impl FnOnce(&Request<'_>, &mut ResponseBlocksMut<'_>) -> Reply,
     ) -> Result<u32, DataPlaneError> {
+        let idle_since = std::time::Instant::now();
         let sample = next_sample(
             &self.ports.subscriber,
             &self.ports.listener,
-            self.policy,
+            self.spin.budget(&self.policy),
+            self.policy.tick,
             alive,
         )?;
+        self.spin.observe(idle_since.elapsed());
         let header = *sample.user_header();
         let l = self.layout;
         let payload = sample.payload();

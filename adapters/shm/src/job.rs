@@ -26,8 +26,11 @@ pub struct WorkerJob {
     pub channel: ChannelName,
     /// The process whose exit ends this worker (the client that uses it).
     pub owner_pid: u32,
-    /// Spin before blocking, in microseconds.
+    /// Spin at least this long before blocking, in microseconds (0: never spin).
     pub spin_us: u64,
+    /// Spin at most this long before blocking, in microseconds.
+    #[serde(default)]
+    pub max_spin_us: u64,
 }
 
 /// The spec a ready worker reports.

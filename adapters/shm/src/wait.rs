@@ -14,12 +14,18 @@ use iceoryx2::prelude::ZeroCopySend;
 use iceoryx2::sample::Sample;
 use std::time::{Duration, Instant};
 
-/// How long to spin on `receive` before blocking. A short spin saves the wake-up latency when
-/// the answer is microseconds away (a cheap env); blocking keeps a 2-core machine usable.
+/// How long to spin on `receive` before blocking. Spinning saves the wake-up latency (tens of
+/// µs on a VM) when the answer is close; blocking keeps a long wait free. The spin adapts:
+/// it covers the usual wait (a smoothed average of recent waits, plus a margin) within
+/// `[spin, max_spin]`, so a MuJoCo step of a millisecond is caught spinning while an idle
+/// worker soon blocks. Spinning yields the core every round, so a process that needs the
+/// core gets it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WaitPolicy {
-    /// Spin this long before blocking.
+    /// Always spin at least this long before blocking (0: never spin).
     pub spin: Duration,
+    /// Never spin longer than this.
+    pub max_spin: Duration,
     /// Check liveness at least this often while blocked.
     pub tick: Duration,
 }
@@ -27,9 +33,38 @@ pub struct WaitPolicy {
 impl Default for WaitPolicy {
     fn default() -> Self {
         WaitPolicy {
-            spin: Duration::from_micros(20),
+            spin: Duration::from_micros(50),
+            max_spin: Duration::from_millis(2),
             tick: Duration::from_millis(20),
         }
+    }
+}
+
+/// The smoothed length of recent waits, which sets the next spin budget.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct AdaptiveSpin {
+    average_ns: f64,
+}
+
+impl AdaptiveSpin {
+    /// The spin budget for the next wait under `policy`.
+    pub fn budget(&self, policy: &WaitPolicy) -> Duration {
+        if policy.spin.is_zero() {
+            return Duration::ZERO;
+        }
+        let wanted = Duration::from_nanos((self.average_ns * 1.5) as u64);
+        wanted.clamp(policy.spin, policy.max_spin.max(policy.spin))
+    }
+
+    /// Records how long a wait took.
+    pub fn observe(&mut self, waited: Duration) {
+        const WEIGHT: f64 = 0.2;
+        let ns = waited.as_nanos() as f64;
+        self.average_ns = if self.average_ns == 0.0 {
+            ns
+        } else {
+            self.average_ns + WEIGHT * (ns - self.average_ns)
+        };
     }
 }
 
@@ -38,7 +73,8 @@ impl Default for WaitPolicy {
 pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
     subscriber: &Subscriber<Ipc, [u8], H>,
     listener: &Listener<Ipc>,
-    policy: WaitPolicy,
+    spin: Duration,
+    tick: Duration,
     mut alive: impl FnMut() -> Result<(), DataPlaneError>,
 ) -> Result<Sample<Ipc, [u8], H>, DataPlaneError> {
     let receive = || {
@@ -47,13 +83,13 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
             detail: format!("{e:?}"),
         })
     };
-    if !policy.spin.is_zero() {
+    if !spin.is_zero() {
         let start = Instant::now();
         loop {
             if let Some(sample) = receive()? {
                 return Ok(sample);
             }
-            if start.elapsed() >= policy.spin {
+            if start.elapsed() >= spin {
                 break;
             }
             // Yield rather than spin: when the peer shares this core, a plain spin would keep
@@ -61,12 +97,16 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
             std::thread::yield_now();
         }
     }
-    let mut next_check = Instant::now() + policy.tick;
+    let mut next_check = Instant::now() + tick;
     loop {
         if let Some(sample) = receive()? {
             return Ok(sample);
         }
-        let timeout = next_check.saturating_duration_since(Instant::now());
+        // At least 1 µs: the wait is a socket receive timeout, where zero (or anything that
+        // rounds down to 0 µs) means "wait forever" — a hang if the peer died meanwhile.
+        let timeout = next_check
+            .saturating_duration_since(Instant::now())
+            .max(Duration::from_micros(1));
         listener
             .timed_wait(|_| {}, timeout)
             .map_err(|e| DataPlaneError::Ipc {
@@ -75,7 +115,7 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
             })?;
         if Instant::now() >= next_check {
             alive()?;
-            next_check = Instant::now() + policy.tick;
+            next_check = Instant::now() + tick;
         }
     }
 }

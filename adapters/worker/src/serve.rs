@@ -75,6 +75,7 @@ pub(crate) fn run(job_json: &str) -> anyhow::Result<()> {
     );
     let policy = WaitPolicy {
         spin: Duration::from_micros(job.spin_us),
+        max_spin: Duration::from_micros(job.max_spin_us),
         tick: Duration::from_millis(50),
     };
     let node_name = format!("worker-{}", std::process::id());
