@@ -108,6 +108,11 @@ fn on_mujoco_log(message: &MjLogMessage) {
     let text = message.subject();
     match message.level() {
         MjtLogLevel::mjLOG_ERROR => tracing::error!(target: "mujoco", "{text}"),
+        // Deprecation notes concern the model's author (Gymnasium's own assets trigger
+        // some); the user of the env cannot act on them.
+        MjtLogLevel::mjLOG_WARNING if text.contains("deprecated") => {
+            tracing::debug!(target: "mujoco", "{text}")
+        }
         MjtLogLevel::mjLOG_WARNING => tracing::warn!(target: "mujoco", "{text}"),
         MjtLogLevel::mjLOG_INFO => tracing::info!(target: "mujoco", "{text}"),
         MjtLogLevel::mjLOG_DEBUG => {}
