@@ -85,6 +85,11 @@ impl Env {
         })
     }
 
+    /// Renders the env (`render_mode = "rgb_array"`); `None` if it renders nothing.
+    pub fn render(&mut self) -> Result<Option<crate::vec_env::Frame>, HubError> {
+        Ok(self.inner.render()?.pop().flatten())
+    }
+
     /// A random action.
     pub fn sample_action(&self, rng: &mut impl rand::Rng) -> Vec<u8> {
         self.inner.sample_actions(rng)

@@ -36,5 +36,5 @@ pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
 pub use registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery};
 pub use routing::{Route, merge_config};
 pub use settings::{CONFIG_FILE_NAME, OneOrMany, Settings, SettingsError};
-pub use vec_env::{Batch, SessionOptions, VecEnv};
+pub use vec_env::{Batch, Frame, SessionOptions, VecEnv};
 pub use worker_binary::{set_default_worker_binary, worker_binary};

@@ -99,6 +99,34 @@ impl<'a> Batch<'a> {
     }
 }
 
+/// An RGB frame, row-major, 3 bytes per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Rows.
+    pub height: usize,
+    /// Columns.
+    pub width: usize,
+    /// `height × width × 3` bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl Frame {
+    /// Reads one frame as the worker encodes it (`u32` height, `u32` width, pixels);
+    /// `Some(None)` for an env that rendered nothing.
+    fn parse(bytes: &[u8]) -> Option<(Option<Frame>, &[u8])> {
+        let h = u32::from_le_bytes(bytes.get(..4)?.try_into().ok()?) as usize;
+        let w = u32::from_le_bytes(bytes.get(4..8)?.try_into().ok()?) as usize;
+        let n = h * w * 3;
+        let rgb = bytes.get(8..8 + n)?;
+        let frame = (n > 0).then(|| Frame {
+            height: h,
+            width: w,
+            rgb: rgb.to_vec(),
+        });
+        Some((frame, &bytes[8 + n..]))
+    }
+}
+
 /// Buffers the results are gathered into when they span several workers.
 #[derive(Default)]
 struct Gathered {
@@ -749,6 +777,42 @@ impl VecEnv {
         }
         self.direct = false;
         self.workers.first_mut().and_then(|w| w.response.take())
+    }
+
+    /// Renders every env (`render_mode = "rgb_array"`): one frame per env, `None` where the
+    /// env renders nothing. Frames are copied out of shared memory (they are large and rare).
+    pub fn render(&mut self) -> Result<Vec<Option<Frame>>, HubError> {
+        self.check_open()?;
+        for w in &mut self.workers {
+            w.channel.send_render(None)?;
+            w.pending = true;
+        }
+        let mut frames = Vec::with_capacity(self.num_envs);
+        for i in 0..self.workers.len() {
+            let response = match self.workers[i].wait(self.options.step_timeout) {
+                Ok(r) => r,
+                Err(e) => {
+                    if matches!(e, HubError::WorkerDied { .. }) {
+                        self.fail();
+                    }
+                    return Err(e);
+                }
+            };
+            if let Some(message) = response.error() {
+                return Err(HubError::EnvFailed { worker: i, message });
+            }
+            let mut bytes = response.info_bytes();
+            for _ in 0..self.workers[i].job.num_envs {
+                let (frame, rest) = Frame::parse(bytes).ok_or_else(|| {
+                    HubError::DataPlane(envhub_shm::DataPlaneError::Protocol(format!(
+                        "worker {i} sent a truncated frame"
+                    )))
+                })?;
+                frames.push(frame);
+                bytes = rest;
+            }
+        }
+        Ok(frames)
     }
 
     /// Random actions for every env, drawn from the action space.

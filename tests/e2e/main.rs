@@ -7,3 +7,4 @@ mod cli;
 mod concurrency;
 mod daemon;
 mod failures;
+mod rendering;

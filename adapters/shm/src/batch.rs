@@ -135,6 +135,27 @@ impl EnvBatch {
         Ok(info_section(&self.infos))
     }
 
+    /// Renders the selected envs. The result is, for each selected env in order, a `u32`
+    /// height, a `u32` width (both 0: the env renders nothing) and `height × width × 3` RGB
+    /// bytes, all little-endian.
+    pub fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+        let mut out = Vec::new();
+        for (env, &flag) in self.envs.iter_mut().zip(flags) {
+            if flag & env_flag::SELECTED == 0 {
+                continue;
+            }
+            match env.render()? {
+                Some((h, w, rgb)) => {
+                    out.extend_from_slice(&(h as u32).to_le_bytes());
+                    out.extend_from_slice(&(w as u32).to_le_bytes());
+                    out.extend_from_slice(&rgb);
+                }
+                None => out.extend_from_slice(&[0; 8]),
+            }
+        }
+        Ok(out)
+    }
+
     /// Closes every env.
     pub fn close(&mut self) {
         for env in &mut self.envs {

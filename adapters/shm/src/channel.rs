@@ -57,6 +57,11 @@ impl Response {
         (len > 0).then(|| std::str::from_utf8(&self.blocks().info[..len]).unwrap_or(""))
     }
 
+    /// The raw info section (frames, for a render).
+    pub fn info_bytes(&self) -> &[u8] {
+        &self.blocks().info[..self.header().info_len as usize]
+    }
+
     /// The worker's error message when the status is [`status::ERROR`].
     pub fn error(&self) -> Option<String> {
         (self.header().status == status::ERROR).then(|| {
@@ -164,6 +169,13 @@ impl ClientChannel {
     ) -> Result<u64, DataPlaneError> {
         self.send(command::RESET, options_json.as_bytes(), |l, p| {
             write_flags(l, p, selected, seeds);
+        })
+    }
+
+    /// Asks the worker to render the `selected` envs (all if `None`).
+    pub fn send_render(&mut self, selected: Option<&[bool]>) -> Result<u64, DataPlaneError> {
+        self.send(command::RENDER, &[], |l, p| {
+            write_flags(l, p, selected, &[])
         })
     }
 

@@ -20,6 +20,8 @@ pub mod command {
     pub const STEP: u32 = 2;
     /// Close the envs and exit.
     pub const CLOSE: u32 = 3;
+    /// Render the selected envs; the frames travel in the info section (see `EnvBatch::render`).
+    pub const RENDER: u32 = 4;
 }
 
 /// Statuses a worker answers with.

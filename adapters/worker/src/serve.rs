@@ -122,6 +122,10 @@ pub(crate) fn run(job_json: &str) -> anyhow::Result<()> {
                 Ok(info) => Reply::Ok { info },
                 Err(e) => Reply::Error(e.to_string()),
             },
+            command::RENDER => match batch.render(req.flags) {
+                Ok(info) => Reply::Ok { info },
+                Err(e) => Reply::Error(e.to_string()),
+            },
             command::CLOSE => {
                 batch.close();
                 Reply::Closed
