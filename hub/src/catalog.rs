@@ -34,12 +34,18 @@ pub fn adapters() -> Result<&'static [AdapterInfo], HubError> {
         let path = worker_binary();
         let out = std::process::Command::new(&path)
             .arg("describe")
-            .stderr(std::process::Stdio::inherit())
             .output()
             .map_err(|e| format!("{}\u{0}{e}", path.display()))?;
         if !out.status.success() {
+            // Typically the loader failing on a missing library: say which.
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            let last = stderr
+                .lines()
+                .rev()
+                .find(|l| !l.trim().is_empty())
+                .unwrap_or("");
             return Err(format!(
-                "{}\u{0}`describe` exited with {}",
+                "{}\u{0}`describe` exited with {}: {last}",
                 path.display(),
                 out.status
             ));

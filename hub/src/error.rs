@@ -42,7 +42,7 @@ pub enum HubError {
     },
     /// The worker binary could not be found or started.
     #[error(
-        "cannot start the worker `{path}`: {reason}\nhint: build it with `cargo build -p envhub-worker`, or set ENVHUB_WORKER to its path"
+        "cannot start the worker `{path}`: {reason}\nhint: `make build` builds it and sets up the libraries it links; or set ENVHUB_WORKER to its path"
     )]
     WorkerBinary {
         /// The path tried.

@@ -123,7 +123,10 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
         workers: Some(args.workers),
         ..EnvConfig::default()
     };
+    let started = Instant::now();
     let mut env = hub.make_vec(&args.id, args.num_envs, &config)?;
+    env.reset(Some(0))?;
+    let start_ms = started.elapsed().as_secs_f64() * 1e3;
     let hub_rate = hub_throughput(&mut env, args.seconds)?;
     let inproc_rate = inproc_throughput(&env, args.workers, args.seconds, hub_rate)?;
     env.close();
@@ -139,6 +142,7 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
                 "inproc_steps_per_sec": inproc_rate,
                 "roundtrip_p50_us": p50,
                 "roundtrip_p99_us": p99,
+                "start_ms": start_ms,
             })
         );
     } else {
@@ -153,6 +157,7 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
         );
         println!("  hub / in-process  {:>12.2}", hub_rate / inproc_rate);
         println!("  round trip        p50 {p50:.1} µs, p99 {p99:.1} µs  (no-op env)");
+        println!("  start             {start_ms:.0} ms  (make + first reset)");
     }
     Ok(Outcome::Done)
 }
