@@ -27,13 +27,14 @@ FEATURES := --features envhub-worker/mujoco
 MESA_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
 MESA_STAMP := .build/mesa.installed
 
-.PHONY: help demo test lint fmt rust-test py-test build venv setup clean
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
 	@echo "make test   run every check (fmt, clippy, Rust and Python tests)"
 	@echo "make lint   cargo fmt --check and clippy -D warnings"
 	@echo "make fmt    format the code"
+	@echo "make bench  data-plane figures: hub vs in-process, round trip"
 
 $(VENV_STAMP): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -64,10 +65,11 @@ setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
 build: setup
 	$(CARGO) build --release --workspace --bins $(FEATURES)
 
-demo: build
+demo: build py-install
 	./target/release/envhub match "balance a pole on a cart"
 	./target/release/envhub run gym-cartpole --num-envs 64 --steps 1000000
 	./target/release/envhub run gym-pendulum --num-envs 8 --steps 200000
+	$(VPY) py-client/examples/rollout.py
 
 lint: setup
 	$(CARGO) fmt --all -- --check
@@ -86,11 +88,31 @@ rust-test: setup
 	fi
 	$(CARGO) test --workspace --doc $(FEATURES)
 
-py-test: $(VENV_STAMP)
-	$(VPY) -m pytest tests/python -q -p no:cacheprovider
+# The Python package `envhub` into .venv/ (editable): maturin builds py-client in its own
+# target dir, so it never rebuilds what cargo built; the release worker goes beside it.
+py-install: build
+	cd py-client && VIRTUAL_ENV=$(abspath $(VENV)) CARGO_TARGET_DIR=$(abspath target/maturin) \
+		$(abspath $(VPY)) -m maturin develop --release --quiet
+	mkdir -p py-client/python/envhub/bin
+	cp target/release/envhub-worker py-client/python/envhub/bin/envhub-worker.tmp
+	mv -f py-client/python/envhub/bin/envhub-worker.tmp py-client/python/envhub/bin/envhub-worker
+
+py-test: py-install
+	ENVHUB_PY_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 
 test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
 	rm -rf $(VENV) .build
+
+# Data-plane figures, each line one `envhub bench` run (hub vs in-process in the same run).
+BENCH_SECONDS ?= 2
+bench: build
+	@for n in 1 8 64 256; do for w in 1 2; do \
+		if [ $$w -le $$n ]; then ./target/release/envhub bench gym-cartpole --num-envs $$n --workers $$w --seconds $(BENCH_SECONDS) --json; fi; \
+	done; done
+	@for id in mujoco-ant mujoco-half-cheetah mujoco-humanoid; do \
+		./target/release/envhub bench $$id --num-envs 8 --workers 1 --seconds $(BENCH_SECONDS) --json; \
+		./target/release/envhub bench $$id --num-envs 16 --workers 2 --seconds $(BENCH_SECONDS) --json; \
+	done

@@ -1,0 +1,100 @@
+"""envhub: Gymnasium environments in worker processes, observations through shared memory.
+
+    import envhub
+    env = envhub.make("gym-cartpole")                     # a gymnasium.Env
+    envs = envhub.make_vec("gym-cartpole", num_envs=64)   # a gymnasium.vector.VectorEnv
+    env = gymnasium.make("envhub/gym-cartpole")           # after `import envhub`
+
+Observations are read-only numpy arrays that view the worker's shared memory; the simulator
+runs in an `envhub-worker` process, so a crash there raises `WorkerDiedError` here instead of
+taking the training process down. Registry, task matching and adapters follow RoboSmith's
+API (`EnvRegistry`, `TaskSpec`, `match_task_to_env`, `EnvConfig`, `make_env`,
+`AdapterRegistry`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import _envhub
+from ._factory import make, make_env, make_vec
+from .adapters import AdapterRegistry
+from .config import EnvConfig
+from .env import Env
+from .errors import (
+    AdapterUnavailableError,
+    DataPlaneError,
+    EnvFailedError,
+    EnvHubError,
+    ForkError,
+    HubDaemonError,
+    InvalidActionError,
+    InvalidConfigError,
+    InvalidStateError,
+    MakeError,
+    NoAdapterError,
+    NoMatchError,
+    RegistryError,
+    UnknownEnvError,
+    WorkerBinaryError,
+    WorkerDiedError,
+)
+from .registration import register_envs
+from .registry import EnvEntry, EnvRegistry, MatchResult, TaskSpec, match_task_to_env
+from .vector import VectorEnv
+
+__version__: str = _envhub.__version__
+
+#: Observation arrays viewing shared memory that may be alive at once per session; later
+#: observations are copies (iceoryx2 lends a bounded number of samples per worker).
+MAX_LENT_SAMPLES: int = _envhub.MAX_LENT_SAMPLES
+
+# The worker binary `make py-install` puts beside this package (`ENVHUB_WORKER` overrides it).
+_envhub.set_worker_binary(str(Path(__file__).resolve().parent / "bin" / "envhub-worker"))
+
+
+def worker_binary() -> str:
+    """The `envhub-worker` binary sessions start."""
+    return str(_envhub.worker_binary())
+
+
+try:
+    register_envs()
+except EnvHubError as _e:  # a broken registry file must not make `import envhub` fail
+    import warnings
+
+    warnings.warn(f"envhub: gymnasium ids not registered: {_e}", stacklevel=1)
+
+__all__ = [
+    "AdapterRegistry",
+    "AdapterUnavailableError",
+    "DataPlaneError",
+    "Env",
+    "EnvConfig",
+    "EnvEntry",
+    "EnvFailedError",
+    "EnvHubError",
+    "EnvRegistry",
+    "ForkError",
+    "HubDaemonError",
+    "InvalidActionError",
+    "InvalidConfigError",
+    "InvalidStateError",
+    "MAX_LENT_SAMPLES",
+    "MakeError",
+    "MatchResult",
+    "NoAdapterError",
+    "NoMatchError",
+    "RegistryError",
+    "TaskSpec",
+    "UnknownEnvError",
+    "VectorEnv",
+    "WorkerBinaryError",
+    "WorkerDiedError",
+    "make",
+    "make_env",
+    "make_vec",
+    "match_task_to_env",
+    "register_envs",
+    "worker_binary",
+]

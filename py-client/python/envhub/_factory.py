@@ -1,0 +1,126 @@
+"""`make`, `make_vec` and RoboSmith's `make_env`."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import gymnasium
+from gymnasium.vector import AutoresetMode
+
+from ._session import RegistryArg
+from .env import Env
+from .registration import NAMESPACE
+from .registry import EnvEntry
+from .vector import VectorEnv
+
+__all__ = ["make", "make_env", "make_vec"]
+
+
+def _with_spec(env: Env, registry_id: str, kwargs: dict[str, Any]) -> Env:
+    """Gives `env` the spec `gymnasium.make` would, so tools that re-create envs from
+    `env.spec` (such as `check_env`) work."""
+    try:
+        spec = gymnasium.spec(f"{NAMESPACE}/{registry_id}")
+    except gymnasium.error.Error:
+        return env
+    env.spec = dataclasses.replace(spec, kwargs={**spec.kwargs, **kwargs})
+    return env
+
+
+def make(
+    id: str,
+    *,
+    render_mode: str | None = None,
+    max_episode_steps: int | None = None,
+    seed: int | None = None,
+    asset_path: str | None = None,
+    registry: RegistryArg = None,
+    step_timeout: float | None = None,
+    restart_on_crash: bool = False,
+    **extra: Any,
+) -> Env:
+    """One env of registry entry `id` in its own worker process (a `gymnasium.Env`).
+
+    `extra` holds the env's own options (merged over the entry's `kwargs`); `registry` a
+    registry (or YAML path) to use instead of the one found the usual way.
+    """
+    env = Env(
+        id,
+        render_mode=render_mode,
+        max_episode_steps=max_episode_steps,
+        seed=seed,
+        asset_path=asset_path,
+        registry=registry,
+        step_timeout=step_timeout,
+        restart_on_crash=restart_on_crash,
+        **extra,
+    )
+    if registry is None:
+        given = {
+            "render_mode": render_mode,
+            "max_episode_steps": max_episode_steps,
+            "seed": seed,
+            "asset_path": asset_path,
+            "step_timeout": step_timeout,
+        }
+        kwargs = {k: v for k, v in given.items() if v is not None}
+        if restart_on_crash:
+            kwargs["restart_on_crash"] = True
+        _with_spec(env, id, {**kwargs, **extra})
+    return env
+
+
+def make_vec(
+    id: str,
+    num_envs: int,
+    num_workers: int | None = None,
+    autoreset_mode: str | AutoresetMode = "next_step",
+    *,
+    render_mode: str | None = None,
+    max_episode_steps: int | None = None,
+    seed: int | None = None,
+    asset_path: str | None = None,
+    registry: RegistryArg = None,
+    step_timeout: float | None = None,
+    restart_on_crash: bool = False,
+    **extra: Any,
+) -> VectorEnv:
+    """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
+    `gymnasium.vector.VectorEnv`; default: one worker per core, at most one per env)."""
+    return VectorEnv(
+        id,
+        num_envs,
+        num_workers,
+        autoreset_mode,
+        render_mode=render_mode,
+        max_episode_steps=max_episode_steps,
+        seed=seed,
+        asset_path=asset_path,
+        registry=registry,
+        step_timeout=step_timeout,
+        restart_on_crash=restart_on_crash,
+        **extra,
+    )
+
+
+def make_env(
+    entry: EnvEntry | str,
+    render_mode: str | None = None,
+    max_episode_steps: int | None = None,
+    seed: int | None = None,
+    **extra: Any,
+) -> Env:
+    """RoboSmith's `make_env`: an env for a registry entry (or id), from the registry the
+    entry came from. `seed` seeds the first reset; `max_episode_steps` 0 or `None` keeps
+    the entry's limit; `extra` holds the env's options."""
+    registry_id = entry.id if isinstance(entry, EnvEntry) else entry
+    registry = entry._registry if isinstance(entry, EnvEntry) else None
+    return Env(
+        registry_id,
+        render_mode=render_mode,
+        max_episode_steps=max_episode_steps,
+        seed=seed,
+        registry=registry,
+        **extra,
+    )

@@ -1,0 +1,57 @@
+"""Starting a session of envs (shared by `Env` and `VectorEnv`)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from . import _envhub
+from .config import EnvConfig
+from .errors import InvalidConfigError
+from .registry import EnvRegistry
+
+RegistryArg = EnvRegistry | _envhub.Registry | str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None
+
+
+def registry_of(registry: RegistryArg) -> Any:
+    """The compiled registry for a `registry=` argument (`None`: found the usual way)."""
+    if registry is None:
+        return None
+    if isinstance(registry, EnvRegistry):
+        return registry._inner
+    if isinstance(registry, _envhub.Registry):
+        return registry
+    return EnvRegistry(registry)._inner
+
+
+def start(
+    registry_id: str,
+    config: EnvConfig,
+    registry: RegistryArg,
+    step_timeout: float | None,
+    restart_on_crash: bool,
+) -> Any:
+    """Starts the workers of `config.num_envs` envs of entry `registry_id`."""
+    if not isinstance(registry_id, str):
+        raise InvalidConfigError(f"the env id must be a string, got {type(registry_id).__name__}")
+    if isinstance(config.num_envs, bool) or not isinstance(config.num_envs, int) or config.num_envs < 1:
+        raise InvalidConfigError(f"invalid num_envs: {config.num_envs!r}; use a positive integer")
+    config.seed = check_seed(config.seed)
+    return _envhub.make_session(
+        registry_id,
+        config.num_envs,
+        config.to_json(),
+        registry=registry_of(registry),
+        step_timeout=step_timeout,
+        restart_on_crash=restart_on_crash,
+    )
+
+
+def check_seed(seed: Any) -> int | None:
+    """A reset seed: `None` or a non-negative integer (numpy integers too)."""
+    if seed is None:
+        return None
+    if isinstance(seed, bool) or not hasattr(seed, "__index__") or seed.__index__() < 0:
+        raise InvalidConfigError(f"invalid seed: {seed!r}; use a non-negative integer or None")
+    return int(seed.__index__())

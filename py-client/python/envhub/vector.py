@@ -1,0 +1,272 @@
+"""`envhub.VectorEnv`: a batch of envs in worker processes, as a `gymnasium.vector.VectorEnv`."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from . import _spaces
+from ._session import RegistryArg, check_seed, start
+from .config import EnvConfig, to_json
+from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
+
+__all__ = ["VectorEnv"]
+
+
+def _add_info(infos: dict[str, Any], env_info: dict[str, Any], k: int, n: int) -> dict[str, Any]:
+    """Gymnasium's vector info layout: every key an array over the `n` envs, with a boolean
+    mask `_key` saying which envs reported it (nested dicts recursively)."""
+    for key, value in env_info.items():
+        if isinstance(value, dict):
+            array: Any = _add_info(infos.get(key, {}), value, k, n)
+        else:
+            if isinstance(value, list):
+                value = np.asarray(value)
+            array = infos.get(key)
+            if array is None:
+                if isinstance(value, bool | int | float | np.number | np.bool_):
+                    array = np.zeros(n, dtype=type(value))
+                elif isinstance(value, np.ndarray):
+                    array = np.zeros((n, *value.shape), dtype=value.dtype)
+                else:
+                    array = np.full(n, fill_value=None, dtype=object)
+            array[k] = value
+        mask = infos.get(f"_{key}")
+        if mask is None:
+            mask = np.zeros(n, dtype=np.bool_)
+        mask[k] = True
+        infos[key], infos[f"_{key}"] = array, mask
+    return infos
+
+
+_RUST_MODES = {
+    AutoresetMode.NEXT_STEP: "next_step",
+    AutoresetMode.SAME_STEP: "same_step",
+    AutoresetMode.DISABLED: "disabled",
+}
+
+
+def _autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
+    """Gymnasium's enum from itself, its value (`"NextStep"`) or envhub's name (`"next_step"`)."""
+    if isinstance(mode, AutoresetMode):
+        return mode
+    for m, name in _RUST_MODES.items():
+        if isinstance(mode, str) and mode.lower().replace("-", "_") in (name, m.value.lower(), name.replace("_", "")):
+            return m
+    raise InvalidConfigError(
+        f"unknown autoreset mode `{mode}`; valid modes are `next_step`, `same_step`, `disabled` "
+        "(or gymnasium.vector.AutoresetMode)"
+    )
+
+
+class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
+    """`num_envs` envs of registry entry `registry_id`, spread over `num_workers` worker
+    processes (default: one per core, at most one per env).
+
+    With one worker, observations are read-only arrays viewing the worker's shared memory
+    (no copy; an array you keep stays valid and unchanged; at most `MAX_LENT_SAMPLES` are
+    views at once, later ones copies). With several workers, each worker's block is gathered
+    into one fresh array (a copy per worker). Rewards and flags are fresh arrays.
+
+    `autoreset_mode` is Gymnasium's: `next_step` (default), `same_step` (`final_obs` and
+    `final_info` in the step's info), or `disabled` (reset finished envs yourself with
+    `reset(options={"reset_mask": mask})`). EnvPool-style asynchronous stepping: `send`
+    actions to some envs, `recv` the results of the first workers to finish.
+    """
+
+    def __init__(
+        self,
+        registry_id: str,
+        num_envs: int = 1,
+        num_workers: int | None = None,
+        autoreset_mode: str | AutoresetMode = AutoresetMode.NEXT_STEP,
+        *,
+        render_mode: str | None = None,
+        max_episode_steps: int | None = None,
+        seed: int | None = None,
+        asset_path: str | None = None,
+        registry: RegistryArg = None,
+        step_timeout: float | None = None,
+        restart_on_crash: bool = False,
+        **extra: Any,
+    ) -> None:
+        mode = _autoreset_mode(autoreset_mode)
+        config = EnvConfig(
+            render_mode=render_mode,
+            seed=seed,
+            max_episode_steps=max_episode_steps,
+            num_envs=num_envs,
+            asset_path=asset_path,
+            extra=extra,
+            workers=num_workers,
+            autoreset_mode=_RUST_MODES[mode],
+        )
+        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash)
+        s = self._session
+        self.registry_id = registry_id
+        self.num_envs = int(s.num_envs)
+        self._codec = _spaces.Codec(
+            s.observation_space_json, s.obs_leaves_json, s.action_space_json, s.action_leaves_json, self.num_envs
+        )
+        self.single_observation_space = _spaces.to_gymnasium(json.loads(s.observation_space_json))
+        self.single_action_space = _spaces.to_gymnasium(json.loads(s.action_space_json))
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.metadata = {"autoreset_mode": mode, "render_modes": [render_mode] if render_mode else []}
+        self.render_mode = render_mode
+        self._last_obs: np.ndarray | None = None
+        # `seed=` seeds the first reset that is not given one (env `i` with `seed + i`).
+        self._first_seed = check_seed(seed)
+        self._sent = np.zeros(self.num_envs, dtype=np.bool_)
+
+    # Lock-step ------------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Resets every env (env `i` seeded with `seed + i`, or `seed[i]` from a list); with
+        `options={"reset_mask": mask}` only the envs where `mask` is true."""
+        if isinstance(seed, list | tuple | np.ndarray):
+            if len(seed) != self.num_envs:
+                raise InvalidConfigError(f"got {len(seed)} seeds for {self.num_envs} envs; pass one per env")
+            seeds = [check_seed(s) for s in seed]
+            first = seeds[0]
+        else:
+            first = check_seed(seed)
+            if first is None and self._first_seed is not None:
+                first = self._first_seed
+            seeds = [None if first is None else first + i for i in range(self.num_envs)]
+        self._first_seed = None
+        super().reset(seed=first)
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is not None:
+            mask = np.asarray(mask)
+            if mask.shape != (self.num_envs,) or mask.dtype != np.bool_:
+                raise InvalidConfigError(
+                    f"reset_mask must be a bool array of shape ({self.num_envs},), got {mask.dtype} {mask.shape}"
+                )
+            if self._last_obs is None and not mask.all():
+                raise InvalidStateError("reset with `reset_mask` needs a full reset first")
+        raw, _, _, _, infos, _ = self._session.reset(
+            seeds, None if mask is None else mask.tolist(), to_json(options) if options else None
+        )
+        if mask is not None and not mask.all():
+            merged = self._last_obs.copy()  # type: ignore[union-attr]
+            merged[mask] = raw[mask]
+            raw = merged
+            if infos is not None:
+                infos = [info if m else {} for info, m in zip(infos, mask, strict=True)]
+        self._last_obs = raw
+        self._sent[:] = False
+        return self._codec.obs(raw), self._info(infos, None, self.num_envs)
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Steps every env with its action (an array of shape `action_space.shape`)."""
+        raw, rewards, terminated, truncated, infos, final = self._session.step(self._codec.actions(actions))
+        self._last_obs = raw
+        if infos is None and final is None:
+            return self._codec.obs(raw), rewards, terminated, truncated, {}
+        return self._codec.obs(raw), rewards, terminated, truncated, self._info(infos, final, self.num_envs)
+
+    # EnvPool-style asynchronous stepping ---------------------------------------------------
+
+    def send(self, actions: Any, env_ids: Any = None) -> None:
+        """Sends one action to each env in `env_ids` (all if `None`) without waiting."""
+        if env_ids is None:
+            ids = np.arange(self.num_envs)
+        else:
+            ids = np.asarray(env_ids).reshape(-1)
+            if ids.dtype.kind not in "iu":
+                raise InvalidActionError(f"env_ids must be integers, got {ids.dtype}")
+            if len(np.unique(ids)) != len(ids):
+                raise InvalidActionError("env_ids must not repeat an env")
+        a = self._codec.actions(actions, count=len(ids))
+        self._session.send(a, ids.astype(np.int64).tolist())
+        self._sent[ids] = True
+
+    def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Waits for the first workers to finish and returns the results of the envs they
+        stepped; `info["env_id"]` says which envs they are."""
+        raw, rewards, terminated, truncated, infos, final, ids = self._session.recv()
+        keep = self._sent[ids]
+        self._sent[ids] = False
+        if not keep.all():
+            raw, rewards, terminated, truncated, ids = (
+                raw[keep],
+                rewards[keep],
+                terminated[keep],
+                truncated[keep],
+                ids[keep],
+            )
+            infos = None if infos is None else [i for i, k in zip(infos, keep, strict=True) if k]
+            final = None if final is None else [f for f, k in zip(final, keep, strict=True) if k]
+        info = self._info(infos, final, len(ids))
+        info["env_id"] = ids
+        return self._codec.obs(raw), rewards, terminated, truncated, info
+
+    # ---------------------------------------------------------------------------------------
+
+    def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if final is not None:
+            for k, data in enumerate(final):
+                if data is not None:
+                    final_info = infos[k].pop("final_info", {}) if infos is not None else {}
+                    out = _add_info(
+                        out, {"final_obs": self._codec.obs_from_bytes(data), "final_info": final_info}, k, n
+                    )
+        if infos is not None:
+            for k, info in enumerate(infos):
+                if info:
+                    out = _add_info(out, info, k, n)
+        return out
+
+    def render(self) -> tuple[np.ndarray | None, ...] | None:
+        """One `(height, width, 3)` uint8 frame per env when made with
+        `render_mode="rgb_array"`; `None` otherwise."""
+        if self.render_mode is None:
+            return None
+        return tuple(self._session.render())
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stops the workers; arrays already returned stay valid."""
+        session = getattr(self, "_session", None)
+        if session is not None:
+            session.close()
+
+    def __del__(self) -> None:
+        try:
+            if not getattr(self, "closed", True):
+                self.close()
+        except Exception:  # noqa: BLE001 - never raise from a finalizer (interpreter shutdown)
+            pass
+
+    @property
+    def num_workers(self) -> int:
+        """Number of worker processes."""
+        return int(self._session.num_workers)
+
+    @property
+    def worker_pids(self) -> list[int]:
+        """Pids of the worker processes, in env order."""
+        return list(self._session.worker_pids)
+
+    @property
+    def max_episode_steps(self) -> int | None:
+        """The episode limit applied, if any."""
+        return self._session.max_episode_steps
+
+    def __repr__(self) -> str:
+        session = getattr(self, "_session", None)
+        if session is None:
+            return "<envhub.VectorEnv (not started)>"
+        return (
+            f"<envhub.VectorEnv {self.registry_id}: {self.num_envs} envs, "
+            f"{session.num_workers} workers ({session.adapter}: {session.env_id})>"
+        )

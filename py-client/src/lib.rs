@@ -1,0 +1,71 @@
+//! `envhub._envhub`: the compiled half of the Python package `envhub`.
+//!
+//! Thin on purpose: sessions, the registry and task matching are the Rust client's, results
+//! cross as numpy arrays and metadata as JSON, and everything Gymnasium-shaped lives in the
+//! pure-Python package on top, where Python users can read it. The one decision made here is
+//! ownership of shared memory: a batch's observations are a read-only numpy array viewing
+//! the worker's response in place, and the array's base object owns that response, so an
+//! array the user keeps stays valid and unchanged. The price is a bounded pool: past
+//! `MAX_BORROWED_RESPONSES - 1` arrays alive at once, observations are copied instead.
+//! Waiting on workers releases the GIL.
+
+mod arrays;
+mod convert;
+mod errors;
+mod registry;
+mod session;
+
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+/// Sets where the hub looks for `envhub-worker` when `ENVHUB_WORKER` is not set (the Python
+/// package points it at the binary installed beside it). Returns whether it was set (the
+/// first call wins).
+#[pyfunction]
+fn set_worker_binary(path: PathBuf) -> bool {
+    envhub::set_default_worker_binary(path)
+}
+
+/// The `envhub-worker` binary the hub would start.
+#[pyfunction]
+fn worker_binary() -> PathBuf {
+    envhub::worker_binary()
+}
+
+/// Every adapter with its availability, as JSON.
+#[pyfunction]
+fn adapters_json(py: Python<'_>) -> PyResult<String> {
+    let adapters = py
+        .detach(|| envhub::Hub::from_env().and_then(|hub| hub.adapters()))
+        .map_err(|e| errors::hub_error(py, e))?;
+    Ok(serde_json::to_string(&adapters).expect("adapters serialize"))
+}
+
+/// Logs go to stderr, filtered by `ENVHUB_LOG` or `RUST_LOG` (default: warnings), as the
+/// CLI does.
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = std::env::var(envhub::env_vars::ENVHUB_LOG)
+        .ok()
+        .or_else(|| std::env::var("RUST_LOG").ok())
+        .unwrap_or_else(|| "warn".to_string());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(EnvFilter::new(filter))
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+#[pymodule]
+fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    init_logging();
+    m.add_function(wrap_pyfunction!(set_worker_binary, m)?)?;
+    m.add_function(wrap_pyfunction!(worker_binary, m)?)?;
+    m.add_function(wrap_pyfunction!(adapters_json, m)?)?;
+    m.add_function(wrap_pyfunction!(session::make_session, m)?)?;
+    m.add_class::<session::Session>()?;
+    m.add_class::<session::SampleOwner>()?;
+    m.add_class::<registry::PyRegistry>()?;
+    m.add("MAX_LENT_SAMPLES", session::LENDABLE)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

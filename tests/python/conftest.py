@@ -1,0 +1,71 @@
+"""Shared set-up for the Python tests.
+
+The `envhub` tests need the compiled package (`make py-install` builds it into `.venv/`;
+`make py-test` does that first). Without it they are skipped, unless `ENVHUB_PY_REQUIRED`
+is set (as `make py-test` does), when a missing package is an error.
+
+Every test process gets its own iceoryx2 namespace, so parallel runs never share files.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import textwrap
+from pathlib import Path
+
+import pytest
+
+NAMESPACE = f"pytest{os.getpid()}_"
+os.environ.setdefault("ENVHUB_NAMESPACE", NAMESPACE)
+# The tests must not pick up a developer's own registry or daemon.
+os.environ.pop("ENVHUB_REGISTRY", None)
+os.environ.pop("ENVHUB_HUB", None)
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+# A registry entry for the `null` adapter: an env that does no work and misbehaves on
+# request (`sleep_ms`, `exit_after`, `error_after`), for failure tests.
+NULL_REGISTRY = textwrap.dedent(
+    """\
+    environments:
+      - id: null-env
+        name: Null
+        framework: envhub
+        env_id: Null-v0
+        robot_type: custom
+        env_type: floor
+        task_tags: [nothing]
+        description: Does no work.
+    """
+)
+
+
+def import_envhub():
+    """The `envhub` package, or a skip (an error under `ENVHUB_PY_REQUIRED`)."""
+    try:
+        import envhub
+    except ImportError as exc:
+        if os.environ.get("ENVHUB_PY_REQUIRED"):
+            raise
+        pytest.skip(f"the envhub package is not built ({exc}); run `make py-install`")
+    return envhub
+
+
+@pytest.fixture
+def null_registry(tmp_path: Path) -> str:
+    """A registry file with `null-env`, plus the built-in catalog."""
+    path = tmp_path / "null_registry.yaml"
+    path.write_text(NULL_REGISTRY)
+    return str(path)
+
+
+def pytest_sessionfinish(session, exitstatus) -> None:  # noqa: ARG001
+    """Removes what this process's namespace left in shared memory (killed workers)."""
+    if os.environ.get("ENVHUB_NAMESPACE") != NAMESPACE:
+        return
+    for path in glob.glob(f"/dev/shm/{NAMESPACE}*") + glob.glob(f"/dev/shm/iox2_{NAMESPACE}*"):
+        try:
+            os.remove(path)
+        except OSError:
+            pass
