@@ -18,11 +18,10 @@
 //! cannot import gymnasium the test fails, unless `ENVHUB_SKIP_PYTHON_TESTS=1`.
 
 use envhub_classic::ClassicControl;
+use envhub_conformance::{close, floats, gymnasium_version, python_reference, scaled_diff};
 use envhub_core::{EnvConfig, Info, ResetOptions};
 use serde_json::Value;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Observations: float32 rounding.
 const OBS_TOL: f64 = 1e-6;
@@ -30,70 +29,6 @@ const OBS_TOL: f64 = 1e-6;
 const REWARD_TOL: f64 = 1e-9;
 /// The state before a step, where a last-bit difference in `sin`/`cos` may have crept in.
 const STATE_TOL: f64 = 1e-9;
-
-fn close(got: f64, want: f64, tol: f64) -> bool {
-    (got - want).abs() <= tol * want.abs().max(1.0)
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .expect("a list of numbers")
-        .iter()
-        .map(|x| x.as_f64().expect("a number"))
-        .collect()
-}
-
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Runs the reference script, or says why it cannot (`None` when skipping is allowed).
-fn reference() -> Option<Value> {
-    let root = repo_root();
-    let python = std::env::var_os("ENVHUB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join(".venv/bin/python"));
-    let probe = Command::new(&python)
-        .args(["-c", "import gymnasium"])
-        .output();
-    let problem = match probe {
-        Err(e) => Some(format!("cannot run `{}`: {e}", python.display())),
-        Ok(out) if !out.status.success() => Some(format!(
-            "`{}` cannot import gymnasium: {}",
-            python.display(),
-            String::from_utf8_lossy(&out.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-                .trim()
-        )),
-        Ok(_) => None,
-    };
-    if let Some(problem) = problem {
-        if std::env::var("ENVHUB_SKIP_PYTHON_TESTS").as_deref() == Ok("1") {
-            println!("skipped the gymnasium parity test (ENVHUB_SKIP_PYTHON_TESTS=1): {problem}");
-            return None;
-        }
-        panic!(
-            "{problem}\nhint: run `make test` (it creates `.venv` with gymnasium), or set \
-             ENVHUB_PYTHON to a Python with gymnasium 1.4; ENVHUB_SKIP_PYTHON_TESTS=1 skips \
-             this test"
-        );
-    }
-    let script = root.join("tests/python/classic_reference.py");
-    let out = Command::new(&python)
-        .arg(&script)
-        .current_dir(&root)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run `{}`: {e}", script.display()));
-    assert!(
-        out.status.success(),
-        "`{}` failed:\n{}",
-        script.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(serde_json::from_slice(&out.stdout).expect("the reference script prints JSON"))
-}
 
 /// What one run of one env showed, for the summary.
 #[derive(Default)]
@@ -109,15 +44,11 @@ struct Tally {
 
 #[test]
 fn matches_gymnasium() {
-    let Some(reference) = reference() else {
+    let script = "tests/python/classic_reference.py";
+    let Some(reference) = python_reference(script, &["gymnasium"], "gymnasium 1.4") else {
         return;
     };
-    let version = reference["gymnasium"].as_str().unwrap_or("?");
-    assert!(
-        version.starts_with("1.4."),
-        "the reference is gymnasium {version}; these envs follow gymnasium 1.4\n\
-         hint: install gymnasium==1.4.* in the Python the test runs"
-    );
+    let version = gymnasium_version(&reference, "1.4");
 
     let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
     for run in reference["runs"].as_array().unwrap() {
@@ -165,7 +96,7 @@ fn matches_gymnasium() {
                     .state()
                     .iter()
                     .zip(&want_state)
-                    .map(|(g, w)| (g - w).abs() / w.abs().max(1.0))
+                    .map(|(g, w)| scaled_diff(*g, *w))
                     .fold(0.0, f64::max);
                 assert!(
                     diff <= STATE_TOL,

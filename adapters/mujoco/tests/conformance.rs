@@ -1,91 +1,20 @@
 //! Conformance of every env of the `mujoco` adapter (and a `custom_mjcf` model) to the `Env`
-//! contract, the classic-control crate's checks: observations inside the observation space,
-//! same seed → same trajectory, reset after the episode ends, and `TimeLimit` truncation at
-//! `max_episode_steps`.
+//! contract: the suite shared with the other adapters (`envhub_conformance::check_env`), then
+//! MuJoCo's reset options and env options.
 
-use envhub_core::{Env, EnvAdapter, EnvConfig, Info, ResetOptions, TimeLimit};
+use envhub_conformance::check_env;
+use envhub_core::{Env, EnvAdapter, EnvConfig, Info, ResetOptions};
 use envhub_mujoco::{CustomMjcf, Mujoco};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-
-type Step = (Vec<u8>, f64, bool, bool);
-
-/// Steps `env` with random actions, resetting when an episode ends; returns every observation,
-/// reward and end flag. Panics if an observation or action leaves its space.
-fn rollout(env: &mut dyn Env, seed: u64, steps: usize) -> Vec<Step> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut obs = vec![0u8; env.observation_space().byte_len()];
-    let mut info = Info::default();
-    let options = ResetOptions::new();
-    env.reset(Some(seed), &options, &mut obs, &mut info)
-        .unwrap();
-    assert!(env.observation_space().contains(&obs));
-    let mut out = vec![(obs.clone(), 0.0, false, false)];
-    for _ in 0..steps {
-        let action = env.action_space().sample(&mut rng);
-        assert!(env.action_space().contains(&action));
-        let t = env.step(&action, &mut obs, &mut info).unwrap();
-        assert!(
-            env.observation_space().contains(&obs) || t.terminated,
-            "{:?}",
-            env.observation_space().validate(&obs)
-        );
-        out.push((obs.clone(), t.reward, t.terminated, t.truncated));
-        if t.terminated || t.truncated {
-            env.reset(None, &options, &mut obs, &mut info).unwrap();
-            assert!(env.observation_space().contains(&obs));
-            out.push((obs.clone(), 0.0, false, false));
-        }
-    }
-    out
-}
-
-/// The contract checks for one env of `adapter`, with `steps` random steps per rollout.
-fn check_env(adapter: &dyn EnvAdapter, env_id: &str, config: &EnvConfig, steps: usize) {
-    let spec = adapter.spec(env_id, config).unwrap();
-    let limit = config.episode_limit(spec.max_episode_steps);
-    let make = || TimeLimit::new(adapter.make(env_id, config).unwrap(), limit);
-
-    let mut env = make();
-    assert_eq!(env.observation_space(), &spec.observation_space, "{env_id}");
-    assert_eq!(env.action_space(), &spec.action_space, "{env_id}");
-
-    let a = rollout(&mut env, 7, steps);
-    assert!(
-        a.iter().any(|s| s.2 || s.3),
-        "{env_id}: no episode ended in {steps} steps"
-    );
-    // Same seed, same trajectory (a fresh env, and the same env reseeded).
-    assert!(a == rollout(&mut make(), 7, steps), "{env_id}: fresh env");
-    assert!(a == rollout(&mut env, 7, steps), "{env_id}: reseeded env");
-    assert!(a != rollout(&mut env, 8, steps), "{env_id}: other seed");
-
-    // Truncation at exactly a short limit.
-    let mut env = TimeLimit::new(adapter.make(env_id, config).unwrap(), Some(5));
-    let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let mut obs = vec![0u8; env.observation_space().byte_len()];
-    let mut info = Info::default();
-    env.reset(Some(3), &ResetOptions::new(), &mut obs, &mut info)
-        .unwrap();
-    for step in 1..=5 {
-        let action = env.action_space().sample(&mut rng);
-        let t = env.step(&action, &mut obs, &mut info).unwrap();
-        assert_eq!(t.truncated, step == 5, "{env_id}: step {step}/5");
-        if t.terminated {
-            break;
-        }
-    }
-}
 
 #[test]
 fn every_env_conforms() {
     let adapter = Mujoco::default();
+    // Short episodes so that every env ends some within the rollout.
+    let config = EnvConfig {
+        max_episode_steps: Some(120),
+        ..EnvConfig::default()
+    };
     for env_id in adapter.list_envs() {
-        // Short episodes so that every env ends some within the rollout.
-        let config = EnvConfig {
-            max_episode_steps: Some(120),
-            ..EnvConfig::default()
-        };
         check_env(&adapter, &env_id, &config, 300);
     }
 }

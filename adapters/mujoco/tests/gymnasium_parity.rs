@@ -17,79 +17,14 @@
 //! Python: `$ENVHUB_PYTHON`, else `<repo>/.venv/bin/python` (`make test` creates it). If it
 //! cannot import gymnasium the test fails, unless `ENVHUB_SKIP_PYTHON_TESTS=1`.
 
+use envhub_conformance::{close, floats, gymnasium_version, python_reference, scaled_diff};
 use envhub_core::{Env, EnvConfig, Info, ResetOptions};
 use envhub_mujoco::Mujoco;
 use serde_json::Value;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Observations and rewards, relative (absolute near 0).
 const TOL: f64 = 1e-6;
-
-fn close(got: f64, want: f64) -> bool {
-    (got - want).abs() <= TOL * want.abs().max(1.0)
-}
-
-fn floats(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .expect("a list of numbers")
-        .iter()
-        .map(|x| x.as_f64().expect("a number"))
-        .collect()
-}
-
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// Runs the reference script, or says why it cannot (`None` when skipping is allowed).
-fn reference() -> Option<Value> {
-    let root = repo_root();
-    let python = std::env::var_os("ENVHUB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join(".venv/bin/python"));
-    let probe = Command::new(&python)
-        .args(["-c", "import gymnasium, mujoco"])
-        .output();
-    let problem = match probe {
-        Err(e) => Some(format!("cannot run `{}`: {e}", python.display())),
-        Ok(out) if !out.status.success() => Some(format!(
-            "`{}` cannot import gymnasium and mujoco: {}",
-            python.display(),
-            String::from_utf8_lossy(&out.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-                .trim()
-        )),
-        Ok(_) => None,
-    };
-    if let Some(problem) = problem {
-        if std::env::var("ENVHUB_SKIP_PYTHON_TESTS").as_deref() == Ok("1") {
-            println!("skipped the gymnasium parity test (ENVHUB_SKIP_PYTHON_TESTS=1): {problem}");
-            return None;
-        }
-        panic!(
-            "{problem}\nhint: run `make test` (it creates `.venv` with gymnasium[mujoco]), or \
-             set ENVHUB_PYTHON to a Python with gymnasium 1.4 and mujoco 3.17; \
-             ENVHUB_SKIP_PYTHON_TESTS=1 skips this test"
-        );
-    }
-    let script = root.join("tests/python/mujoco_reference.py");
-    let out = Command::new(&python)
-        .arg(&script)
-        .current_dir(&root)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run `{}`: {e}", script.display()));
-    assert!(
-        out.status.success(),
-        "`{}` failed:\n{}",
-        script.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(serde_json::from_slice(&out.stdout).expect("the reference script prints JSON"))
-}
 
 /// What the runs of one env showed, for the summary.
 #[derive(Default)]
@@ -116,25 +51,22 @@ fn check_obs(obs: &[u8], want: &Value, what: &str) -> f64 {
     let mut worst = 0.0f64;
     for (i, (g, w)) in got.iter().zip(&want).enumerate() {
         assert!(
-            close(*g, *w),
+            close(*g, *w, TOL),
             "{what}: obs[{i}] = {g} != {w}\n got {got:?}\nwant {want:?}"
         );
-        worst = worst.max((g - w).abs() / w.abs().max(1.0));
+        worst = worst.max(scaled_diff(*g, *w));
     }
     worst
 }
 
 #[test]
 fn matches_gymnasium() {
-    let Some(reference) = reference() else {
+    let script = "tests/python/mujoco_reference.py";
+    let needs = "gymnasium 1.4 and mujoco 3.17";
+    let Some(reference) = python_reference(script, &["gymnasium", "mujoco"], needs) else {
         return;
     };
-    let version = reference["gymnasium"].as_str().unwrap_or("?");
-    assert!(
-        version.starts_with("1.4."),
-        "the reference is gymnasium {version}; these envs follow gymnasium 1.4\n\
-         hint: install gymnasium==1.4.* in the Python the test runs"
-    );
+    let version = gymnasium_version(&reference, "1.4");
 
     let adapter = Mujoco::default();
     let mut tallies: BTreeMap<String, Tally> = BTreeMap::new();
@@ -179,11 +111,11 @@ fn matches_gymnasium() {
             let diff = check_obs(&obs, &step["obs"], &at);
             let reward = step["reward"].as_f64().unwrap();
             assert!(
-                close(t.reward, reward),
+                close(t.reward, reward, TOL),
                 "{at}: reward {} != {reward}",
                 t.reward
             );
-            let diff = diff.max((t.reward - reward).abs() / reward.abs().max(1.0));
+            let diff = diff.max(scaled_diff(t.reward, reward));
             tally.inexact += usize::from(diff > 0.0);
             tally.max_diff = tally.max_diff.max(diff);
             assert_eq!(
