@@ -22,3 +22,7 @@ pub const ENVHUB_HUB: &str = "ENVHUB_HUB";
 /// Python interpreter whose packages the adapters use (Gymnasium's MuJoCo assets) and that the
 /// parity tests compare against (default: the project's `.venv/bin/python`).
 pub const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
+
+/// `1` lets the parity tests skip (with a note) when no Python with Gymnasium is available;
+/// otherwise they fail, so a missing set-up cannot pass silently.
+pub const ENVHUB_SKIP_PYTHON_TESTS: &str = "ENVHUB_SKIP_PYTHON_TESTS";
