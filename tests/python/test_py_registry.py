@@ -68,9 +68,13 @@ def test_match_task_to_env():
     assert 0 < found.score <= 1 and "balance" in found.match_reason
     explicit = envhub.match_task_to_env(envhub.TaskSpec("anything", environment_id="gym-pendulum"), reg)
     assert explicit.entry.id == "gym-pendulum" and explicit.score == 1.0
+    # As RoboSmith: no match is `None`; `strict=True` says why.
+    reef = envhub.TaskSpec("a submarine explores a coral reef")
+    assert envhub.match_task_to_env(reef, reg) is None
     with pytest.raises(envhub.NoMatchError) as caught:
-        envhub.match_task_to_env(envhub.TaskSpec("a submarine explores a coral reef"), reg)
+        envhub.match_task_to_env(reef, reg, strict=True)
     assert isinstance(caught.value, LookupError) and "hint:" in str(caught.value)
+    assert envhub.match_task_to_env(envhub.TaskSpec("balance a pole"), reg, framework="isaac_lab").entry.id == "isaac-cartpole"
 
 
 def test_env_config_fields():

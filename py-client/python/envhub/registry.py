@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from . import _envhub
+from .errors import NoMatchError
 
 __all__ = ["EnvEntry", "EnvRegistry", "MatchResult", "TaskSpec", "match_task_to_env"]
 
@@ -169,11 +170,27 @@ class MatchResult:
     alternatives: list[dict[str, Any]] = field(default_factory=list)
 
 
-def match_task_to_env(spec: TaskSpec, registry: EnvRegistry | None = None) -> MatchResult:
-    """The registry entry that best fits `spec`; `NoMatchError` (a `LookupError`) when none
-    does, with what was tried and the robot and environment types that exist."""
+def match_task_to_env(
+    spec: TaskSpec,
+    registry: EnvRegistry | None = None,
+    framework: str | None = None,
+    *,
+    strict: bool = False,
+) -> MatchResult | None:
+    """The registry entry that best fits `spec`, as RoboSmith's function: `None` when no
+    entry fits well enough (so ported code that checks for `None` keeps working). With
+    `strict=True`, raise `NoMatchError` (a `LookupError`) instead, which says what was tried
+    and which robot and environment types exist. `framework` restricts the search."""
     registry = registry if registry is not None else EnvRegistry()
-    found = json.loads(registry._inner.match_task_json(json.dumps(asdict(spec))))
+    query = asdict(spec)
+    if framework is not None:
+        query["framework"] = framework
+    try:
+        found = json.loads(registry._inner.match_task_json(json.dumps(query)))
+    except NoMatchError:
+        if strict:
+            raise
+        return None
     return MatchResult(
         entry=registry.get(found["entry"]["id"]),
         score=float(found["score"]),
