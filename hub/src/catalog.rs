@@ -1,13 +1,26 @@
 //! The adapter catalog: which adapters exist, what they run, whether they can run here.
 //!
-//! The hub links no simulator, so it asks the worker binary (`envhub-worker describe`) once
-//! per process and keeps the answer.
+//! The hub links no simulator, so it asks the worker binary (`envhub-worker describe`) and
+//! the Python worker (`python -m envhub.worker describe`) once per process and keeps the
+//! answer; [`refresh_adapters`] asks again (after a Python adapter is registered).
 
 use crate::error::HubError;
+use crate::python_host;
 use crate::worker_binary::worker_binary;
 use envhub_core::Availability;
 use serde::{Deserialize, Serialize};
-use std::sync::OnceLock;
+use std::sync::Mutex;
+
+/// Which worker process hosts an adapter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Host {
+    /// `envhub-worker` (Rust).
+    #[default]
+    Native,
+    /// `python -m envhub.worker`, in the configured interpreter.
+    Python,
+}
 
 /// What the hub knows about one adapter.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -24,43 +37,114 @@ pub struct AdapterInfo {
     pub availability: Availability,
     /// Env ids it implements natively (empty: it forwards any id to its framework).
     pub envs: Vec<String>,
+    /// The worker process that hosts it.
+    #[serde(default)]
+    pub host: Host,
 }
 
-static CATALOG: OnceLock<Result<Vec<AdapterInfo>, String>> = OnceLock::new();
+type Cached = Result<&'static [AdapterInfo], (String, String)>;
 
-/// Every adapter, asked of the worker binary once per process.
+static CATALOG: Mutex<Option<Cached>> = Mutex::new(None);
+
+/// Forgets the catalog, so the next [`adapters`] call asks the workers again.
+pub fn refresh_adapters() {
+    *CATALOG.lock().unwrap_or_else(|e| e.into_inner()) = None;
+}
+
+/// Every adapter, asked of the worker binary and the Python worker once per process.
 pub fn adapters() -> Result<&'static [AdapterInfo], HubError> {
-    let cached = CATALOG.get_or_init(|| {
-        let path = worker_binary();
-        let out = std::process::Command::new(&path)
-            .arg("describe")
-            .output()
-            .map_err(|e| format!("{}\u{0}{e}", path.display()))?;
-        if !out.status.success() {
-            // Typically the loader failing on a missing library: say which.
-            let stderr = String::from_utf8_lossy(&out.stderr);
-            let last = stderr
-                .lines()
-                .rev()
-                .find(|l| !l.trim().is_empty())
-                .unwrap_or("");
-            return Err(format!(
-                "{}\u{0}`describe` exited with {}: {last}",
-                path.display(),
-                out.status
-            ));
-        }
-        serde_json::from_slice(&out.stdout)
-            .map_err(|e| format!("{}\u{0}unreadable `describe` output: {e}", path.display()))
+    let mut cached = CATALOG.lock().unwrap_or_else(|e| e.into_inner());
+    let result = cached.get_or_insert_with(|| {
+        let mut list = native()?;
+        list.extend(python());
+        // Leaked once per (re)load: the catalog is small and reloaded only on registration.
+        Ok(&*Box::leak(list.into_boxed_slice()))
     });
-    match cached {
+    match result {
         Ok(list) => Ok(list),
-        Err(e) => {
-            let (path, reason) = e.split_once('\u{0}').unwrap_or(("envhub-worker", e));
-            Err(HubError::WorkerBinary {
-                path: path.to_string(),
-                reason: reason.to_string(),
-            })
-        }
+        Err((path, reason)) => Err(HubError::WorkerBinary {
+            path: path.clone(),
+            reason: reason.clone(),
+        }),
     }
+}
+
+fn native() -> Result<Vec<AdapterInfo>, (String, String)> {
+    let path = worker_binary();
+    let shown = path.display().to_string();
+    let out = std::process::Command::new(&path)
+        .arg("describe")
+        .output()
+        .map_err(|e| (shown.clone(), e.to_string()))?;
+    if !out.status.success() {
+        // Typically the loader failing on a missing library: say which.
+        return Err((
+            shown,
+            format!(
+                "`describe` exited with {}: {}",
+                out.status,
+                last_line(&out.stderr)
+            ),
+        ));
+    }
+    serde_json::from_slice(&out.stdout)
+        .map_err(|e| (shown, format!("unreadable `describe` output: {e}")))
+}
+
+fn last_line(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes)
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("")
+        .to_string()
+}
+
+/// The Python-hosted adapters; when the interpreter cannot describe them, the built-in ones
+/// are listed as unavailable with the reason.
+fn python() -> Vec<AdapterInfo> {
+    let python = python_host::python_interpreter();
+    let out = python_host::worker_command().arg("describe").output();
+    let failure = match out {
+        Ok(out) if out.status.success() => {
+            match serde_json::from_slice::<Vec<AdapterInfo>>(&out.stdout) {
+                Ok(mut list) => {
+                    for a in &mut list {
+                        a.host = Host::Python;
+                    }
+                    return list;
+                }
+                Err(e) => format!("unreadable `describe` output: {e}"),
+            }
+        }
+        Ok(out) => format!("exited with {}: {}", out.status, last_line(&out.stderr)),
+        Err(e) => e.to_string(),
+    };
+    tracing::debug!(python = %python.display(), %failure, "no Python-hosted adapters");
+    python_host::BUILTIN
+        .iter()
+        .map(|(name, framework)| AdapterInfo {
+            name: name.to_string(),
+            frameworks: vec![framework.to_string()],
+            requires: vec!["python".into(), "envhub (Python package)".into()],
+            description: format!("{framework} envs hosted in a Python worker"),
+            availability: Availability::Unavailable {
+                reason: format!(
+                    "`{} -m envhub.worker describe` failed: {failure}",
+                    python.display()
+                ),
+                hint: "run `make py-install`, or point ENVHUB_PYTHON (or `python:` in envhub.yaml) at an interpreter with the `envhub` package".into(),
+            },
+            envs: vec![],
+            host: Host::Python,
+        })
+        .collect()
+}
+
+/// How the adapter `name` is hosted (native if unknown).
+pub(crate) fn host_of(name: &str) -> Host {
+    adapters()
+        .ok()
+        .and_then(|list| list.iter().find(|a| a.name == name).map(|a| a.host))
+        .unwrap_or_default()
 }

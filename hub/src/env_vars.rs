@@ -19,10 +19,15 @@ pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
 /// Control socket of a hub daemon (`envhub serve`) to use instead of the embedded hub.
 pub const ENVHUB_HUB: &str = "ENVHUB_HUB";
 
-/// Python interpreter whose packages the adapters use (Gymnasium's MuJoCo assets) and that the
+/// Python interpreter that runs Python-hosted adapters (`python -m envhub.worker`) and whose
+/// packages the adapters use (Gymnasium's MuJoCo assets), and that the
 /// parity tests compare against (default: the project's `.venv/bin/python`).
 pub const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
 
 /// `1` lets the parity tests skip (with a note) when no Python with Gymnasium is available;
 /// otherwise they fail, so a missing set-up cannot pass silently.
 pub const ENVHUB_SKIP_PYTHON_TESTS: &str = "ENVHUB_SKIP_PYTHON_TESTS";
+
+/// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
+/// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
+pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";

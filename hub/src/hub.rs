@@ -66,6 +66,9 @@ impl Hub {
         explicit: &[std::path::PathBuf],
     ) -> Result<Hub, HubError> {
         let registry = settings.registry(explicit)?;
+        if crate::python_host::configure(settings.python.clone(), settings.adapters.clone()) {
+            crate::catalog::refresh_adapters();
+        }
         match std::env::var_os(crate::env_vars::ENVHUB_HUB).filter(|s| !s.is_empty()) {
             Some(socket) => Hub::connect(std::path::Path::new(&socket), registry),
             None => Ok(Hub::new(registry)),

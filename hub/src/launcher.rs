@@ -1,5 +1,6 @@
 //! Starting worker processes: here (the embedded hub) or by the hub daemon on our behalf.
 
+use crate::catalog::Host;
 use crate::daemon_client::DaemonClient;
 use crate::error::HubError;
 use crate::worker_binary::worker_binary;
@@ -90,13 +91,23 @@ impl Launcher {
     }
 }
 
-/// Spawns `envhub-worker serve` for `job` and reads its ready line.
+/// Spawns `envhub-worker serve` (or `python -m envhub.worker serve` for a Python-hosted
+/// adapter) for `job` and reads its ready line.
 pub(crate) fn launch_local(
     job: &WorkerJob,
     start_timeout: Duration,
 ) -> Result<(Child, ReadySpec), HubError> {
-    let path = worker_binary();
-    let mut child = Command::new(&path)
+    let (mut command, path) = match crate::catalog::host_of(&job.adapter) {
+        Host::Native => {
+            let path = worker_binary();
+            (Command::new(&path), path)
+        }
+        Host::Python => (
+            crate::python_host::worker_command(),
+            crate::python_host::python_interpreter(),
+        ),
+    };
+    let mut child = command
         .arg("serve")
         .arg("--job")
         .arg(serde_json::to_string(job).expect("a job serializes"))

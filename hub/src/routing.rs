@@ -145,6 +145,7 @@ mod tests {
                 }
             },
             envs: envs.iter().map(|s| s.to_string()).collect(),
+            host: Default::default(),
         }
     }
 

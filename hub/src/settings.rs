@@ -25,6 +25,12 @@ pub struct Settings {
     /// Registry file(s) replacing the built-in catalog; relative paths are relative to the
     /// config file. List `@default` among them to keep the built-in entries.
     pub env_registry_path: Option<OneOrMany>,
+    /// Interpreter for Python-hosted adapters (`ENVHUB_PYTHON` overrides it); relative paths
+    /// are relative to the config file.
+    pub python: Option<PathBuf>,
+    /// User adapters hosted in Python workers, as import paths (`my_pkg.sim:MySimAdapter`):
+    /// `envhub.EnvAdapter` subclasses; registry entries with their `framework` route to them.
+    pub adapters: Vec<String>,
     /// Where the settings came from, for messages.
     #[serde(skip)]
     pub source: Option<PathBuf>,
@@ -43,7 +49,7 @@ pub enum SettingsError {
         source: std::io::Error,
     },
     /// The file is not valid.
-    #[error("{path}: {message}\nhint: valid fields are `env_registry_path`")]
+    #[error("{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `adapters`")]
     Parse {
         /// The file.
         path: PathBuf,
@@ -79,6 +85,13 @@ impl Settings {
             match p {
                 OneOrMany::One(p) => OneOrMany::One(anchor(p)),
                 OneOrMany::Many(ps) => OneOrMany::Many(ps.into_iter().map(anchor).collect()),
+            }
+        });
+        settings.python = settings.python.map(|p| {
+            if p.components().count() > 1 && p.is_relative() {
+                dir.join(p)
+            } else {
+                p
             }
         });
         settings.source = Some(path.to_path_buf());

@@ -14,6 +14,7 @@ mod convert;
 mod errors;
 mod registry;
 mod session;
+mod worker;
 
 use pyo3::prelude::*;
 use std::path::PathBuf;
@@ -30,6 +31,20 @@ fn set_worker_binary(path: PathBuf) -> bool {
 #[pyfunction]
 fn worker_binary() -> PathBuf {
     envhub::worker_binary()
+}
+
+/// Sets the interpreter Python-hosted adapters run in when neither `ENVHUB_PYTHON` nor the
+/// config names one (the package passes `sys.executable`). The first call wins.
+#[pyfunction]
+fn set_python(path: PathBuf) -> bool {
+    envhub::set_default_python(path)
+}
+
+/// Forgets the adapter catalog, so the next look-up asks the workers again (after a Python
+/// adapter was registered).
+#[pyfunction]
+fn refresh_adapters() {
+    envhub::refresh_adapters()
 }
 
 /// Every adapter with its availability, as JSON.
@@ -61,7 +76,11 @@ fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(set_worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(adapters_json, m)?)?;
+    m.add_function(wrap_pyfunction!(set_python, m)?)?;
+    m.add_function(wrap_pyfunction!(refresh_adapters, m)?)?;
     m.add_function(wrap_pyfunction!(session::make_session, m)?)?;
+    m.add_function(wrap_pyfunction!(worker::serve_worker, m)?)?;
+    m.add_function(wrap_pyfunction!(worker::space_leaves_json, m)?)?;
     m.add_class::<session::Session>()?;
     m.add_class::<session::SampleOwner>()?;
     m.add_class::<registry::PyRegistry>()?;

@@ -247,7 +247,7 @@ struct Made(State);
 // SAFETY: as for `State`: nothing else refers to its iceoryx2 parts.
 unsafe impl Send for Made {}
 
-fn leaves_json(space: &envhub::Space) -> String {
+pub(crate) fn leaves_json(space: &envhub::Space) -> String {
     let leaves: Vec<serde_json::Value> = space
         .leaves()
         .iter()

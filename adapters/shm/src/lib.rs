@@ -14,6 +14,7 @@ mod channel;
 mod job;
 mod layout;
 mod process;
+mod serve;
 mod transport;
 mod wait;
 
@@ -25,6 +26,7 @@ pub use layout::{
     env_flag, status,
 };
 pub use process::{ProcessWatch, die_with_parent, kill};
+pub use serve::serve_batch;
 pub use transport::{ChannelName, MAX_BORROWED_RESPONSES, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
 

@@ -14,11 +14,12 @@ API (`EnvRegistry`, `TaskSpec`, `match_task_to_env`, `EnvConfig`, `make_env`,
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from . import _envhub
 from ._factory import make, make_env, make_vec
-from .adapters import AdapterRegistry
+from .adapters import AdapterRegistry, EnvAdapter
 from .config import EnvConfig
 from .env import Env
 from .errors import (
@@ -51,6 +52,8 @@ MAX_LENT_SAMPLES: int = _envhub.MAX_LENT_SAMPLES
 
 # The worker binary `make py-install` puts beside this package (`ENVHUB_WORKER` overrides it).
 _envhub.set_worker_binary(str(Path(__file__).resolve().parent / "bin" / "envhub-worker"))
+# Python-hosted adapters run in this interpreter unless ENVHUB_PYTHON or the config names one.
+_envhub.set_python(sys.executable)
 
 
 def worker_binary() -> str:
@@ -70,6 +73,7 @@ __all__ = [
     "AdapterUnavailableError",
     "DataPlaneError",
     "Env",
+    "EnvAdapter",
     "EnvConfig",
     "EnvEntry",
     "EnvFailedError",

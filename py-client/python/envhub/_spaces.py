@@ -216,3 +216,43 @@ def _value_bytes(node: Any) -> int:
     """Bytes of one value of a composite: every child is padded to 8 bytes."""
     end = max((leaf.offset + leaf.nbytes for leaf in _leaves(node)), default=0)
     return (end + 7) // 8 * 8
+
+
+def _bound_list(a: np.ndarray) -> list[Any]:
+    out: list[Any] = []
+    for v in np.asarray(a, dtype=np.float64).reshape(-1):
+        out.append("inf" if v == np.inf else "-inf" if v == -np.inf else float(v))
+    return out
+
+
+_DTYPES = {"float32", "float64", "int8", "int32", "int64", "uint8", "bool"}
+
+
+def from_gymnasium(space: spaces.Space[Any]) -> dict[str, Any]:
+    """The JSON description of a `gymnasium.spaces` space (the inverse of `to_gymnasium`)."""
+    if isinstance(space, spaces.Box):
+        dtype = np.dtype(space.dtype).name
+        if dtype not in _DTYPES:
+            raise ValueError(f"Box dtype `{dtype}` is not supported; supported: {', '.join(sorted(_DTYPES))}")
+        return {
+            "type": "box",
+            "dtype": dtype,
+            "shape": list(space.shape),
+            "low": _bound_list(space.low),
+            "high": _bound_list(space.high),
+        }
+    if isinstance(space, spaces.Discrete):
+        return {"type": "discrete", "n": int(space.n), "start": int(space.start)}
+    if isinstance(space, spaces.MultiDiscrete):
+        return {
+            "type": "multi_discrete",
+            "nvec": [int(v) for v in np.asarray(space.nvec).reshape(-1)],
+            "start": [int(v) for v in np.asarray(space.start).reshape(-1)],
+        }
+    if isinstance(space, spaces.MultiBinary):
+        return {"type": "multi_binary", "shape": list(np.atleast_1d(space.n))}
+    if isinstance(space, spaces.Dict):
+        return {"type": "dict", "spaces": [[k, from_gymnasium(s)] for k, s in space.spaces.items()]}
+    if isinstance(space, spaces.Tuple):
+        return {"type": "tuple", "spaces": [from_gymnasium(s) for s in space.spaces]}
+    raise ValueError(f"space {space} is not supported; supported: Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple")

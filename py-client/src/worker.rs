@@ -1,0 +1,243 @@
+//! The Python worker's Rust half: `python -m envhub.worker serve` creates its envs in Python
+//! and hands them to [`serve_worker`], which runs the same serve loop as the Rust worker
+//! binary ([`envhub_shm::serve_batch`]) with each Python env behind the `Env` trait.
+//!
+//! Why a Python process driving the Rust loop rather than CPython embedded in
+//! `envhub-worker`: the worker then runs in the user's own interpreter (the project's `.venv`
+//! or `ENVHUB_PYTHON`), so their installed simulators, `sys.path` and numpy are simply there;
+//! libpython stays out of the Rust worker binary (which keeps building and running where
+//! Python is absent); and the module reused here is the one the client already ships. The
+//! cost is a second entry point (`python -m envhub.worker`) the hub must know how to start.
+//!
+//! Zero copy as far as Python allows: an env's action arrives as a read-only numpy view of
+//! the request sample, and its observation is copied once, by numpy, into the response
+//! sample. The views are valid only during the call (an env that keeps the action array
+//! sees later requests' bytes; envs copy actions into their simulator, so none does).
+
+use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions, Space, Transition};
+use envhub_shm::{EnvBatch, ReadySpec, WorkerJob};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use std::io::Write;
+
+/// One Python env, through the wrapper `envhub.worker.HostedEnv` (methods `reset_into`,
+/// `step_into`, `render_rgb`, `close`).
+struct PyEnv {
+    env: Py<PyAny>,
+    env_id: String,
+    observation_space: Space,
+    action_space: Space,
+}
+
+/// A numpy-ready `memoryview` over `bytes` (writable or not), valid while `bytes` is.
+fn memory_view<'py>(
+    py: Python<'py>,
+    ptr: *const u8,
+    len: usize,
+    writable: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let flags = if writable {
+        pyo3::ffi::PyBUF_WRITE
+    } else {
+        pyo3::ffi::PyBUF_READ
+    };
+    // SAFETY: the memory stays mapped for the whole call that uses the view (it is the
+    // request or response sample being served); see the module docs about keeping it.
+    unsafe {
+        let view = pyo3::ffi::PyMemoryView_FromMemory(
+            ptr as *mut std::ffi::c_char,
+            len as pyo3::ffi::Py_ssize_t,
+            flags,
+        );
+        Bound::from_owned_ptr_or_err(py, view)
+    }
+}
+
+/// The Python traceback of `err`, as Python prints it.
+fn traceback(py: Python<'_>, err: &PyErr) -> String {
+    let formatted = py.import("traceback").and_then(|tb| {
+        tb.call_method1(
+            "format_exception",
+            (err.get_type(py), err.value(py), err.traceback(py)),
+        )?
+        .extract::<Vec<String>>()
+    });
+    match formatted {
+        Ok(lines) => lines.concat().trim_end().to_string(),
+        Err(_) => err.to_string(),
+    }
+}
+
+impl PyEnv {
+    fn failed(&self, py: Python<'_>, what: &str, err: PyErr) -> EnvError {
+        EnvError::Simulator {
+            env_id: self.env_id.clone(),
+            reason: format!(
+                "the Python env raised in `{what}`:\n{}",
+                traceback(py, &err)
+            ),
+        }
+    }
+}
+
+/// Fills `info` from the JSON object text a wrapper returned (`None`: no info). Values that
+/// are not numbers, flags, text or lists of numbers were already dropped in Python.
+fn fill_info(info: &mut Info, json: Option<String>) {
+    let Some(text) = json else { return };
+    if let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&text) {
+        for (key, value) in map {
+            if let Ok(v) = serde_json::from_value::<InfoValue>(value) {
+                info.insert(key, v);
+            }
+        }
+    }
+}
+
+impl Env for PyEnv {
+    fn observation_space(&self) -> &Space {
+        &self.observation_space
+    }
+
+    fn action_space(&self) -> &Space {
+        &self.action_space
+    }
+
+    fn reset(
+        &mut self,
+        seed: Option<u64>,
+        options: &ResetOptions,
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<(), EnvError> {
+        Python::attach(|py| {
+            let mut run = || -> PyResult<Option<String>> {
+                let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
+                let options = (!options.is_empty())
+                    .then(|| serde_json::to_string(options).unwrap_or_default());
+                self.env
+                    .call_method1(py, "reset_into", (seed, options, out))?
+                    .extract(py)
+            };
+            match run() {
+                Ok(json) => {
+                    fill_info(info, json);
+                    Ok(())
+                }
+                Err(e) => Err(self.failed(py, "reset", e)),
+            }
+        })
+    }
+
+    fn step(
+        &mut self,
+        action: &[u8],
+        obs: &mut [u8],
+        info: &mut Info,
+    ) -> Result<Transition, EnvError> {
+        Python::attach(|py| {
+            let mut run = || -> PyResult<(f64, bool, bool, Option<String>)> {
+                let act = memory_view(py, action.as_ptr(), action.len(), false)?;
+                let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
+                self.env
+                    .call_method1(py, "step_into", (act, out))?
+                    .extract(py)
+            };
+            match run() {
+                Ok((reward, terminated, truncated, json)) => {
+                    fill_info(info, json);
+                    Ok(Transition {
+                        reward,
+                        terminated,
+                        truncated,
+                    })
+                }
+                Err(e) => Err(self.failed(py, "step", e)),
+            }
+        })
+    }
+
+    fn render(&mut self) -> Result<Option<(usize, usize, Vec<u8>)>, EnvError> {
+        Python::attach(|py| {
+            let frame: PyResult<Option<(usize, usize, Vec<u8>)>> = self
+                .env
+                .call_method0(py, "render_rgb")
+                .and_then(|f| f.extract(py));
+            frame.map_err(|e| self.failed(py, "render", e))
+        })
+    }
+
+    fn close(&mut self) {
+        Python::attach(|py| {
+            if let Err(e) = self.env.call_method0(py, "close") {
+                tracing::warn!(env_id = %self.env_id, "close raised: {}", traceback(py, &e));
+            }
+        });
+    }
+}
+
+fn parse_space(what: &str, json: &str) -> PyResult<Space> {
+    serde_json::from_str(json)
+        .map_err(|e| PyValueError::new_err(format!("invalid {what} space `{json}`: {e}")))
+}
+
+/// Serves `envs` (wrappers made by `envhub.worker`) for the job `job_json` until the client
+/// closes the session or exits: prints the ready line on the file descriptor `reply_fd`,
+/// then answers requests. `max_episode_steps` is the limit the envs apply themselves
+/// (reported to the client). Releases the GIL while waiting for requests.
+#[pyfunction]
+#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, envs, reply_fd))]
+pub(crate) fn serve_worker(
+    py: Python<'_>,
+    job_json: &str,
+    observation_space: &str,
+    action_space: &str,
+    max_episode_steps: Option<u32>,
+    envs: Vec<Py<PyAny>>,
+    reply_fd: i32,
+) -> PyResult<()> {
+    let job: WorkerJob = serde_json::from_str(job_json)
+        .map_err(|e| PyValueError::new_err(format!("invalid job: {e}")))?;
+    let observation_space = parse_space("observation", observation_space)?;
+    let action_space = parse_space("action", action_space)?;
+    let batch: Vec<Box<dyn Env>> = envs
+        .into_iter()
+        .map(|env| {
+            Box::new(PyEnv {
+                env,
+                env_id: job.env_id.clone(),
+                observation_space: observation_space.clone(),
+                action_space: action_space.clone(),
+            }) as Box<dyn Env>
+        })
+        .collect();
+    let mode: AutoresetMode = job.config.autoreset_mode;
+    let ready = ReadySpec {
+        observation_space,
+        action_space,
+        max_episode_steps,
+        pid: std::process::id(),
+    };
+    // SAFETY: the caller passes a descriptor it owns and keeps open (a dup of stdout).
+    let fd = unsafe { std::os::fd::BorrowedFd::borrow_raw(reply_fd) };
+    let mut out = std::fs::File::from(
+        fd.try_clone_to_owned()
+            .map_err(|e| PyRuntimeError::new_err(format!("bad reply descriptor: {e}")))?,
+    );
+    let span = tracing::info_span!("worker", adapter = %job.adapter, env_id = %job.env_id, pid = std::process::id());
+    py.detach(|| {
+        let _guard = span.enter();
+        envhub_shm::serve_batch(&job, EnvBatch::new(batch, mode), ready, |line| {
+            let text = serde_json::to_string(line).map_err(std::io::Error::other)?;
+            out.write_all(text.as_bytes())?;
+            out.write_all(b"\n")?;
+            out.flush()
+        })
+    })
+    .map_err(|e| PyRuntimeError::new_err(format!("worker data plane failed: {e}")))
+}
+
+/// The layout of a space's leaves (`[{path, offset, dtype, shape, bytes}]`) from its JSON.
+#[pyfunction]
+pub(crate) fn space_leaves_json(space: &str) -> PyResult<String> {
+    Ok(crate::session::leaves_json(&parse_space("the", space)?))
+}

@@ -1,0 +1,61 @@
+"""User adapters for the Python-hosted adapter tests (importable by the worker processes)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import envhub
+
+#: What the last `make` received, per process (the test reads it back through `info`).
+RECEIVED: dict[str, Any] = {}
+
+
+class EchoEnv(gym.Env):
+    """Observation: a counter and the last action; reports its config in the reset info."""
+
+    def __init__(self, config: Any) -> None:
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self.config = config
+        self.t = 0
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        super().reset(seed=seed)
+        self.t = 0
+        c = self.config
+        info = {
+            "seed": -1 if c.seed is None else c.seed,
+            "render_mode": str(c.render_mode),
+            "max_episode_steps": -1 if c.max_episode_steps is None else c.max_episode_steps,
+            "num_envs": c.num_envs,
+            "asset_path": str(c.asset_path),
+            "extra": repr(sorted(c.extra.items())),
+        }
+        return np.zeros(2, np.float32), info
+
+    def step(self, action: Any) -> Any:
+        self.t += 1
+        if float(action[0]) > 0.99:
+            raise ValueError("boom: action above 0.99")
+        return np.array([self.t, float(action[0])], np.float32), 1.0, False, False, {}
+
+
+class MySimAdapter(envhub.EnvAdapter):
+    name = "mysim"
+    frameworks = ["mysim"]
+    requires = ["numpy"]
+    description = "a test simulator"
+
+    def make(self, env_id: str, config: Any) -> Any:
+        return EchoEnv(config)
+
+
+class MissingDepAdapter(envhub.EnvAdapter):
+    name = "needs_missing"
+    frameworks = ["needs_missing"]
+    requires = ["envhub_no_such_module_xyz"]
+    description = "depends on a module that is not installed"
+    install_hint = "pip install envhub-no-such-module-xyz"
