@@ -45,6 +45,7 @@ pub struct AdapterInfo {
 type Cached = Result<&'static [AdapterInfo], (String, String)>;
 
 static CATALOG: Mutex<Option<Cached>> = Mutex::new(None);
+static NATIVE: Mutex<Option<Cached>> = Mutex::new(None);
 
 /// Forgets the catalog, so the next [`adapters`] call asks the workers again.
 pub fn refresh_adapters() {
@@ -55,11 +56,28 @@ pub fn refresh_adapters() {
 pub fn adapters() -> Result<&'static [AdapterInfo], HubError> {
     let mut cached = CATALOG.lock().unwrap_or_else(|e| e.into_inner());
     let result = cached.get_or_insert_with(|| {
-        let mut list = native()?;
+        let mut list = native_cached()?.to_vec();
         list.extend(python());
         // Leaked once per (re)load: the catalog is small and reloaded only on registration.
         Ok(&*Box::leak(list.into_boxed_slice()))
     });
+    unpack(result)
+}
+
+/// The adapters of the Rust worker only: a few milliseconds to ask, where starting Python
+/// to ask it takes a few hundred, so sessions of native envs never wait for Python.
+pub fn native_adapters() -> Result<&'static [AdapterInfo], HubError> {
+    unpack(&native_cached())
+}
+
+fn native_cached() -> Cached {
+    let mut cached = NATIVE.lock().unwrap_or_else(|e| e.into_inner());
+    cached
+        .get_or_insert_with(|| Ok(&*Box::leak(native()?.into_boxed_slice())))
+        .clone()
+}
+
+fn unpack(result: &Cached) -> Result<&'static [AdapterInfo], HubError> {
     match result {
         Ok(list) => Ok(list),
         Err((path, reason)) => Err(HubError::WorkerBinary {
@@ -143,8 +161,10 @@ fn python() -> Vec<AdapterInfo> {
 
 /// How the adapter `name` is hosted (native if unknown).
 pub(crate) fn host_of(name: &str) -> Host {
-    adapters()
+    let find = |list: &[AdapterInfo]| list.iter().find(|a| a.name == name).map(|a| a.host);
+    native_adapters()
         .ok()
-        .and_then(|list| list.iter().find(|a| a.name == name).map(|a| a.host))
+        .and_then(find)
+        .or_else(|| adapters().ok().and_then(find))
         .unwrap_or_default()
 }

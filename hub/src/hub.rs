@@ -105,6 +105,10 @@ impl Hub {
             return d.route(id, config);
         }
         let entry = self.registry.get(id)?;
+        // Native adapters first: when one runs the entry, Python is never started to ask.
+        if let Ok(found) = route(entry, catalog::native_adapters()?, config) {
+            return Ok(found);
+        }
         route(entry, catalog::adapters()?, config)
     }
 
