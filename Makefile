@@ -69,6 +69,7 @@ demo: build py-install
 	./target/release/envhub match "balance a pole on a cart"
 	./target/release/envhub run gym-cartpole --num-envs 64 --steps 1000000
 	./target/release/envhub run gym-pendulum --num-envs 8 --steps 200000
+	./target/release/envhub run mujoco-ant --num-envs 8 --workers 1 --steps 40000
 	$(VPY) py-client/examples/rollout.py
 
 lint: setup
