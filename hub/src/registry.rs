@@ -2,7 +2,7 @@
 
 use crate::entry::EnvEntry;
 use crate::tags::{stem, stems_match, tag_stems};
-use envhub_core::canonical_framework;
+use envhub_core::{canonical_framework, did_you_mean};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -76,19 +76,6 @@ pub enum RegistryError {
         /// The closest ids that exist.
         closest: Vec<String>,
     },
-}
-
-fn did_you_mean(closest: &[String]) -> String {
-    match closest {
-        [] => String::new(),
-        ids => format!(
-            "; did you mean {}?",
-            ids.iter()
-                .map(|c| format!("`{c}`"))
-                .collect::<Vec<_>>()
-                .join(" or ")
-        ),
-    }
 }
 
 #[derive(Deserialize)]
@@ -395,10 +382,11 @@ fn parse(text: &str, name: &str) -> Result<Vec<EnvEntry>, RegistryError> {
 }
 
 fn validate(entry: &EnvEntry, index: usize, text: &str, name: &str) -> Result<(), RegistryError> {
-    let line = id_lines(text, &entry.id).first().copied().unwrap_or(0);
+    // The line is looked up only for an error: scanning the text for every valid entry
+    // would make each load quadratic in the file's length.
     let invalid = |field: &'static str, message: String| RegistryError::Invalid {
         path: name.to_string(),
-        line,
+        line: id_lines(text, &entry.id).first().copied().unwrap_or(0),
         index,
         field,
         message,

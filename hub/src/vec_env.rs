@@ -41,6 +41,19 @@ impl Default for SessionOptions {
     }
 }
 
+impl SessionOptions {
+    /// How the client waits for its workers. Spinning yields the core on every round, so it
+    /// costs nothing when another process needs the core, and saves a wake-up (tens of µs on
+    /// a VM) when the answer is close; the 5 ms tick bounds how late a dead worker is seen.
+    fn wait_policy(&self) -> WaitPolicy {
+        WaitPolicy {
+            spin: self.spin,
+            max_spin: self.max_spin,
+            tick: Duration::from_millis(5),
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Phase {
     Created,
@@ -177,6 +190,8 @@ pub struct VecEnv {
     observation_space: Space,
     action_space: Space,
     num_envs: usize,
+    /// `0..num_envs`, for validating a full batch without allocating.
+    all_env_ids: Vec<usize>,
     phase: Phase,
     gathered: Gathered,
     /// Whether the last results are viewed straight in the one worker's sample.
@@ -222,14 +237,8 @@ impl VecEnv {
             });
         }
         let session = session_name();
-        // Spinning yields the core on every round, so it costs nothing when another process
-        // needs the core, and saves a wake-up (tens of µs on a VM) when the answer is close.
-        let spin = options.spin;
-        let policy = WaitPolicy {
-            spin,
-            max_spin: options.max_spin,
-            tick: Duration::from_millis(5),
-        };
+        let policy = options.wait_policy();
+        let spin = policy.spin;
         let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
             .into_iter()
             .map(|(env_offset, count)| {
@@ -287,6 +296,7 @@ impl VecEnv {
             observation_space,
             action_space,
             num_envs,
+            all_env_ids: (0..num_envs).collect(),
             phase: Phase::Created,
             gathered: Gathered::default(),
             direct: false,
@@ -405,31 +415,6 @@ impl VecEnv {
     }
 
     /// Validates a batch of actions (`n` actions back to back) against the action space.
-    fn validate_actions(&self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
-        let ab = self.action_space.byte_len();
-        if actions.len() != env_ids.len() * ab {
-            return Err(HubError::InvalidAction {
-                reason: format!(
-                    "got {} bytes of actions for {} envs; each action of {} is {} bytes",
-                    actions.len(),
-                    env_ids.len(),
-                    self.action_space,
-                    ab
-                ),
-                hint: format!("pass an array of shape {}", self.batch_shape(env_ids.len())),
-            });
-        }
-        for (k, &env) in env_ids.iter().enumerate() {
-            self.action_space
-                .validate(&actions[k * ab..(k + 1) * ab])
-                .map_err(|e| HubError::InvalidAction {
-                    reason: format!("env {env}: {e}"),
-                    hint: format!("actions must lie in {}", self.action_space),
-                })?;
-        }
-        Ok(())
-    }
-
     fn batch_shape(&self, n: usize) -> String {
         let mut shape = vec![n];
         shape.extend(self.action_space.shape().unwrap_or_default());
@@ -458,7 +443,7 @@ impl VecEnv {
     /// Steps every env with `actions` (one per env, back to back in the action space's layout).
     pub fn step(&mut self, actions: &[u8]) -> Result<Batch<'_>, HubError> {
         self.check_steppable()?;
-        self.validate_all(actions)?;
+        self.validate_actions(actions, &self.all_env_ids)?;
         let ab = self.action_space.byte_len();
         for w in &mut self.workers {
             let (lo, n) = (w.job.env_offset, w.job.num_envs);
@@ -483,22 +468,24 @@ impl VecEnv {
         Ok(())
     }
 
-    fn validate_all(&self, actions: &[u8]) -> Result<(), HubError> {
+    /// Checks `env_ids.len()` actions back to back against the action space; an error names
+    /// the env (by its id) and the valid range or shape.
+    fn validate_actions(&self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
         self.action_space
-            .validate_batch(actions, self.num_envs)
-            .map_err(|(env, e)| match e {
+            .validate_batch(actions, env_ids.len())
+            .map_err(|(k, e)| match e {
                 envhub_core::SpaceError::Length { .. } => HubError::InvalidAction {
                     reason: format!(
                         "got {} bytes of actions for {} envs; each action of {} is {} bytes",
                         actions.len(),
-                        self.num_envs,
+                        env_ids.len(),
                         self.action_space,
                         self.action_space.byte_len()
                     ),
-                    hint: format!("pass an array of shape {}", self.batch_shape(self.num_envs)),
+                    hint: format!("pass an array of shape {}", self.batch_shape(env_ids.len())),
                 },
                 e => HubError::InvalidAction {
-                    reason: format!("env {env}: {e}"),
+                    reason: format!("env {}: {e}", env_ids[k]),
                     hint: format!("actions must lie in {}", self.action_space),
                 },
             })
@@ -617,11 +604,7 @@ impl VecEnv {
             return Err(err);
         }
         tracing::warn!(worker = i, error = %err, "restarting worker");
-        let policy = WaitPolicy {
-            spin: self.options.spin,
-            max_spin: self.options.max_spin,
-            tick: Duration::from_millis(5),
-        };
+        let policy = self.options.wait_policy();
         self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
         let n = self.workers[i].job.num_envs;
         let seeds = vec![None; n];

@@ -83,7 +83,8 @@ pub enum EnvError {
     },
 }
 
-pub(crate) fn did_you_mean(closest: &[String]) -> String {
+/// `; did you mean `a` or `b`?` for a list of suggestions, or nothing when there are none.
+pub fn did_you_mean(closest: &[String]) -> String {
     if closest.is_empty() {
         String::new()
     } else {

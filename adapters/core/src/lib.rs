@@ -23,7 +23,7 @@ mod time_limit;
 pub use adapter::{Availability, EnvAdapter, EnvSpec};
 pub use config::{AutoresetMode, EnvConfig, ExtraKeys};
 pub use env::{Env, Info, InfoValue, ResetOptions, Transition};
-pub use error::EnvError;
+pub use error::{EnvError, did_you_mean};
 pub use framework::{FRAMEWORKS, Framework, canonical_framework};
 pub use numpy_rng::NumpyRng;
 pub use space::{DType, Space, SpaceError};
