@@ -21,12 +21,6 @@ def _runnable_or_skip(entry_id: str):
         return envhub.make(entry_id)
     except (envhub.AdapterUnavailableError, envhub.NoAdapterError) as exc:
         pytest.skip(f"`{entry_id}` cannot run here: {str(exc).splitlines()[0]}")
-    except envhub.MakeError as exc:
-        # gymnasium-robotics (Fetch, Shadow hand, kitchen) against the pinned mujoco: the
-        # adapter names the incompatibility; anything else is a real failure.
-        if "known incompatibility" not in str(exc):
-            raise
-        pytest.skip(f"`{entry_id}`: {str(exc).splitlines()[0]}")
 
 
 @pytest.mark.parametrize("entry_id", REGISTRY.list_ids())

@@ -10,6 +10,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import gymnasium
 import numpy as np
 import pytest
 
@@ -168,20 +169,43 @@ def test_gymnasium_robotics_dict_observations(registry):
         env.close()
 
 
-def test_fetch_works_or_fails_clearly(registry):
-    """Fetch with mujoco 3.17 fails inside gymnasium-robotics 1.4.2; the error must say so."""
+def test_fetch_matches_gymnasium_robotics_in_process(registry):
+    """Fetch (gymnasium-robotics 1.4.2 under mujoco 3.17, with `robotics_compat`): the same
+    seed and actions give the same Dict observations and rewards as the env made here."""
     pytest.importorskip("gymnasium_robotics")
+    import gymnasium_robotics
+    from envhub.hosted import robotics_compat
+
+    gymnasium.register_envs(gymnasium_robotics)
+    robotics_compat.apply()
+    ours, ref = envhub.make("fetch-reach", registry=registry), gymnasium.make("FetchReach-v4")
     try:
-        env = envhub.make("fetch-reach", registry=registry)
-    except envhub.EnvHubError as e:
-        text = str(e)
-        assert "FetchReach-v4" in text and "Traceback" in text, text
-        return
-    try:
-        obs, _ = env.reset(seed=0)
-        assert "desired_goal" in obs
+        ref.action_space.seed(2)
+        o1, _ = ours.reset(seed=0)
+        o2, _ = ref.reset(seed=0)
+        for step in range(60):
+            for key in ("observation", "achieved_goal", "desired_goal"):
+                np.testing.assert_array_equal(o1[key], o2[key], err_msg=f"{key} at step {step}")
+            a = ref.action_space.sample()
+            (o1, r1, t1, u1, _), (o2, r2, t2, u2, _) = ours.step(a), ref.step(a)
+            assert (r1, t1, u1) == (r2, t2, u2)
     finally:
-        env.close()
+        ours.close()
+        ref.close()
+
+
+def test_robotics_compat_is_scoped_and_idempotent():
+    """The fix touches only gymnasium-robotics' `mujoco_utils`, and only where needed."""
+    pytest.importorskip("gymnasium_robotics")
+    import mujoco
+    from envhub.hosted import robotics_compat
+    from gymnasium_robotics.utils import mujoco_utils
+
+    needed = robotics_compat.apply()
+    assert robotics_compat.apply() == needed
+    hinge = np.int32(int(mujoco.mjtJoint.mjJNT_HINGE))
+    assert hinge in (mujoco_utils.mujoco.mjtJoint.mjJNT_HINGE, mujoco_utils.mujoco.mjtJoint.mjJNT_SLIDE)
+    assert mujoco_utils.mujoco.mj_name2id is mujoco.mj_name2id
 
 
 @pytest.mark.parametrize(

@@ -35,33 +35,16 @@ class GymnasiumAdapter(EnvAdapter):
                 + (f"; did you mean {' or '.join(f'`{c}`' for c in close)}?" if close else "")
                 + "\nhint: `python -c 'import gymnasium; gymnasium.pprint_registry()'` lists the ids"
             )
+        if _from_robotics(gym.registry[env_id]):
+            from . import robotics_compat
+
+            robotics_compat.apply()
         kwargs = dict(config.extra)
         limit = config.max_episode_steps or None  # 0 and None both mean the env's default
-        try:
-            return gym.make(env_id, render_mode=config.render_mode, max_episode_steps=limit, **kwargs)
-        except AssertionError as e:
-            raise _robotics_mujoco_mismatch(env_id, e) or e
+        return gym.make(env_id, render_mode=config.render_mode, max_episode_steps=limit, **kwargs)
 
 
-KNOWN_INCOMPATIBILITY = "known incompatibility"
-
-
-def _robotics_mujoco_mismatch(env_id: str, error: AssertionError) -> Exception | None:
-    """The clear error for gymnasium-robotics' joint-type assertion failing under the
-    `mujoco` package pinned here (Fetch, Shadow hand, Franka kitchen), else None."""
-    import traceback
-    from importlib.metadata import PackageNotFoundError, version
-
-    frames = traceback.extract_tb(error.__traceback__)
-    if not any(f.filename.endswith("gymnasium_robotics/utils/mujoco_utils.py") for f in frames):
-        return None
-    try:
-        versions = f"gymnasium-robotics {version('gymnasium-robotics')} with mujoco {version('mujoco')}"
-    except PackageNotFoundError:
-        versions = "this gymnasium-robotics with this mujoco"
-    return RuntimeError(
-        f"`{env_id}` cannot be built by {versions}: the joint-type assertion in "
-        f"`gymnasium_robotics/utils/mujoco_utils.py` fails ({KNOWN_INCOMPATIBILITY}; Adroit, "
-        "PointMaze and AntMaze work)\nhint: a `mujoco` Python package newer than the libmujoco "
-        "3.17 the native adapter links is needed; not available in this set-up yet"
-    )
+def _from_robotics(spec: Any) -> bool:
+    entry = spec.entry_point
+    module = entry if isinstance(entry, str) else getattr(entry, "__module__", "")
+    return module.startswith("gymnasium_robotics")
