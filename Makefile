@@ -79,13 +79,13 @@ lint: setup
 fmt:
 	$(CARGO) fmt --all
 
-rust-test: setup
+rust-test: setup py-install
 	# End-to-end tests start the real binaries: build them first.
 	$(CARGO) build --workspace --bins $(FEATURES)
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		$(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 $(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		$(CARGO) test --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 $(CARGO) test --workspace $(FEATURES); \
 	fi
 	$(CARGO) test --workspace --doc $(FEATURES)
 

@@ -2,14 +2,15 @@
 //!
 //! The hub links no simulator, so it asks the worker binary (`envhub-worker describe`) and
 //! the Python worker (`python -m envhub.worker describe`) once per process and keeps the
-//! answer; [`refresh_adapters`] asks again (after a Python adapter is registered).
+//! answer; [`refresh_adapters`] asks again (after a Python adapter is registered). A hub
+//! daemon also describes each client's own user adapters, once per distinct set.
 
 use crate::error::HubError;
-use crate::python_host;
+use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
 use envhub_core::Availability;
 use serde::{Deserialize, Serialize};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 /// Which worker process hosts an adapter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -47,9 +48,15 @@ type Cached = Result<&'static [AdapterInfo], (String, String)>;
 static CATALOG: Mutex<Option<Cached>> = Mutex::new(None);
 static NATIVE: Mutex<Option<Cached>> = Mutex::new(None);
 
+/// Catalogs with a client's user adapters, most recent last. Bounded, so a daemon that
+/// serves many distinct sets asks again rather than growing.
+static WITH_USER: Mutex<Vec<(UserAdapters, Arc<[AdapterInfo]>)>> = Mutex::new(Vec::new());
+const WITH_USER_CAPACITY: usize = 16;
+
 /// Forgets the catalog, so the next [`adapters`] call asks the workers again.
 pub fn refresh_adapters() {
     *CATALOG.lock().unwrap_or_else(|e| e.into_inner()) = None;
+    WITH_USER.lock().unwrap_or_else(|e| e.into_inner()).clear();
 }
 
 /// Every adapter, asked of the worker binary and the Python worker once per process.
@@ -57,11 +64,31 @@ pub fn adapters() -> Result<&'static [AdapterInfo], HubError> {
     let mut cached = CATALOG.lock().unwrap_or_else(|e| e.into_inner());
     let result = cached.get_or_insert_with(|| {
         let mut list = native_cached()?.to_vec();
-        list.extend(python());
+        list.extend(python(&UserAdapters::default()));
         // Leaked once per (re)load: the catalog is small and reloaded only on registration.
         Ok(&*Box::leak(list.into_boxed_slice()))
     });
     unpack(result)
+}
+
+/// Every adapter, with `user`'s adapters hosted beside this process's own (the catalog of
+/// [`adapters`] when `user` is empty).
+pub(crate) fn adapters_with(user: &UserAdapters) -> Result<Arc<[AdapterInfo]>, HubError> {
+    if user.is_empty() {
+        return Ok(adapters()?.into());
+    }
+    let mut cached = WITH_USER.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, list)) = cached.iter().find(|(key, _)| key == user) {
+        return Ok(list.clone());
+    }
+    let mut list = native_adapters()?.to_vec();
+    list.extend(python(user));
+    let list: Arc<[AdapterInfo]> = list.into();
+    if cached.len() == WITH_USER_CAPACITY {
+        cached.remove(0);
+    }
+    cached.push((user.clone(), list.clone()));
+    Ok(list)
 }
 
 /// The adapters of the Rust worker only: a few milliseconds to ask, where starting Python
@@ -118,11 +145,11 @@ fn last_line(bytes: &[u8]) -> String {
         .to_string()
 }
 
-/// The Python-hosted adapters; when the interpreter cannot describe them, the built-in ones
-/// are listed as unavailable with the reason.
-fn python() -> Vec<AdapterInfo> {
+/// The Python-hosted adapters (with `user`'s); when the interpreter cannot describe them,
+/// the built-in ones are listed as unavailable with the reason.
+fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
     let python = python_host::python_interpreter();
-    let out = python_host::worker_command().arg("describe").output();
+    let out = python_host::worker_command(user).arg("describe").output();
     let failure = match out {
         Ok(out) if out.status.success() => {
             match serde_json::from_slice::<Vec<AdapterInfo>>(&out.stdout) {
@@ -159,12 +186,13 @@ fn python() -> Vec<AdapterInfo> {
         .collect()
 }
 
-/// How the adapter `name` is hosted (native if unknown).
-pub(crate) fn host_of(name: &str) -> Host {
+/// How the adapter `name` is hosted, among this process's adapters and `user`'s (native if
+/// unknown).
+pub(crate) fn host_of(name: &str, user: &UserAdapters) -> Host {
     let find = |list: &[AdapterInfo]| list.iter().find(|a| a.name == name).map(|a| a.host);
     native_adapters()
         .ok()
         .and_then(find)
-        .or_else(|| adapters().ok().and_then(find))
+        .or_else(|| adapters_with(user).ok().and_then(|list| find(&list)))
         .unwrap_or_default()
 }

@@ -4,10 +4,16 @@
 //! directly over shared memory; the daemon is never on the per-step path. Each client
 //! connection owns the workers started through it, and closing it (the client exits or
 //! crashes) stops them. A client that crashes does not disturb the daemon or other clients.
+//!
+//! Workers start from the daemon's environment, so a client's own user adapters (its
+//! `ENVHUB_ADAPTERS`, set by `AdapterRegistry().register`) travel with its `adapters`, `route`
+//! and `launch` requests as `user_adapters` (absent: none); the daemon routes and starts
+//! Python workers with them beside its own.
 
 use crate::error::HubError;
 use crate::hub::Hub;
 use crate::launcher::launch_local;
+use crate::python_host::UserAdapters;
 use envhub_core::EnvConfig;
 use envhub_shm::WorkerJob;
 use serde_json::{Value, json};
@@ -107,7 +113,9 @@ impl Connection {
         match request["op"].as_str().unwrap_or_default() {
             "ping" => Ok(json!("pong")),
             "adapters" => {
-                Ok(serde_json::to_value(self.hub.adapters()?).expect("adapters serialize"))
+                let user = user_adapters(request)?;
+                Ok(serde_json::to_value(self.hub.adapters_with(&user)?)
+                    .expect("adapters serialize"))
             }
             "status" => Ok(json!({"workers": self.workers.load(Ordering::Relaxed)})),
             "route" => {
@@ -119,14 +127,18 @@ impl Connection {
                             reason: e.to_string(),
                         }
                     })?;
-                Ok(serde_json::to_value(self.hub.route(id, &config)?).expect("routes serialize"))
+                let user = user_adapters(request)?;
+                Ok(
+                    serde_json::to_value(self.hub.route_with(id, &config, &user)?)
+                        .expect("routes serialize"),
+                )
             }
             "launch" => {
                 let job: WorkerJob =
                     serde_json::from_value(request["job"].clone()).map_err(|_| bad("job"))?;
                 let timeout =
                     Duration::from_millis(request["start_timeout_ms"].as_u64().unwrap_or(60_000));
-                let (child, spec) = launch_local(&job, timeout)?;
+                let (child, spec) = launch_local(&job, &user_adapters(request)?, timeout)?;
                 self.children.insert(child.id(), child);
                 self.workers.fetch_add(1, Ordering::Relaxed);
                 Ok(serde_json::to_value(spec).expect("specs serialize"))
@@ -152,6 +164,31 @@ impl Connection {
             }),
         }
     }
+}
+
+/// The client's user adapters of a request (none when the field is absent, as from a client
+/// that predates it). Folders must be absolute: the daemon's working directory is not the
+/// client's.
+fn user_adapters(request: &Value) -> Result<UserAdapters, HubError> {
+    let invalid = |reason: String| HubError::InvalidConfig {
+        what: "daemon request",
+        reason: format!("invalid `user_adapters`: {reason}"),
+    };
+    let user: UserAdapters = match request.get("user_adapters") {
+        None | Some(Value::Null) => return Ok(UserAdapters::default()),
+        Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
+            invalid(format!(
+                "{e}; expected {{\"adapters\": [\"module:Class\"], \"pythonpath\": [\"/abs/dir\"]}}"
+            ))
+        })?,
+    };
+    if let Some(relative) = user.pythonpath.iter().find(|p| p.is_relative()) {
+        return Err(invalid(format!(
+            "`pythonpath` entry `{}` is relative; send absolute folders",
+            relative.display()
+        )));
+    }
+    Ok(user)
 }
 
 impl Drop for Connection {

@@ -1,10 +1,13 @@
 //! The client side of the hub daemon's control socket: JSON lines over a Unix socket.
 //!
 //! The connection lives as long as the sessions started through it: when it closes (the
-//! client exits or crashes), the daemon stops that client's workers.
+//! client exits or crashes), the daemon stops that client's workers. Requests that depend on
+//! the adapters carry this process's user adapters (see `UserAdapters`), read at each call so
+//! an adapter registered since is included.
 
 use crate::catalog::AdapterInfo;
 use crate::error::HubError;
+use crate::python_host::UserAdapters;
 use crate::routing::Route;
 use envhub_core::EnvConfig;
 use envhub_shm::{ReadySpec, WorkerJob};
@@ -55,6 +58,16 @@ impl DaemonClient {
         }
     }
 
+    /// Adds this process's user adapters to `request`, when it has any (an older daemon
+    /// ignores the field).
+    fn with_user_adapters(mut request: Value) -> Value {
+        let user = UserAdapters::of_this_process();
+        if !user.is_empty() {
+            request["user_adapters"] = serde_json::to_value(user).expect("paths serialize");
+        }
+        request
+    }
+
     /// Sends one request and reads its reply: `{"ok": ...}` or `{"err": "..."}`.
     fn call(&self, request: Value) -> Result<Value, HubError> {
         let mut conn = self
@@ -90,7 +103,11 @@ impl DaemonClient {
         job: &WorkerJob,
         start_timeout: Duration,
     ) -> Result<ReadySpec, HubError> {
-        let ok = self.call(json!({"op": "launch", "job": job, "start_timeout_ms": start_timeout.as_millis() as u64}))?;
+        let ok = self.call(Self::with_user_adapters(json!({
+            "op": "launch",
+            "job": job,
+            "start_timeout_ms": start_timeout.as_millis() as u64,
+        })))?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable ready spec: {e}")))
     }
 
@@ -102,13 +119,15 @@ impl DaemonClient {
 
     /// Routes a registry id with the daemon's registry and adapters.
     pub(crate) fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
-        let ok = self.call(json!({"op": "route", "id": id, "config": config}))?;
+        let ok = self.call(Self::with_user_adapters(
+            json!({"op": "route", "id": id, "config": config}),
+        ))?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable route: {e}")))
     }
 
     /// The daemon's adapters.
     pub fn adapters(&self) -> Result<Vec<AdapterInfo>, HubError> {
-        let ok = self.call(json!({"op": "adapters"}))?;
+        let ok = self.call(Self::with_user_adapters(json!({"op": "adapters"})))?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable adapters: {e}")))
     }
 

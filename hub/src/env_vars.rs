@@ -28,6 +28,10 @@ pub const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
 /// otherwise they fail, so a missing set-up cannot pass silently.
 pub const ENVHUB_SKIP_PYTHON_TESTS: &str = "ENVHUB_SKIP_PYTHON_TESTS";
 
+/// Set (non-empty) to make tests that need the compiled Python package (`make py-install`)
+/// fail instead of skipping when it is missing; `make rust-test` and `make py-test` set it.
+pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
+
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
 /// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
 pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";

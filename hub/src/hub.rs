@@ -8,6 +8,7 @@ use crate::daemon_client::DaemonClient;
 use crate::env::Env;
 use crate::error::HubError;
 use crate::launcher::Launcher;
+use crate::python_host::UserAdapters;
 use crate::registry::Registry;
 use crate::routing::{Route, route};
 use crate::settings::Settings;
@@ -99,17 +100,32 @@ impl Hub {
         }
     }
 
+    /// Every adapter, with `user`'s beside this hub's own (a daemon answering a client).
+    pub(crate) fn adapters_with(&self, user: &UserAdapters) -> Result<Vec<AdapterInfo>, HubError> {
+        Ok(catalog::adapters_with(user)?.to_vec())
+    }
+
     /// The adapter and config that would run `id` with `config`.
     pub fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
         if let Launcher::Daemon(d) = &self.launcher {
             return d.route(id, config);
         }
+        self.route_with(id, config, &UserAdapters::default())
+    }
+
+    /// [`Hub::route`] here, with `user`'s adapters beside this hub's own.
+    pub(crate) fn route_with(
+        &self,
+        id: &str,
+        config: &EnvConfig,
+        user: &UserAdapters,
+    ) -> Result<Route, HubError> {
         let entry = self.registry.get(id)?;
         // Native adapters first: when one runs the entry, Python is never started to ask.
         if let Ok(found) = route(entry, catalog::native_adapters()?, config) {
             return Ok(found);
         }
-        route(entry, catalog::adapters()?, config)
+        route(entry, &catalog::adapters_with(user)?, config)
     }
 
     /// A batch of `num_envs` envs of registry entry `id`.

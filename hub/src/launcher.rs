@@ -3,6 +3,7 @@
 use crate::catalog::Host;
 use crate::daemon_client::DaemonClient;
 use crate::error::HubError;
+use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
 use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
@@ -74,7 +75,7 @@ impl Launcher {
     ) -> Result<(WorkerProcess, ReadySpec), HubError> {
         match self {
             Launcher::Local => {
-                let (child, spec) = launch_local(job, start_timeout)?;
+                let (child, spec) = launch_local(job, &UserAdapters::default(), start_timeout)?;
                 Ok((WorkerProcess::Local(child), spec))
             }
             Launcher::Daemon(daemon) => {
@@ -92,18 +93,19 @@ impl Launcher {
 }
 
 /// Spawns `envhub-worker serve` (or `python -m envhub.worker serve` for a Python-hosted
-/// adapter) for `job` and reads its ready line.
+/// adapter, also hosting `user`'s adapters) for `job` and reads its ready line.
 pub(crate) fn launch_local(
     job: &WorkerJob,
+    user: &UserAdapters,
     start_timeout: Duration,
 ) -> Result<(Child, ReadySpec), HubError> {
-    let (mut command, path) = match crate::catalog::host_of(&job.adapter) {
+    let (mut command, path) = match crate::catalog::host_of(&job.adapter, user) {
         Host::Native => {
             let path = worker_binary();
             (Command::new(&path), path)
         }
         Host::Python => (
-            crate::python_host::worker_command(),
+            crate::python_host::worker_command(user),
             crate::python_host::python_interpreter(),
         ),
     };

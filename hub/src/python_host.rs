@@ -66,23 +66,89 @@ pub fn python_interpreter() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("python3"))
 }
 
-/// `python -m envhub.worker`, with the user adapters of the config and of `ENVHUB_ADAPTERS`
-/// passed on in `ENVHUB_ADAPTERS`.
-pub(crate) fn worker_command() -> Command {
-    let mut cmd = Command::new(python_interpreter());
-    cmd.arg("-m").arg("envhub.worker");
+/// User adapters beyond this hub's own (its config's `adapters:` and `ENVHUB_ADAPTERS`):
+/// import paths, and the `PYTHONPATH` entries their modules need. A hub daemon gets them
+/// from each client with its requests, because the client's environment never reaches the
+/// daemon's workers; empty (the default, also for an older client) means none.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub(crate) struct UserAdapters {
+    /// Import paths, `module:Class`.
+    pub adapters: Vec<String>,
+    /// Absolute folders to put first on the worker's `PYTHONPATH`.
+    pub pythonpath: Vec<PathBuf>,
+}
+
+impl UserAdapters {
+    /// What a Python worker started by this process would host beyond the built-in
+    /// adapters: the config's `adapters:` and `ENVHUB_ADAPTERS`, with this process's
+    /// `PYTHONPATH` and working directory (which `python -m` puts on `sys.path`) made
+    /// absolute. Empty when there are no user adapters.
+    pub(crate) fn of_this_process() -> UserAdapters {
+        let adapters = own_adapters();
+        if adapters.is_empty() {
+            return UserAdapters::default();
+        }
+        let cwd = std::env::current_dir().unwrap_or_default();
+        let mut pythonpath: Vec<PathBuf> = std::env::var_os("PYTHONPATH")
+            .map(|v| std::env::split_paths(&v).collect())
+            .unwrap_or_default();
+        pythonpath.push(cwd.clone());
+        UserAdapters {
+            adapters,
+            pythonpath: unique(
+                pythonpath
+                    .into_iter()
+                    .filter(|p| !p.as_os_str().is_empty())
+                    .map(|p| cwd.join(p))
+                    // Sent as JSON text: a folder whose name is not UTF-8 cannot travel.
+                    .filter(|p| p.to_str().is_some()),
+            ),
+        }
+    }
+
+    /// Whether there are none.
+    pub(crate) fn is_empty(&self) -> bool {
+        self.adapters.is_empty() && self.pythonpath.is_empty()
+    }
+}
+
+/// This process's user adapters: the config's `adapters:`, then `ENVHUB_ADAPTERS`, each once.
+fn own_adapters() -> Vec<String> {
     let mut adapters = configured().1;
     if let Ok(var) = std::env::var(ENVHUB_ADAPTERS) {
-        adapters.extend(
-            var.split(',')
-                .map(str::trim)
-                .filter(|s| !s.is_empty())
-                .map(String::from),
-        );
+        adapters.extend(var.split(',').map(str::trim).map(String::from));
     }
+    unique(adapters.into_iter().filter(|s| !s.is_empty()))
+}
+
+fn unique<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
+    let mut out = Vec::new();
+    for item in items {
+        if !out.contains(&item) {
+            out.push(item);
+        }
+    }
+    out
+}
+
+/// `python -m envhub.worker`, hosting this process's user adapters and `extra` ones (a
+/// daemon's client's) in `ENVHUB_ADAPTERS`, with `extra`'s folders first on `PYTHONPATH`.
+pub(crate) fn worker_command(extra: &UserAdapters) -> Command {
+    let mut cmd = Command::new(python_interpreter());
+    cmd.arg("-m").arg("envhub.worker");
+    let adapters = unique(own_adapters().into_iter().chain(extra.adapters.clone()));
     if !adapters.is_empty() {
-        adapters.dedup();
         cmd.env(ENVHUB_ADAPTERS, adapters.join(","));
+    }
+    if !extra.pythonpath.is_empty() {
+        let own = std::env::var_os("PYTHONPATH")
+            .map(|v| std::env::split_paths(&v).collect::<Vec<_>>())
+            .unwrap_or_default();
+        let all = unique(extra.pythonpath.iter().cloned().chain(own));
+        if let Ok(joined) = std::env::join_paths(all) {
+            cmd.env("PYTHONPATH", joined);
+        }
     }
     cmd
 }
@@ -95,3 +161,37 @@ pub(crate) const BUILTIN: &[(&str, &str)] = &[
     ("libero", "libero"),
     ("isaac_lab", "isaac_lab"),
 ];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::OsStr;
+
+    #[test]
+    fn worker_command_hosts_a_clients_adapters_with_their_folders_first() {
+        let extra = UserAdapters {
+            adapters: vec!["client_sim:ClientAdapter".into()],
+            pythonpath: vec!["/client/dir".into()],
+        };
+        let cmd = worker_command(&extra);
+        let env = |name: &str| {
+            cmd.get_envs()
+                .find(|(k, _)| *k == OsStr::new(name))
+                .and_then(|(_, v)| v)
+                .and_then(OsStr::to_str)
+                .unwrap_or_default()
+                .to_string()
+        };
+        assert!(
+            env(ENVHUB_ADAPTERS)
+                .split(',')
+                .any(|a| a == "client_sim:ClientAdapter"),
+            "{}",
+            env(ENVHUB_ADAPTERS)
+        );
+        assert!(env("PYTHONPATH").starts_with("/client/dir"));
+        // Nothing extra: the worker inherits this process's PYTHONPATH untouched.
+        let plain = worker_command(&UserAdapters::default());
+        assert!(!plain.get_envs().any(|(k, _)| k == OsStr::new("PYTHONPATH")));
+    }
+}

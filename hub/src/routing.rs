@@ -89,7 +89,11 @@ pub fn route(
         return Err(HubError::NoAdapter {
             env_id: entry.env_id.clone(),
             framework: entry.framework.clone(),
-            detail: format!(": unknown framework `{}`", entry.framework),
+            detail: format!(
+                ": unknown framework `{}`{}",
+                entry.framework,
+                unloadable(adapters)
+            ),
             hint: format!("known frameworks: {}", known.join(", ")),
         });
     }
@@ -117,6 +121,20 @@ pub fn route(
         detail: format!(": {}", provided.join("; ")),
         hint: "`envhub adapters --all` lists every adapter and what it runs".to_string(),
     })
+}
+
+/// Why each adapter that failed to load did (a user adapter that cannot be imported), as
+/// `; reason` clauses: such an adapter cannot say which frameworks it serves, so it is the
+/// likely cause of an unknown framework.
+fn unloadable(adapters: &[AdapterInfo]) -> String {
+    adapters
+        .iter()
+        .filter(|a| a.frameworks.is_empty())
+        .filter_map(|a| match &a.availability {
+            Availability::Unavailable { reason, .. } => Some(format!("; {reason}")),
+            Availability::Available => None,
+        })
+        .collect()
 }
 
 fn names<'a>(adapters: impl Iterator<Item = &'a AdapterInfo>) -> String {
@@ -205,6 +223,23 @@ mod tests {
         .to_string();
         assert!(
             err.contains("unavailable") && err.contains("install it"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn unknown_framework_names_adapters_that_failed_to_load() {
+        let mut broken = adapter("my_sim:Adapter", &[], &[], false);
+        broken.availability = Availability::Unavailable {
+            reason: "cannot import `my_sim:Adapter`: ModuleNotFoundError".into(),
+            hint: "check the import path".into(),
+        };
+        let adapters = [adapter("gymnasium", &["gymnasium"], &[], true), broken];
+        let err = route(&entry("mysim", "X"), &adapters, &EnvConfig::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("unknown framework `mysim`; cannot import `my_sim:Adapter`"),
             "{err}"
         );
     }

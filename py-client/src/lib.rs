@@ -80,6 +80,7 @@ fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(refresh_adapters, m)?)?;
     m.add_function(wrap_pyfunction!(session::make_session, m)?)?;
     m.add_function(wrap_pyfunction!(worker::serve_worker, m)?)?;
+    m.add_function(wrap_pyfunction!(worker::serve_vector_worker, m)?)?;
     m.add_function(wrap_pyfunction!(worker::space_leaves_json, m)?)?;
     m.add_class::<session::Session>()?;
     m.add_class::<session::SampleOwner>()?;

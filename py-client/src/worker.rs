@@ -1,6 +1,8 @@
 //! The Python worker's Rust half: `python -m envhub.worker serve` creates its envs in Python
 //! and hands them to [`serve_worker`], which runs the same serve loop as the Rust worker
-//! binary ([`envhub_shm::serve_batch`]) with each Python env behind the `Env` trait.
+//! binary ([`envhub_shm::serve_batch`]) with each Python env behind the `Env` trait; or, for a
+//! simulator that holds all of the worker's envs in one vector env, to
+//! [`serve_vector_worker`], which serves that object as the whole batch.
 //!
 //! Why a Python process driving the Rust loop rather than CPython embedded in
 //! `envhub-worker`: the worker then runs in the user's own interpreter (the project's `.venv`
@@ -15,7 +17,9 @@
 //! sees later requests' bytes; envs copy actions into their simulator, so none does).
 
 use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions, Space, Transition};
-use envhub_shm::{EnvBatch, ReadySpec, WorkerJob};
+use envhub_shm::{
+    EnvBatch, Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerJob, env_flag, frames_section,
+};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use std::io::Write;
@@ -68,15 +72,20 @@ fn traceback(py: Python<'_>, err: &PyErr) -> String {
     }
 }
 
+/// The error for a Python exception raised by `env_id`'s `what`, with its traceback.
+fn python_failed(py: Python<'_>, env_id: &str, what: &str, err: PyErr) -> EnvError {
+    EnvError::Simulator {
+        env_id: env_id.to_string(),
+        reason: format!(
+            "the Python env raised in `{what}`:\n{}",
+            traceback(py, &err)
+        ),
+    }
+}
+
 impl PyEnv {
     fn failed(&self, py: Python<'_>, what: &str, err: PyErr) -> EnvError {
-        EnvError::Simulator {
-            env_id: self.env_id.clone(),
-            reason: format!(
-                "the Python env raised in `{what}`:\n{}",
-                traceback(py, &err)
-            ),
-        }
+        python_failed(py, &self.env_id, what, err)
     }
 }
 
@@ -175,9 +184,202 @@ impl Env for PyEnv {
     }
 }
 
+/// A simulator that holds all of the worker's envs in one object (a Gymnasium `VectorEnv`:
+/// Isaac Lab, `gymnasium.make_vec(..., vectorization_mode="vector_entry_point")`), through
+/// the wrapper `envhub.worker.HostedVectorEnv` (methods `reset_into`, `step_into`,
+/// `render_rgb`, `close`). It steps every env at once and autoresets them itself; the wrapper
+/// checked when it was made that its autoreset mode is the session's. Each call hands the
+/// wrapper memoryviews of whole blocks, so every result is copied once, batched.
+struct PyVectorEnv {
+    env: Py<PyAny>,
+    env_id: String,
+    num_envs: usize,
+    /// The session's id of the first env (for error messages).
+    env_offset: usize,
+}
+
+impl PyVectorEnv {
+    fn failed(&self, py: Python<'_>, what: &str, err: PyErr) -> EnvError {
+        python_failed(py, &self.env_id, what, err)
+    }
+}
+
+fn selected(flags: &[u8]) -> Vec<bool> {
+    flags.iter().map(|f| f & env_flag::SELECTED != 0).collect()
+}
+
+/// A writable memoryview of a block of `f64`s.
+fn f64_view<'py>(py: Python<'py>, block: &mut [f64]) -> PyResult<Bound<'py, PyAny>> {
+    memory_view(
+        py,
+        block.as_mut_ptr().cast(),
+        std::mem::size_of_val(block),
+        true,
+    )
+}
+
+impl ServedBatch for PyVectorEnv {
+    fn len(&self) -> usize {
+        self.num_envs
+    }
+
+    fn reset(
+        &mut self,
+        flags: &[u8],
+        seeds: &[u64],
+        options: &ResetOptions,
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let seeds: Vec<Option<u64>> = flags
+            .iter()
+            .zip(seeds)
+            .map(|(f, &s)| (f & env_flag::SEEDED != 0).then_some(s))
+            .collect();
+        out.rewards.fill(0.0);
+        out.terminated.fill(0);
+        out.truncated.fill(0);
+        out.final_mask.fill(0);
+        let info = Python::attach(|py| {
+            let run = || -> PyResult<Option<String>> {
+                let obs = memory_view(py, out.obs.as_mut_ptr(), out.obs.len(), true)?;
+                let options = (!options.is_empty())
+                    .then(|| serde_json::to_string(options).unwrap_or_default());
+                self.env
+                    .call_method1(py, "reset_into", (selected(flags), seeds, options, obs))?
+                    .extract(py)
+            };
+            run().map_err(|e| self.failed(py, "reset", e))
+        })?;
+        Ok(info.map(String::into_bytes).unwrap_or_default())
+    }
+
+    fn step(
+        &mut self,
+        flags: &[u8],
+        actions: &[u8],
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let stepped = flags
+            .iter()
+            .filter(|&&f| f & env_flag::SELECTED != 0)
+            .count();
+        if stepped != self.num_envs {
+            let (first, last) = (self.env_offset, self.env_offset + self.num_envs - 1);
+            return Err(EnvError::Simulator {
+                env_id: self.env_id.clone(),
+                reason: format!(
+                    "its vector env steps its {} envs (env ids {first} to {last}) together, and this step selects {stepped} of them; step all of them\nhint: `step(actions)`, or `send` an action to every one of env ids {first} to {last} at once",
+                    self.num_envs
+                ),
+            });
+        }
+        out.final_mask.fill(0);
+        let info = Python::attach(|py| {
+            let mut run = || -> PyResult<Option<String>> {
+                let act = memory_view(py, actions.as_ptr(), actions.len(), false)?;
+                let obs = memory_view(py, out.obs.as_mut_ptr(), out.obs.len(), true)?;
+                let rewards = f64_view(py, out.rewards)?;
+                let terminated =
+                    memory_view(py, out.terminated.as_mut_ptr(), out.terminated.len(), true)?;
+                let truncated =
+                    memory_view(py, out.truncated.as_mut_ptr(), out.truncated.len(), true)?;
+                // Only same_step sessions have a final-observation block.
+                let final_obs = if out.final_obs.is_empty() {
+                    None
+                } else {
+                    Some(memory_view(
+                        py,
+                        out.final_obs.as_mut_ptr(),
+                        out.final_obs.len(),
+                        true,
+                    )?)
+                };
+                let final_mask =
+                    memory_view(py, out.final_mask.as_mut_ptr(), out.final_mask.len(), true)?;
+                self.env
+                    .call_method1(
+                        py,
+                        "step_into",
+                        (
+                            act, obs, rewards, terminated, truncated, final_obs, final_mask,
+                        ),
+                    )?
+                    .extract(py)
+            };
+            run().map_err(|e| self.failed(py, "step", e))
+        })?;
+        Ok(info.map(String::into_bytes).unwrap_or_default())
+    }
+
+    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+        let frames = Python::attach(|py| {
+            let frames: PyResult<Vec<Option<Frame>>> = self
+                .env
+                .call_method1(py, "render_rgb", (selected(flags),))
+                .and_then(|f| f.extract(py));
+            frames.map_err(|e| self.failed(py, "render", e))
+        })?;
+        Ok(frames_section(frames))
+    }
+
+    fn close(&mut self) {
+        Python::attach(|py| {
+            if let Err(e) = self.env.call_method0(py, "close") {
+                tracing::warn!(env_id = %self.env_id, "close raised: {}", traceback(py, &e));
+            }
+        });
+    }
+}
+
 fn parse_space(what: &str, json: &str) -> PyResult<Space> {
     serde_json::from_str(json)
         .map_err(|e| PyValueError::new_err(format!("invalid {what} space `{json}`: {e}")))
+}
+
+/// The job and the spec a ready worker reports, from `serve_worker`'s arguments.
+fn job_and_spec(
+    job_json: &str,
+    observation_space: &str,
+    action_space: &str,
+    max_episode_steps: Option<u32>,
+) -> PyResult<(WorkerJob, ReadySpec)> {
+    let job: WorkerJob = serde_json::from_str(job_json)
+        .map_err(|e| PyValueError::new_err(format!("invalid job: {e}")))?;
+    let ready = ReadySpec {
+        observation_space: parse_space("observation", observation_space)?,
+        action_space: parse_space("action", action_space)?,
+        max_episode_steps,
+        pid: std::process::id(),
+    };
+    Ok((job, ready))
+}
+
+/// Runs the serve loop for `batch`, with the GIL released while waiting for requests; the
+/// ready line goes to the file descriptor `reply_fd`.
+fn serve(
+    py: Python<'_>,
+    job: &WorkerJob,
+    batch: impl ServedBatch + Send,
+    ready: ReadySpec,
+    reply_fd: i32,
+) -> PyResult<()> {
+    // SAFETY: the caller passes a descriptor it owns and keeps open (a dup of stdout).
+    let fd = unsafe { std::os::fd::BorrowedFd::borrow_raw(reply_fd) };
+    let mut out = std::fs::File::from(
+        fd.try_clone_to_owned()
+            .map_err(|e| PyRuntimeError::new_err(format!("bad reply descriptor: {e}")))?,
+    );
+    let span = tracing::info_span!("worker", adapter = %job.adapter, env_id = %job.env_id, pid = std::process::id());
+    py.detach(|| {
+        let _guard = span.enter();
+        envhub_shm::serve_batch(job, batch, ready, |line| {
+            let text = serde_json::to_string(line).map_err(std::io::Error::other)?;
+            out.write_all(text.as_bytes())?;
+            out.write_all(b"\n")?;
+            out.flush()
+        })
+    })
+    .map_err(|e| PyRuntimeError::new_err(format!("worker data plane failed: {e}")))
 }
 
 /// Serves `envs` (wrappers made by `envhub.worker`) for the job `job_json` until the client
@@ -195,45 +397,45 @@ pub(crate) fn serve_worker(
     envs: Vec<Py<PyAny>>,
     reply_fd: i32,
 ) -> PyResult<()> {
-    let job: WorkerJob = serde_json::from_str(job_json)
-        .map_err(|e| PyValueError::new_err(format!("invalid job: {e}")))?;
-    let observation_space = parse_space("observation", observation_space)?;
-    let action_space = parse_space("action", action_space)?;
+    let (job, ready) = job_and_spec(job_json, observation_space, action_space, max_episode_steps)?;
     let batch: Vec<Box<dyn Env>> = envs
         .into_iter()
         .map(|env| {
             Box::new(PyEnv {
                 env,
                 env_id: job.env_id.clone(),
-                observation_space: observation_space.clone(),
-                action_space: action_space.clone(),
+                observation_space: ready.observation_space.clone(),
+                action_space: ready.action_space.clone(),
             }) as Box<dyn Env>
         })
         .collect();
     let mode: AutoresetMode = job.config.autoreset_mode;
-    let ready = ReadySpec {
-        observation_space,
-        action_space,
-        max_episode_steps,
-        pid: std::process::id(),
+    serve(py, &job, EnvBatch::new(batch, mode), ready, reply_fd)
+}
+
+/// As [`serve_worker`], for one `envhub.worker.HostedVectorEnv` holding all of the job's
+/// envs (its `num_envs`; the loop refuses a count that is not the job's): it steps them
+/// together and autoresets them itself.
+#[pyfunction]
+#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, vector_env, reply_fd))]
+pub(crate) fn serve_vector_worker(
+    py: Python<'_>,
+    job_json: &str,
+    observation_space: &str,
+    action_space: &str,
+    max_episode_steps: Option<u32>,
+    vector_env: Py<PyAny>,
+    reply_fd: i32,
+) -> PyResult<()> {
+    let (job, ready) = job_and_spec(job_json, observation_space, action_space, max_episode_steps)?;
+    let num_envs: usize = vector_env.getattr(py, "num_envs")?.extract(py)?;
+    let batch = PyVectorEnv {
+        env: vector_env,
+        env_id: job.env_id.clone(),
+        num_envs,
+        env_offset: job.env_offset,
     };
-    // SAFETY: the caller passes a descriptor it owns and keeps open (a dup of stdout).
-    let fd = unsafe { std::os::fd::BorrowedFd::borrow_raw(reply_fd) };
-    let mut out = std::fs::File::from(
-        fd.try_clone_to_owned()
-            .map_err(|e| PyRuntimeError::new_err(format!("bad reply descriptor: {e}")))?,
-    );
-    let span = tracing::info_span!("worker", adapter = %job.adapter, env_id = %job.env_id, pid = std::process::id());
-    py.detach(|| {
-        let _guard = span.enter();
-        envhub_shm::serve_batch(&job, EnvBatch::new(batch, mode), ready, |line| {
-            let text = serde_json::to_string(line).map_err(std::io::Error::other)?;
-            out.write_all(text.as_bytes())?;
-            out.write_all(b"\n")?;
-            out.flush()
-        })
-    })
-    .map_err(|e| PyRuntimeError::new_err(format!("worker data plane failed: {e}")))
+    serve(py, &job, batch, ready, reply_fd)
 }
 
 /// The layout of a space's leaves (`[{path, offset, dtype, shape, bytes}]`) from its JSON.

@@ -1,7 +1,10 @@
 //! `envhub serve`: one hub daemon shared by several client processes.
 
-use envhub::{EnvConfig, Hub, HubError, Registry, SessionOptions};
-use envhub_e2e::binary;
+use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_HUB, ENVHUB_NAMESPACE, ENVHUB_REGISTRY};
+use envhub::{EnvConfig, Host, Hub, HubError, Registry, SessionOptions};
+use envhub_e2e::{PyModule, binary, python_worker_available};
+use rand::SeedableRng;
+use std::ffi::OsString;
 use std::io::BufRead;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -15,6 +18,11 @@ struct Daemon {
 
 impl Daemon {
     fn start(name: &str) -> Daemon {
+        Daemon::start_with(name, &[])
+    }
+
+    /// A daemon with `vars` set, and without the user adapters of this process.
+    fn start_with(name: &str, vars: &[(&str, OsString)]) -> Daemon {
         let dir = std::env::temp_dir().join(format!("e2e-daemon-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let socket = dir.join("hub.sock");
@@ -22,6 +30,8 @@ impl Daemon {
         let mut child = Command::new(binary("envhub"))
             .args(["serve", "--socket", socket.to_str().unwrap()])
             .env("ENVHUB_NAMESPACE", &namespace)
+            .envs(vars.iter().cloned())
+            .env_remove(ENVHUB_ADAPTERS)
             .stdout(Stdio::piped())
             .spawn()
             .unwrap();
@@ -206,4 +216,117 @@ fn killed_worker_and_killed_client_leave_the_daemon_running() {
         .unwrap();
     env.reset(Some(0)).unwrap();
     env.step_i64(&[1]).unwrap();
+}
+
+/// A user adapter whose `make` wraps Gymnasium's CartPole.
+const WRAPPED_ADAPTER: &str = r#"
+import gymnasium as gym
+
+import envhub
+
+
+class WrappedCartPole(envhub.EnvAdapter):
+    name = "e2e_wrapped"
+    frameworks = ["e2e_wrapped"]
+    requires = ["gymnasium"]
+    description = "Gymnasium's CartPole behind a user adapter"
+
+    def make(self, env_id, config):
+        return gym.make("CartPole-v1")
+"#;
+
+const WRAPPED_REGISTRY: &str = "
+environments:
+  - id: wrapped-cartpole
+    name: CartPole through a user adapter
+    framework: e2e_wrapped
+    env_id: WrappedCartPole-v0
+    robot_type: custom
+    env_type: floor
+";
+
+#[test]
+fn user_adapters_of_a_client_reach_the_daemon() {
+    if !python_worker_available("daemon::user_adapters_of_a_client_reach_the_daemon") {
+        return;
+    }
+    let module = PyModule::write("daemon-user", "e2e_wrapped_adapter", WRAPPED_ADAPTER);
+    let registry = module.dir.join("registry.yaml");
+    std::fs::write(&registry, WRAPPED_REGISTRY).unwrap();
+    let mut registries = OsString::from("@default:");
+    registries.push(&registry);
+    let mut d = Daemon::start_with("user", &[(ENVHUB_REGISTRY, registries)]);
+
+    // A client without the adapter: the daemon's own catalog has no such framework.
+    let out = Command::new(binary("envhub"))
+        .args([
+            "run",
+            "wrapped-cartpole",
+            "--num-envs",
+            "1",
+            "--steps",
+            "10",
+        ])
+        .env(ENVHUB_HUB, &d.socket)
+        .env(ENVHUB_NAMESPACE, &d.namespace)
+        .env_remove(ENVHUB_ADAPTERS)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("unknown framework `e2e_wrapped`"),
+        "{stderr}"
+    );
+
+    // This process registers it as `AdapterRegistry().register` does: in its own
+    // environment, which the daemon never sees (nextest runs each test in its own process).
+    unsafe {
+        std::env::set_var(ENVHUB_ADAPTERS, "e2e_wrapped_adapter:WrappedCartPole");
+        std::env::set_var("PYTHONPATH", module.pythonpath());
+    }
+    let hub = d.hub();
+    let listed = hub.adapters().unwrap();
+    let wrapped_info = listed.iter().find(|a| a.name == "e2e_wrapped");
+    assert!(
+        wrapped_info.is_some_and(|a| a.availability.is_available() && a.host == Host::Python),
+        "{listed:?}"
+    );
+    let config = EnvConfig {
+        workers: Some(2),
+        ..EnvConfig::default()
+    };
+    let mut wrapped = hub.make_vec("wrapped-cartpole", 2, &config).unwrap();
+    assert_eq!(wrapped.route().adapter, "e2e_wrapped");
+    for pid in wrapped.worker_pids() {
+        assert_eq!(parent_of(pid), d.child.id(), "the daemon started it");
+    }
+    // It is Gymnasium's CartPole: it steps like the native one.
+    let mut native = hub.make_vec("gym-cartpole", 2, &config).unwrap();
+    let first = native.reset(Some(3)).unwrap().obs.to_vec();
+    assert_eq!(wrapped.reset(Some(3)).unwrap().obs, first);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    for step in 0..100 {
+        let actions = native.sample_actions(&mut rng);
+        let a = native.step(&actions).unwrap();
+        let b = wrapped.step(&actions).unwrap();
+        assert_eq!((a.obs, a.rewards), (b.obs, b.rewards), "step {step}");
+        assert_eq!(a.terminated, b.terminated, "step {step}");
+    }
+    wrapped.close();
+    native.close();
+
+    // An import path that fails: the reason names it, as with the embedded hub.
+    unsafe { std::env::set_var(ENVHUB_ADAPTERS, "e2e_no_such_module_xyz:Nope") };
+    let err = hub
+        .make_vec("wrapped-cartpole", 1, &EnvConfig::default())
+        .err()
+        .expect("the adapter cannot be imported")
+        .to_string();
+    assert!(
+        err.contains("cannot import `e2e_no_such_module_xyz:Nope`")
+            && err.contains("ModuleNotFoundError"),
+        "{err}"
+    );
+    assert!(d.alive());
 }

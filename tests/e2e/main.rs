@@ -7,4 +7,5 @@ mod cli;
 mod concurrency;
 mod daemon;
 mod failures;
+mod python_worker;
 mod rendering;

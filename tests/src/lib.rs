@@ -39,6 +39,15 @@ impl TestHub {
 
     /// A hub whose session options `tweak` adjusts.
     pub fn with(name: &str, tweak: impl FnOnce(&mut SessionOptions)) -> TestHub {
+        Self::over(name, Registry::builtin(), tweak)
+    }
+
+    /// A hub over `registry` whose session options `tweak` adjusts.
+    pub fn over(
+        name: &str,
+        registry: Registry,
+        tweak: impl FnOnce(&mut SessionOptions),
+    ) -> TestHub {
         // The hub finds the worker next to the test binary's folder; fail early and clearly
         // if it was not built.
         binary("envhub-worker");
@@ -51,7 +60,7 @@ impl TestHub {
         };
         tweak(&mut options);
         TestHub {
-            hub: Hub::new(Registry::builtin()).with_options(options),
+            hub: Hub::new(registry).with_options(options),
             namespace,
         }
     }
@@ -73,4 +82,64 @@ pub fn shm_files(needle: &str) -> Vec<String> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+/// Whether the Python worker can run: the interpreter the hub starts it with imports the
+/// compiled `envhub._envhub`. If not, prints why and returns false so the test skips,
+/// unless `ENVHUB_PY_REQUIRED` is set (as `make rust-test` does), when it panics: a missing
+/// build must not pass by skipping.
+pub fn python_worker_available(test: &str) -> bool {
+    let python = envhub::python_interpreter();
+    let out = std::process::Command::new(&python)
+        .args(["-c", "import envhub._envhub"])
+        .output();
+    let why = match out {
+        Ok(out) if out.status.success() => return true,
+        Ok(out) => String::from_utf8_lossy(&out.stderr)
+            .lines()
+            .last()
+            .unwrap_or("")
+            .to_string(),
+        Err(e) => e.to_string(),
+    };
+    let reason = format!(
+        "`{} -c 'import envhub._envhub'` failed: {why}; run `make py-install`, or set ENVHUB_PYTHON",
+        python.display()
+    );
+    assert!(
+        std::env::var_os(envhub::env_vars::ENVHUB_PY_REQUIRED).is_none_or(|v| v.is_empty()),
+        "{test}: the Python worker is required (ENVHUB_PY_REQUIRED) but {reason}"
+    );
+    eprintln!("skipped {test}: {reason}");
+    false
+}
+
+/// A temp folder holding one Python module (a user adapter for the Python worker), removed
+/// when dropped.
+pub struct PyModule {
+    /// The folder, to put on `PYTHONPATH`.
+    pub dir: PathBuf,
+}
+
+impl PyModule {
+    /// Writes `<module>.py` with `source` into a folder named after `test` and this process.
+    pub fn write(test: &str, module: &str, source: &str) -> PyModule {
+        let dir = std::env::temp_dir().join(format!("e2e-{test}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        std::fs::write(dir.join(format!("{module}.py")), source).expect("module file");
+        PyModule { dir }
+    }
+
+    /// This process's `PYTHONPATH` with the folder first.
+    pub fn pythonpath(&self) -> std::ffi::OsString {
+        let rest = std::env::var_os("PYTHONPATH").unwrap_or_default();
+        let paths = std::iter::once(self.dir.clone()).chain(std::env::split_paths(&rest));
+        std::env::join_paths(paths).expect("temp dir names hold no `:`")
+    }
+}
+
+impl Drop for PyModule {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
 }

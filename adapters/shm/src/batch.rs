@@ -1,6 +1,7 @@
 //! A worker's envs as one batch: reset, step with autoreset, results written into the blocks
 //! of a response. Used by the worker loop and, without any IPC, by in-process benchmarks.
 
+use crate::ServedBatch;
 use crate::layout::{ResponseBlocksMut, env_flag};
 use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions};
 
@@ -135,25 +136,15 @@ impl EnvBatch {
         Ok(info_section(&self.infos))
     }
 
-    /// Renders the selected envs. The result is, for each selected env in order, a `u32`
-    /// height, a `u32` width (both 0: the env renders nothing) and `height × width × 3` RGB
-    /// bytes, all little-endian.
+    /// Renders the selected envs: their frames in order, as [`frames_section`] lays them out.
     pub fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
-        let mut out = Vec::new();
+        let mut frames = Vec::new();
         for (env, &flag) in self.envs.iter_mut().zip(flags) {
-            if flag & env_flag::SELECTED == 0 {
-                continue;
-            }
-            match env.render()? {
-                Some((h, w, rgb)) => {
-                    out.extend_from_slice(&(h as u32).to_le_bytes());
-                    out.extend_from_slice(&(w as u32).to_le_bytes());
-                    out.extend_from_slice(&rgb);
-                }
-                None => out.extend_from_slice(&[0; 8]),
+            if flag & env_flag::SELECTED != 0 {
+                frames.push(env.render()?);
             }
         }
-        Ok(out)
+        Ok(frames_section(frames))
     }
 
     /// Closes every env.
@@ -163,6 +154,61 @@ impl EnvBatch {
         }
     }
 }
+
+/// The serve loop's view of the batch; the inherent methods stay for callers that step a
+/// batch directly (in-process benchmarks).
+impl ServedBatch for EnvBatch {
+    fn len(&self) -> usize {
+        EnvBatch::len(self)
+    }
+
+    fn reset(
+        &mut self,
+        flags: &[u8],
+        seeds: &[u64],
+        options: &ResetOptions,
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        EnvBatch::reset(self, flags, seeds, options, out)
+    }
+
+    fn step(
+        &mut self,
+        flags: &[u8],
+        actions: &[u8],
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        EnvBatch::step(self, flags, actions, out)
+    }
+
+    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+        EnvBatch::render(self, flags)
+    }
+
+    fn close(&mut self) {
+        EnvBatch::close(self);
+    }
+}
+
+/// The answer to a render: for each frame a `u32` height, a `u32` width (both 0 for `None`,
+/// nothing rendered) and `height × width × 3` RGB bytes, all little-endian.
+pub fn frames_section(frames: impl IntoIterator<Item = Option<Frame>>) -> Vec<u8> {
+    let mut out = Vec::new();
+    for frame in frames {
+        match frame {
+            Some((h, w, rgb)) => {
+                out.extend_from_slice(&(h as u32).to_le_bytes());
+                out.extend_from_slice(&(w as u32).to_le_bytes());
+                out.extend_from_slice(&rgb);
+            }
+            None => out.extend_from_slice(&[0; 8]),
+        }
+    }
+    out
+}
+
+/// One rendered frame: height, width and `height × width × 3` RGB bytes.
+pub type Frame = (usize, usize, Vec<u8>);
 
 /// `[{...}, {...}]` with one object per env, or nothing when no env reported info.
 fn info_section(infos: &[Info]) -> Vec<u8> {

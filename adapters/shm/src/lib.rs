@@ -18,7 +18,7 @@ mod serve;
 mod transport;
 mod wait;
 
-pub use batch::EnvBatch;
+pub use batch::{EnvBatch, Frame, frames_section};
 pub use channel::{ClientChannel, Reply, Request, Response, WorkerChannel};
 pub use job::{ReadySpec, WorkerJob, WorkerReply};
 pub use layout::{
@@ -26,7 +26,7 @@ pub use layout::{
     env_flag, status,
 };
 pub use process::{ProcessWatch, die_with_parent, kill};
-pub use serve::serve_batch;
+pub use serve::{ServedBatch, serve_batch};
 pub use transport::{ChannelName, MAX_BORROWED_RESPONSES, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
 

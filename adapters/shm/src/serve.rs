@@ -4,23 +4,77 @@
 //! same protocol and only differ in what their envs are.
 
 use crate::{
-    DataPlaneError, EnvBatch, Layout, ProcessWatch, ReadySpec, Reply, WaitPolicy, WorkerChannel,
-    WorkerJob, WorkerReply, command,
+    DataPlaneError, Layout, ProcessWatch, ReadySpec, Reply, ResponseBlocksMut, WaitPolicy,
+    WorkerChannel, WorkerJob, WorkerReply, command,
 };
-use envhub_core::{AutoresetMode, ResetOptions};
+use envhub_core::{AutoresetMode, EnvError, ResetOptions};
 use std::time::Duration;
 
+/// What the worker loop serves: all of one worker's envs, answering each request for the
+/// whole batch at once.
+///
+/// [`EnvBatch`](crate::EnvBatch) implements it over one [`Env`](envhub_core::Env) per env and
+/// applies the autoreset mode itself; a simulator that holds its envs in one object, steps
+/// them together and autoresets them itself (a Gymnasium `VectorEnv`, Isaac Lab) implements
+/// it directly. Every method that answers with blocks writes every block the client reads for
+/// that command, for every env (samples are reused, so nothing is zero on arrival).
+pub trait ServedBatch {
+    /// Number of envs; must equal the job's `num_envs`.
+    fn len(&self) -> usize;
+
+    /// Whether there are no envs.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Resets the envs whose flag has [`env_flag::SELECTED`](crate::env_flag::SELECTED),
+    /// seeding those with [`env_flag::SEEDED`](crate::env_flag::SEEDED). Returns the info
+    /// section (`[{...}, ...]`, one JSON object per env; empty when no env reported info).
+    fn reset(
+        &mut self,
+        flags: &[u8],
+        seeds: &[u64],
+        options: &ResetOptions,
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError>;
+
+    /// Steps the selected envs with their actions (`act_bytes` per env, back to back) under
+    /// the job's autoreset mode. Returns the info section.
+    fn step(
+        &mut self,
+        flags: &[u8],
+        actions: &[u8],
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError>;
+
+    /// Renders the selected envs: for each, in order, a `u32` height, a `u32` width (both 0:
+    /// nothing rendered) and `height × width × 3` RGB bytes, all little-endian.
+    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError>;
+
+    /// Closes every env.
+    fn close(&mut self);
+}
+
 /// Serves `batch` for `job` until the client closes it or its owner exits. `reply` prints the
-/// one ready (or error) line the owner waits for. A channel that cannot be opened is reported
-/// through `reply`, not returned.
+/// one ready (or error) line the owner waits for. A channel that cannot be opened, or a batch
+/// whose size is not the job's, is reported through `reply`, not returned.
 pub fn serve_batch(
     job: &WorkerJob,
-    mut batch: EnvBatch,
+    mut batch: impl ServedBatch,
     ready: ReadySpec,
     mut reply: impl FnMut(&WorkerReply) -> std::io::Result<()>,
 ) -> Result<(), DataPlaneError> {
     let io =
         |e: std::io::Error| DataPlaneError::PeerGone(format!("cannot reply to the owner: {e}"));
+    if batch.len() != job.num_envs {
+        batch.close();
+        return reply(&WorkerReply::Error(format!(
+            "the worker made {} envs for a job of {}\nhint: a batch must hold exactly the job's `num_envs`",
+            batch.len(),
+            job.num_envs
+        )))
+        .map_err(io);
+    }
     let layout = Layout::new(
         job.num_envs,
         ready.observation_space.byte_len(),
@@ -97,6 +151,183 @@ pub fn serve_batch(
                 return Ok(());
             }
             Err(e) => return Err(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ChannelName, ClientChannel, env_flag, remove_namespace, status};
+    use envhub_core::{EnvConfig, Space};
+    use std::sync::mpsc;
+
+    /// A batch that, like a vectorised simulator, only steps all its envs together: every
+    /// observation is the step count, every reward the env's action.
+    struct Lockstep {
+        num_envs: usize,
+        t: f32,
+    }
+
+    impl ServedBatch for Lockstep {
+        fn len(&self) -> usize {
+            self.num_envs
+        }
+
+        fn reset(
+            &mut self,
+            _flags: &[u8],
+            _seeds: &[u64],
+            _options: &ResetOptions,
+            out: &mut ResponseBlocksMut<'_>,
+        ) -> Result<Vec<u8>, EnvError> {
+            self.t = 0.0;
+            out.obs.fill(0);
+            out.rewards.fill(0.0);
+            out.terminated.fill(0);
+            out.truncated.fill(0);
+            out.final_mask.fill(0);
+            Ok(Vec::new())
+        }
+
+        fn step(
+            &mut self,
+            flags: &[u8],
+            actions: &[u8],
+            out: &mut ResponseBlocksMut<'_>,
+        ) -> Result<Vec<u8>, EnvError> {
+            if flags.iter().any(|f| f & env_flag::SELECTED == 0) {
+                return Err(EnvError::Simulator {
+                    env_id: "Lockstep-v0".into(),
+                    reason: "it steps its envs together".into(),
+                });
+            }
+            self.t += 1.0;
+            let actions: &[i64] = bytemuck::cast_slice(actions);
+            for obs in out.obs.chunks_exact_mut(4) {
+                obs.copy_from_slice(&self.t.to_le_bytes());
+            }
+            for (reward, &a) in out.rewards.iter_mut().zip(actions) {
+                *reward = a as f64;
+            }
+            out.terminated.fill(0);
+            out.truncated.fill(0);
+            out.final_mask.fill(0);
+            Ok(Vec::new())
+        }
+
+        fn render(&mut self, _flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+            Ok(Vec::new())
+        }
+
+        fn close(&mut self) {}
+    }
+
+    fn job(prefix: &str, num_envs: usize) -> WorkerJob {
+        WorkerJob {
+            adapter: "test".into(),
+            env_id: "Lockstep-v0".into(),
+            config: EnvConfig::default(),
+            env_offset: 0,
+            num_envs,
+            channel: ChannelName {
+                prefix: prefix.into(),
+                service: "envhub/serve-test/0/0".into(),
+            },
+            owner_pid: std::process::id(),
+            spin_us: 0,
+            max_spin_us: 0,
+        }
+    }
+
+    fn ready() -> ReadySpec {
+        ReadySpec {
+            observation_space: Space::box_f32(&[1], -1e9, 1e9),
+            action_space: Space::discrete(10),
+            max_episode_steps: None,
+            pid: std::process::id(),
+        }
+    }
+
+    #[test]
+    fn serves_any_served_batch_over_a_real_channel() {
+        let prefix = format!("shmserve{}_", std::process::id());
+        let n = 3;
+        let layout = Layout::new(n, 4, 8, false);
+        let policy = WaitPolicy {
+            spin: Duration::ZERO,
+            max_spin: Duration::ZERO,
+            tick: Duration::from_millis(10),
+        };
+        let job = job(&prefix, n);
+        let mut client = ClientChannel::create(&job.channel, "client", layout, policy).unwrap();
+        let (tx, rx) = mpsc::channel();
+        let worker = std::thread::spawn(move || {
+            let batch = Lockstep {
+                num_envs: n,
+                t: 0.0,
+            };
+            serve_batch(&job, batch, ready(), |line| {
+                tx.send(line.clone()).map_err(std::io::Error::other)
+            })
+        });
+        let line = rx.recv_timeout(Duration::from_secs(20)).unwrap();
+        assert!(matches!(line, WorkerReply::Ready(_)), "{line:?}");
+        let alive = || Ok(());
+
+        client
+            .send_reset(&[Some(1), Some(2), Some(3)], None, "")
+            .unwrap();
+        assert_eq!(client.receive(alive).unwrap().header().status, status::OK);
+
+        let actions: Vec<i64> = vec![4, 5, 6];
+        client
+            .send_step(bytemuck::cast_slice(&actions), None)
+            .unwrap();
+        let r = client.receive(alive).unwrap();
+        assert_eq!(r.header().status, status::OK);
+        let obs: Vec<f32> = r
+            .blocks()
+            .obs
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        assert_eq!(obs, [1.0; 3]);
+        assert_eq!(r.blocks().rewards, [4.0, 5.0, 6.0]);
+        drop(r);
+
+        // The batch's own error reaches the client; the loop keeps serving.
+        client
+            .send_step(bytemuck::cast_slice(&actions), Some(&[true, false, true]))
+            .unwrap();
+        let err = client.receive(alive).unwrap().error().unwrap();
+        assert!(err.contains("steps its envs together"), "{err}");
+
+        client.send_close().unwrap();
+        assert_eq!(
+            client.receive(alive).unwrap().header().status,
+            status::CLOSED
+        );
+        worker.join().unwrap().unwrap();
+        drop(client);
+        let _ = remove_namespace(&prefix);
+    }
+
+    #[test]
+    fn a_batch_of_the_wrong_size_is_refused_before_serving() {
+        let mut lines = Vec::new();
+        let batch = Lockstep {
+            num_envs: 2,
+            t: 0.0,
+        };
+        serve_batch(&job("unused_", 3), batch, ready(), |line| {
+            lines.push(line.clone());
+            Ok(())
+        })
+        .unwrap();
+        match &lines[..] {
+            [WorkerReply::Error(e)] => assert!(e.contains("made 2 envs for a job of 3"), "{e}"),
+            other => panic!("expected one error line, got {other:?}"),
         }
     }
 }

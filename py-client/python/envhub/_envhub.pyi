@@ -23,6 +23,14 @@ def serve_worker(
     envs: Sequence[object],
     reply_fd: int,
 ) -> None: ...
+def serve_vector_worker(
+    job_json: str,
+    observation_space: str,
+    action_space: str,
+    max_episode_steps: int | None,
+    vector_env: object,
+    reply_fd: int,
+) -> None: ...
 def make_session(
     id: str,
     num_envs: int,

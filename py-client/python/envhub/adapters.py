@@ -57,6 +57,8 @@ class AdapterRegistry:
     def register(self, adapter: type[EnvAdapter] | EnvAdapter) -> None:
         """Registers a Python adapter (an `envhub.EnvAdapter` subclass) for this process and
         the workers it starts: registry entries with one of its `frameworks` route to it.
+        With a hub daemon (`ENVHUB_HUB`), each request carries this process's adapters and
+        `PYTHONPATH`, so the daemon routes to it and its workers import it too.
 
         Workers import the class by its import path, so it must live in an importable module
         (not `__main__`). For a permanent registration list `module:Class` under `adapters:`

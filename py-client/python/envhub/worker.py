@@ -6,6 +6,10 @@ them to the Rust serve loop in `envhub._envhub.serve_worker`, which speaks the s
 shared-memory protocol as the Rust `envhub-worker`: actions arrive as read-only numpy views
 of the request sample, each observation is copied once into the response sample.
 
+An adapter whose `make_vec` returns a vector env (one object stepping all of the worker's
+envs, as Isaac Lab and Gymnasium's `vector_entry_point` envs do) is served whole instead,
+through `envhub._envhub.serve_vector_worker` and `HostedVectorEnv`.
+
 Anything the envs print goes to stderr: stdout carries only the one ready line.
 """
 
@@ -26,55 +30,178 @@ from .config import EnvConfig
 from .hosted import all_adapters
 
 
+def _space_tree(desc: dict[str, Any]) -> Any:
+    return _tree(desc, json.loads(_envhub.space_leaves_json(json.dumps(desc))))
+
+
+def _write(node: Any, value: Any, buf: np.ndarray) -> None:
+    """Copies `value` into the bytes `buf` (last axis: one value's bytes; any leading axes,
+    such as a batch of envs, are kept), leaf by leaf."""
+    if isinstance(node, _Leaf):
+        dst = buf[..., node.offset : node.offset + node.nbytes].view(node.dtype).reshape(buf.shape[:-1] + node.shape)
+        dst[...] = value
+        return
+    kind, children = node
+    if kind == "dict":
+        for key, child in children:
+            _write(child, value[key], buf)
+    else:
+        for i, child in enumerate(children):
+            _write(child, value[i], buf)
+
+
+def _read(node: Any, buf: np.ndarray) -> Any:
+    """The value in the bytes `buf` (shaped as for `_write`), as numpy views of them."""
+    if isinstance(node, _Leaf):
+        return buf[..., node.offset : node.offset + node.nbytes].view(node.dtype).reshape(buf.shape[:-1] + node.shape)
+    kind, children = node
+    if kind == "dict":
+        return {key: _read(child, buf) for key, child in children}
+    return tuple(_read(child, buf) for child in children)
+
+
+def _rgb(frame: Any) -> tuple[int, int, bytes] | None:
+    if frame is None:
+        return None
+    a = np.ascontiguousarray(frame, dtype=np.uint8)
+    return int(a.shape[0]), int(a.shape[1]), a[..., :3].tobytes()
+
+
 class HostedEnv:
     """One env, as `serve_worker` drives it: results are written into the slots it gives."""
 
     def __init__(self, env: Any, obs_desc: dict[str, Any], act_desc: dict[str, Any]) -> None:
         self.env = env
-        self.obs_tree = _tree(obs_desc, json.loads(_envhub.space_leaves_json(json.dumps(obs_desc))))
-        self.act_tree = _tree(act_desc, json.loads(_envhub.space_leaves_json(json.dumps(act_desc))))
-
-    def _write(self, node: Any, value: Any, buf: np.ndarray) -> None:
-        if isinstance(node, _Leaf):
-            dst = buf[node.offset : node.offset + node.nbytes].view(node.dtype).reshape(node.shape)
-            dst[...] = value
-            return
-        kind, children = node
-        if kind == "dict":
-            for key, child in children:
-                self._write(child, value[key], buf)
-        else:
-            for i, child in enumerate(children):
-                self._write(child, value[i], buf)
-
-    def _read(self, node: Any, buf: np.ndarray) -> Any:
-        if isinstance(node, _Leaf):
-            return buf[node.offset : node.offset + node.nbytes].view(node.dtype).reshape(node.shape)
-        kind, children = node
-        if kind == "dict":
-            return {key: self._read(child, buf) for key, child in children}
-        return tuple(self._read(child, buf) for child in children)
+        self.obs_tree = _space_tree(obs_desc)
+        self.act_tree = _space_tree(act_desc)
 
     def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> str | None:
         obs, info = self.env.reset(seed=seed, options=json.loads(options) if options else None)
-        self._write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
+        _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
         return info_json(info)
 
     def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, str | None]:
-        act = self._read(self.act_tree, np.frombuffer(action, dtype=np.uint8))
+        act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8))
         obs, reward, terminated, truncated, info = self.env.step(act)
-        self._write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
+        _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
         return float(reward), bool(terminated), bool(truncated), info_json(info)
 
     def render_rgb(self) -> tuple[int, int, bytes] | None:
-        frame = self.env.render()
-        if frame is None:
-            return None
-        a = np.ascontiguousarray(frame, dtype=np.uint8)
-        return int(a.shape[0]), int(a.shape[1]), a[..., :3].tobytes()
+        return _rgb(self.env.render())
 
     def close(self) -> None:
         self.env.close()
+
+
+class HostedVectorEnv:
+    """A vector env (Gymnasium 1.x `VectorEnv` contract) holding all of a worker's envs, as
+    `serve_vector_worker` drives it. It steps every env at once and autoresets them itself, so
+    it is served only under the autoreset mode it declares. Each result is copied once, for
+    the whole batch, into the response block it is given; actions are numpy views of the
+    request block."""
+
+    def __init__(self, env: Any, env_id: str, obs_desc: dict[str, Any], act_desc: dict[str, Any]) -> None:
+        self.env = env
+        self.env_id = env_id
+        self.num_envs = int(env.num_envs)
+        self.obs_tree = _space_tree(obs_desc)
+        self.act_tree = _space_tree(act_desc)
+
+    def _rows(self, block: memoryview) -> np.ndarray:
+        """A block as `[num_envs, bytes of one env's value]`."""
+        return np.frombuffer(block, dtype=np.uint8).reshape(self.num_envs, -1)
+
+    def reset_into(
+        self, selected: list[bool], seeds: list[int | None], options: str | None, obs: memoryview
+    ) -> str | None:
+        mask = np.asarray(selected, dtype=np.bool_)
+        if not mask.any():
+            return None  # the session reset only other workers' envs
+        opts = json.loads(options) if options else {}
+        partial = not mask.all()
+        if partial:
+            opts["reset_mask"] = mask  # Gymnasium 1.x: reset only these envs
+        seed = _vector_seed(seeds, mask)
+        try:
+            values, info = self.env.reset(seed=seed, options=opts or None)
+        except Exception as e:
+            if partial:
+                raise RuntimeError(
+                    f"`{self.env_id}`'s vector env cannot reset some of its envs alone: it rejected "
+                    f"`options['reset_mask']` ({type(e).__name__}: {e})\n"
+                    "hint: reset every env at once (no `reset_mask`)"
+                ) from e
+            if isinstance(seed, list):
+                raise RuntimeError(
+                    f"`{self.env_id}`'s vector env rejected per-env seeds {seed} ({type(e).__name__}: {e})\n"
+                    "hint: reset with one int seed (env i gets seed + i, as Gymnasium does) or none"
+                ) from e
+            raise
+        if partial and "reset_mask" in opts:
+            # Gymnasium's vector envs take the mask out of the options; this one did not look.
+            raise RuntimeError(
+                f"`{self.env_id}`'s vector env ignored `options['reset_mask']` and reset all its "
+                f"{self.num_envs} envs: it cannot reset some of them alone\n"
+                "hint: reset every env at once (no `reset_mask`)"
+            )
+        _write(self.obs_tree, values, self._rows(obs))
+        return vector_info_json(info, self.num_envs)
+
+    def step_into(
+        self,
+        actions: memoryview,
+        obs: memoryview,
+        rewards: memoryview,
+        terminated: memoryview,
+        truncated: memoryview,
+        final_obs: memoryview | None,
+        final_mask: memoryview,
+    ) -> str | None:
+        values, reward, term, trunc, info = self.env.step(_read(self.act_tree, self._rows(actions)))
+        _write(self.obs_tree, values, self._rows(obs))
+        np.frombuffer(rewards, dtype=np.float64)[:] = reward
+        np.frombuffer(terminated, dtype=np.uint8)[:] = term
+        np.frombuffer(truncated, dtype=np.uint8)[:] = trunc
+        info = dict(info or {})
+        finals, has_final = info.pop("final_obs", None), info.pop("_final_obs", None)
+        if final_obs is not None and finals is not None and has_final is not None:
+            # same_step: the episode's last observation of each env that finished (absent
+            # when the simulator does not report it: that env's final mask stays 0).
+            rows, flags = self._rows(final_obs), np.frombuffer(final_mask, dtype=np.uint8)
+            for i in np.flatnonzero(has_final):
+                _write(self.obs_tree, _env_value(finals, int(i)), rows[i])
+                flags[i] = 1
+        return vector_info_json(info, self.num_envs)
+
+    def render_rgb(self, selected: list[bool]) -> list[tuple[int, int, bytes] | None]:
+        frames = self.env.render()
+        return [_rgb(None if frames is None else frames[i]) for i, s in enumerate(selected) if s]
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _vector_seed(seeds: list[int | None], mask: np.ndarray) -> int | list[int | None] | None:
+    """The `seed` argument of a vector env's reset: None when no env is seeded, one int when
+    the envs get `s, s + 1, ...` (what an int seed means to Gymnasium's vector envs, and what
+    `envhub`'s `reset(seed=s)` sends), else one seed (or None) per env."""
+    chosen = [s if m else None for s, m in zip(seeds, mask, strict=True)]
+    if all(s is None for s in chosen):
+        return None
+    first = chosen[0]
+    if first is not None and chosen == [first + i for i in range(len(chosen))]:
+        return first
+    return chosen
+
+
+def _env_value(batched: Any, i: int) -> Any:
+    """Env `i`'s value from a batched one: an object array of per-env values (Gymnasium's
+    `final_obs`), a batched array, or a dict/tuple of them."""
+    if isinstance(batched, dict):
+        return {k: _env_value(v, i) for k, v in batched.items()}
+    if isinstance(batched, tuple):
+        return tuple(_env_value(v, i) for v in batched)
+    return batched[i]
 
 
 def _info_value(v: Any) -> Any:
@@ -103,6 +230,44 @@ def info_json(info: dict[str, Any] | None) -> str | None:
         if value is not None:
             out[str(k)] = value
     return json.dumps(out) if out else None
+
+
+def _env_infos(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
+    """Gymnasium's batched vector info (`key`: a value per env, `_key`: which envs have it;
+    nested dicts alike) as one info dict per env. Values without a leading axis of `n`
+    describe the whole batch, not an env, and are left out."""
+    out: list[dict[str, Any]] = [{} for _ in range(n)]
+    for key, value in info.items():
+        key = str(key)
+        if key.startswith("_") and key[1:] in info:
+            continue
+        mask = info.get(f"_{key}")
+        if isinstance(value, dict):
+            for i, sub in enumerate(_env_infos(value, n)):
+                if sub and (mask is None or mask[i]):
+                    out[i][key] = sub
+            continue
+        if isinstance(value, np.ndarray):
+            batched = value.ndim > 0 and value.shape[0] == n
+        else:
+            batched = isinstance(value, (list, tuple)) and len(value) == n
+        if not batched:
+            continue
+        for i in range(n):
+            if mask is None or mask[i]:
+                v = _info_value(value[i])
+                if v is not None:
+                    out[i][key] = v
+    return out
+
+
+def vector_info_json(info: dict[str, Any] | None, n: int) -> str | None:
+    """A vector env's info as the info section (`[{...}, ...]`, one object per env, with
+    what `info_json` keeps), or None when no env has any."""
+    if not info:
+        return None
+    per_env = _env_infos(info, n)
+    return json.dumps(per_env) if any(per_env) else None
 
 
 def _has_time_limit(env: Any) -> bool:
@@ -139,8 +304,33 @@ def describe() -> list[dict[str, Any]]:
     return out
 
 
-def make_envs(job: dict[str, Any]) -> tuple[list[HostedEnv], dict[str, Any], dict[str, Any], int | None]:
-    """Creates a job's envs; raises with a message that names the adapter and env."""
+def _vector_autoreset_mode(env: Any, env_id: str, session_mode: str) -> None:
+    """Raises unless the vector env declares the session's autoreset mode: it resets its
+    envs itself, so the worker cannot serve another mode without misreporting episodes."""
+    from .vector import _RUST_MODES, _autoreset_mode
+
+    declared = (getattr(env, "metadata", None) or {}).get("autoreset_mode")
+    if declared is None:
+        raise ValueError(
+            f"`{env_id}`'s vector env ({type(env).__name__}) declares no `metadata['autoreset_mode']`, "
+            "so when it resets finished envs is unknown\nhint: set `metadata['autoreset_mode']` to a "
+            "`gymnasium.vector.AutoresetMode` in the vector env (or in its adapter's wrapper)"
+        )
+    own = _RUST_MODES[_autoreset_mode(declared)]
+    if own != session_mode:
+        raise ValueError(
+            f"`{env_id}`'s vector env autoresets `{own}` (its metadata['autoreset_mode']), but this "
+            f"session asks for `{session_mode}`; it resets its envs itself, so the worker cannot change that\n"
+            f'hint: make the session with autoreset_mode="{own}", e.g. envhub.make_vec(id, n, autoreset_mode="{own}")'
+        )
+
+
+def make_batch(
+    job: dict[str, Any],
+) -> tuple[list[HostedEnv] | HostedVectorEnv, dict[str, Any], dict[str, Any], int | None]:
+    """Creates a job's envs: the adapter's vector env for all of them when its `make_vec`
+    returns one, else one `make` per env. Raises with a message that names the adapter and
+    env."""
     name, env_id = job["adapter"], job["env_id"]
     found = [a for a, n, _ in all_adapters() if a is not None and n == name]
     if not found:
@@ -151,18 +341,38 @@ def make_envs(job: dict[str, Any]) -> tuple[list[HostedEnv], dict[str, Any], dic
     if not ok:
         raise RuntimeError(f"adapter `{name}` is unavailable: {reason}\nhint: {hint}")
     c = job["config"]
+    num_envs = int(job["num_envs"])
     config = EnvConfig(
         render_mode=c.get("render_mode"),
         seed=c.get("seed"),
         max_episode_steps=c.get("max_episode_steps"),
-        num_envs=c.get("num_envs", 1),
+        num_envs=num_envs,
         asset_path=c.get("asset_path"),
         extra=dict(c.get("extra") or {}),
         workers=c.get("workers"),
         autoreset_mode=c.get("autoreset_mode", "next_step"),
     )
+    vector = adapter.make_vec(env_id, config)
+    if vector is not None:
+        try:
+            got = int(vector.num_envs)
+            if got != num_envs:
+                raise ValueError(
+                    f"`{name}.make_vec` returned a vector env of {got} envs for a worker of {num_envs}\n"
+                    "hint: build it with `num_envs=config.num_envs`"
+                )
+            _vector_autoreset_mode(vector, env_id, config.autoreset_mode)
+            obs_desc = from_gymnasium(vector.single_observation_space)
+            act_desc = from_gymnasium(vector.single_action_space)
+        except BaseException:
+            vector.close()
+            raise
+        spec = getattr(vector, "spec", None)
+        limit = config.max_episode_steps or getattr(spec, "max_episode_steps", None)
+        hosted = HostedVectorEnv(vector, env_id, obs_desc, act_desc)
+        return hosted, obs_desc, act_desc, limit
     raw = []
-    for _ in range(int(job["num_envs"])):
+    for _ in range(num_envs):
         env = adapter.make(env_id, config)
         if config.max_episode_steps and not _has_time_limit(env):
             import gymnasium as gym
@@ -183,13 +393,17 @@ def serve(job_json: str) -> int:
     sys.stdout = sys.stderr
     job = json.loads(job_json)
     try:
-        envs, obs_desc, act_desc, limit = make_envs(job)
+        batch, obs_desc, act_desc, limit = make_batch(job)
     except Exception as e:  # noqa: BLE001 - reported to the client, with the traceback
         detail = "".join(traceback.format_exception(e)).rstrip()
         message = f"cannot make `{job.get('env_id')}` with adapter `{job.get('adapter')}`: {e}\n{detail}"
         os.write(reply_fd, (json.dumps({"error": message}) + "\n").encode())
         return 0
-    _envhub.serve_worker(job_json, json.dumps(obs_desc), json.dumps(act_desc), limit, envs, reply_fd)
+    spaces = (json.dumps(obs_desc), json.dumps(act_desc))
+    if isinstance(batch, HostedVectorEnv):
+        _envhub.serve_vector_worker(job_json, *spaces, limit, batch, reply_fd)
+    else:
+        _envhub.serve_worker(job_json, *spaces, limit, batch, reply_fd)
     return 0
 
 

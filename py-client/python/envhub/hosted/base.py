@@ -28,6 +28,10 @@ class EnvAdapter:
     Gymnasium contract (`reset`, `step`, `observation_space`, `action_space`, `close`), and
     optionally `list_envs()` (ids it implements; empty: it takes any id of its frameworks).
     Override `availability()` when a module check is not enough (a GPU, a licence).
+
+    A simulator that holds many envs in one object and steps them together (Isaac Lab,
+    Gymnasium's `vector_entry_point` envs) implements `make_vec(env_id, config)` too: the
+    worker then serves that one object as its whole batch of `config.num_envs` envs.
     """
 
     name: ClassVar[str] = ""
@@ -50,6 +54,22 @@ class EnvAdapter:
         """A new env (Gymnasium contract) for `env_id`, configured by `config`
         (`envhub.EnvConfig`)."""
         raise NotImplementedError(f"adapter `{self.name}` does not implement make()")
+
+    def make_vec(self, env_id: str, config: Any) -> Any:
+        """One vector env holding all `config.num_envs` envs of the worker, or None (the
+        default) for one `make` per env.
+
+        The object follows Gymnasium 1.x's `VectorEnv` contract: `num_envs` (equal to
+        `config.num_envs`), `single_observation_space`, `single_action_space`,
+        `reset(seed=..., options=...)` and `step(actions)` on arrays with a leading axis of
+        `num_envs` (Dict observations as dicts of such arrays), batched `info` (`key` and
+        `_key` mask), `close()`, optionally `render()`. It autoresets its envs itself and
+        must say how in `metadata["autoreset_mode"]` (a `gymnasium.vector.AutoresetMode`):
+        the worker serves it only to sessions with that mode, and fills same_step final
+        observations from `info["final_obs"]`/`info["_final_obs"]`. It must apply
+        `config.max_episode_steps` itself (the worker cannot wrap it in `TimeLimit`).
+        """
+        return None
 
     def list_envs(self) -> list[str]:
         """Env ids this adapter implements (empty: any id of its frameworks)."""

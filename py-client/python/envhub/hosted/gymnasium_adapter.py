@@ -44,6 +44,47 @@ class GymnasiumAdapter(EnvAdapter):
         return gym.make(env_id, render_mode=config.render_mode, max_episode_steps=limit, **kwargs)
 
 
+    def make_vec(self, env_id: str, config: Any) -> Any:
+        """With `vectorization_mode: vector_entry_point` in the entry's `kwargs`: the id's own
+        vector env (`gymnasium.make_vec(..., vectorization_mode="vector_entry_point")`, e.g.
+        `CartPoleVectorEnv`) holding all of the worker's envs; else None (one `make` per env)."""
+        if "vectorization_mode" not in config.extra:
+            return None
+        kwargs = dict(config.extra)
+        mode = kwargs.pop("vectorization_mode")
+        if mode != VECTOR_ENTRY_POINT:
+            raise ValueError(
+                f"invalid `vectorization_mode` {mode!r} for `{env_id}`; the only valid value is "
+                f"`{VECTOR_ENTRY_POINT}` (the id's own vector env serves all of a worker's envs; "
+                "`sync`/`async` are what the worker does anyway with one env per instance)\n"
+                f"hint: set `vectorization_mode: {VECTOR_ENTRY_POINT}` in the entry's kwargs, or remove it"
+            )
+        import gymnasium as gym
+
+        spec = gym.registry.get(env_id)
+        if spec is None or spec.vector_entry_point is None:
+            with_entry = sorted(
+                i for i, s in gym.registry.items() if s.vector_entry_point is not None and s.namespace != "envhub"
+            )
+            raise LookupError(
+                f"`{env_id}` has no vector entry point in Gymnasium's registry, so "
+                f"`vectorization_mode: {VECTOR_ENTRY_POINT}` cannot apply\n"
+                f"hint: ids with one: {', '.join(with_entry)}; or remove `vectorization_mode` from the "
+                "entry's kwargs to host one env per instance"
+            )
+        # Passed only when set: a vector entry point need not take them.
+        if config.render_mode is not None:
+            kwargs["render_mode"] = config.render_mode
+        if config.max_episode_steps:
+            kwargs["max_episode_steps"] = config.max_episode_steps
+        return gym.make_vec(env_id, num_envs=config.num_envs, vectorization_mode=VECTOR_ENTRY_POINT, **kwargs)
+
+
+#: The `vectorization_mode` (entry `kwargs`) that makes `GymnasiumAdapter.make_vec` serve the
+#: id's own vector env.
+VECTOR_ENTRY_POINT = "vector_entry_point"
+
+
 def _from_robotics(spec: Any) -> bool:
     entry = spec.entry_point
     module = entry if isinstance(entry, str) else getattr(entry, "__module__", "")

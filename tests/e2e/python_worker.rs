@@ -1,0 +1,241 @@
+//! The Python worker (`python -m envhub.worker`) driven through the Rust hub: Gymnasium envs
+//! pinned to it step bit for bit like the native adapters, and a Python exception or a
+//! killed Python worker reaches the client as an error while the hub goes on.
+//!
+//! Each test skips (with the reason) when the interpreter the hub uses cannot import the
+//! compiled `envhub._envhub`, unless `ENVHUB_PY_REQUIRED` is set.
+
+use envhub::env_vars::ENVHUB_ADAPTERS;
+use envhub::{EnvConfig, HubError, Registry, VecEnv};
+use envhub_e2e::{PyModule, TestHub, python_worker_available};
+use rand::SeedableRng;
+use std::time::{Duration, Instant};
+
+/// Entries pinned to the Python host, beside the built-in (native) ones.
+const REGISTRY: &str = "
+environments:
+  - id: py-cartpole
+    name: CartPole in the Python worker
+    framework: gymnasium
+    env_id: CartPole-v1
+    adapter: gymnasium
+    robot_type: custom
+    env_type: floor
+  - id: py-half-cheetah
+    name: HalfCheetah in the Python worker
+    framework: gymnasium
+    env_id: HalfCheetah-v5
+    adapter: gymnasium
+    robot_type: biped
+    env_type: floor
+  - id: py-boom
+    name: An env that raises in step
+    framework: e2e_boom
+    env_id: Boom-v0
+    robot_type: custom
+    env_type: floor
+";
+
+/// A user adapter whose env raises in `step` on action 1.
+const BOOM_ADAPTER: &str = r#"
+import gymnasium as gym
+import numpy as np
+
+import envhub
+
+
+class BoomEnv(gym.Env):
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.zeros(1, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        if int(action) == 1:
+            raise ValueError(f"boom: action 1 at step {self.t}")
+        return np.array([self.t], np.float32), 1.0, False, False, {}
+
+
+class BoomAdapter(envhub.EnvAdapter):
+    name = "e2e_boom"
+    frameworks = ["e2e_boom"]
+    requires = ["gymnasium"]
+    description = "raises in step on action 1"
+
+    def make(self, env_id, config):
+        return BoomEnv()
+"#;
+
+fn hub(name: &str) -> TestHub {
+    let mut registry = Registry::builtin();
+    registry
+        .add_yaml(REGISTRY, "python_worker.yaml", &std::env::temp_dir())
+        .unwrap();
+    TestHub::over(name, registry, |_| {})
+}
+
+fn workers(n: usize) -> EnvConfig {
+    EnvConfig {
+        workers: Some(n),
+        ..EnvConfig::default()
+    }
+}
+
+/// Steps `native` and `python` with the same seeds and random actions and asserts every
+/// observation byte, reward and flag is equal; returns the episodes that ended.
+fn assert_same_rollout(mut native: VecEnv, mut python: VecEnv, steps: usize) -> usize {
+    let id = python.id().to_string();
+    assert_eq!(python.route().adapter, "gymnasium", "{id} runs in Python");
+    assert_ne!(native.route().adapter, "gymnasium", "{id}'s twin is native");
+    assert_eq!(python.num_workers(), 2);
+    assert_eq!(native.action_space(), python.action_space(), "{id}");
+    let n = native.num_envs();
+    let ob = native.observation_space().byte_len();
+    assert_eq!(python.observation_space().byte_len(), ob, "{id}");
+    let same_obs = |a: &[u8], b: &[u8], when: &str| {
+        for i in 0..n {
+            assert_eq!(
+                a[i * ob..(i + 1) * ob],
+                b[i * ob..(i + 1) * ob],
+                "{id}: obs of env {i} {when}"
+            );
+        }
+    };
+    let a = native.reset(Some(42)).unwrap().obs.to_vec();
+    same_obs(&a, python.reset(Some(42)).unwrap().obs, "after reset");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let mut episodes = 0;
+    for step in 0..steps {
+        let actions = native.sample_actions(&mut rng);
+        let a = native.step(&actions).unwrap();
+        let b = python.step(&actions).unwrap();
+        same_obs(a.obs, b.obs, &format!("at step {step}"));
+        assert_eq!(a.rewards, b.rewards, "{id}: rewards at step {step}");
+        assert_eq!(
+            a.terminated, b.terminated,
+            "{id}: terminated at step {step}"
+        );
+        assert_eq!(a.truncated, b.truncated, "{id}: truncated at step {step}");
+        episodes += a.terminated.iter().filter(|d| **d).count();
+    }
+    native.close();
+    python.close();
+    episodes
+}
+
+#[test]
+fn gymnasium_envs_in_the_python_worker_match_the_native_adapters() {
+    if !python_worker_available(
+        "python_worker::gymnasium_envs_in_the_python_worker_match_the_native_adapters",
+    ) {
+        return;
+    }
+    let t = hub("pymatch");
+    let native = t.hub.make_vec("gym-cartpole", 4, &workers(2)).unwrap();
+    let python = t.hub.make_vec("py-cartpole", 4, &workers(2)).unwrap();
+    // Episodes end, so the autoreset of both hosts is compared too.
+    assert!(assert_same_rollout(native, python, 300) > 0);
+    let native = t
+        .hub
+        .make_vec("mujoco-half-cheetah", 2, &workers(2))
+        .unwrap();
+    let python = t.hub.make_vec("py-half-cheetah", 2, &workers(2)).unwrap();
+    assert_same_rollout(native, python, 200);
+}
+
+#[test]
+fn a_python_exception_names_the_env_and_carries_the_traceback() {
+    if !python_worker_available(
+        "python_worker::a_python_exception_names_the_env_and_carries_the_traceback",
+    ) {
+        return;
+    }
+    let module = PyModule::write("pyboom", "e2e_boom_adapter", BOOM_ADAPTER);
+    // The hub passes its own environment to the workers it starts; no other test in this
+    // process (nextest runs each in its own) reads it while it changes.
+    unsafe {
+        std::env::set_var(ENVHUB_ADAPTERS, "e2e_boom_adapter:BoomAdapter");
+        std::env::set_var("PYTHONPATH", module.pythonpath());
+    }
+    envhub::refresh_adapters();
+    let t = hub("pyboom");
+    let mut other = t.hub.make_vec("py-cartpole", 2, &workers(1)).unwrap();
+    other.reset(Some(0)).unwrap();
+    let mut env = t.hub.make_vec("py-boom", 2, &workers(1)).unwrap();
+    assert_eq!(env.route().adapter, "e2e_boom");
+    env.reset(Some(0)).unwrap();
+    env.step_i64(&[0, 0]).unwrap();
+    let err = env.step_i64(&[0, 1]).unwrap_err();
+    let HubError::EnvFailed { worker: 0, message } = &err else {
+        panic!("expected EnvFailed from worker 0, got {err}");
+    };
+    for needle in [
+        "`Boom-v0`",
+        "raised in `step`",
+        "Traceback (most recent call last)",
+        "e2e_boom_adapter.py",
+        "ValueError: boom: action 1 at step 2",
+    ] {
+        assert!(message.contains(needle), "no {needle:?} in: {message}");
+    }
+    // The worker outlives the exception; the other session and new ones go on.
+    env.step_i64(&[0, 0]).unwrap();
+    other.step_i64(&[1, 0]).unwrap();
+    let mut fresh = t.hub.make_vec("py-boom", 1, &workers(1)).unwrap();
+    fresh.reset(Some(1)).unwrap();
+    assert_eq!(fresh.step_i64(&[0]).unwrap().rewards, [1.0]);
+}
+
+#[test]
+fn a_killed_python_worker_is_worker_died_within_a_second() {
+    if !python_worker_available(
+        "python_worker::a_killed_python_worker_is_worker_died_within_a_second",
+    ) {
+        return;
+    }
+    let t = hub("pykill");
+    let mut env = t.hub.make_vec("py-cartpole", 4, &workers(2)).unwrap();
+    let mut other = t.hub.make_vec("py-cartpole", 2, &workers(1)).unwrap();
+    other.reset(Some(0)).unwrap();
+    env.reset(Some(0)).unwrap();
+    let actions = [0i64, 1, 1, 0];
+    for _ in 0..20 {
+        env.step_i64(&actions).unwrap();
+    }
+    let victim = env.worker_pids()[1];
+    let killed = std::process::Command::new("kill")
+        .args(["-9", &victim.to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let start = Instant::now();
+    let err = loop {
+        match env.step_i64(&actions) {
+            Ok(_) => assert!(
+                start.elapsed() < Duration::from_secs(1),
+                "no error within 1 s"
+            ),
+            Err(e) => break e,
+        }
+    };
+    let took = start.elapsed();
+    assert!(took < Duration::from_secs(1), "detected after {took:?}");
+    match &err {
+        HubError::WorkerDied {
+            worker, pid, why, ..
+        } => {
+            assert_eq!((*worker, *pid), (1, victim));
+            assert!(why.contains("signal: 9"), "{why}");
+        }
+        other => panic!("expected WorkerDied, got {other}"),
+    }
+    assert!(matches!(
+        env.step_i64(&actions),
+        Err(HubError::InvalidState(_))
+    ));
+    other.step_i64(&[0, 1]).unwrap();
+}
