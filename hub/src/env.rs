@@ -57,6 +57,12 @@ impl Env {
         self.inner.max_episode_steps()
     }
 
+    /// Frames per second of the env's rendering (Gymnasium's `metadata["render_fps"]`), if
+    /// the env says.
+    pub fn render_fps(&self) -> Option<f64> {
+        self.inner.render_fps()
+    }
+
     /// Starts an episode: returns the first observation and the info.
     pub fn reset(
         &mut self,

@@ -343,6 +343,12 @@ impl VecEnv {
         self.workers[0].spec.max_episode_steps
     }
 
+    /// Frames per second of the envs' rendering (Gymnasium's `metadata["render_fps"]`), if
+    /// the env says.
+    pub fn render_fps(&self) -> Option<f64> {
+        self.workers[0].spec.render_fps
+    }
+
     /// Autoreset mode.
     pub fn autoreset_mode(&self) -> AutoresetMode {
         self.route.config.autoreset_mode

@@ -232,6 +232,7 @@ pub(crate) struct Session {
     num_workers: usize,
     worker_pids: Vec<u32>,
     max_episode_steps: Option<u32>,
+    render_fps: Option<f64>,
     autoreset_mode: String,
     observation_space: String,
     action_space: String,
@@ -331,6 +332,7 @@ pub(crate) fn make_session(
         num_workers: v.num_workers(),
         worker_pids: v.worker_pids(),
         max_episode_steps: v.max_episode_steps(),
+        render_fps: v.render_fps(),
         autoreset_mode: serde_json::to_value(v.autoreset_mode())
             .ok()
             .and_then(|m| m.as_str().map(str::to_string))
@@ -694,6 +696,13 @@ impl Session {
     #[getter]
     fn max_episode_steps(&self) -> Option<u32> {
         self.max_episode_steps
+    }
+
+    /// Frames per second of the envs' rendering (Gymnasium's `metadata["render_fps"]`), if
+    /// the env says.
+    #[getter]
+    fn render_fps(&self) -> Option<f64> {
+        self.render_fps
     }
 
     /// `next_step`, `same_step` or `disabled`.

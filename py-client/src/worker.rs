@@ -342,6 +342,7 @@ fn job_and_spec(
     observation_space: &str,
     action_space: &str,
     max_episode_steps: Option<u32>,
+    render_fps: Option<f64>,
 ) -> PyResult<(WorkerJob, ReadySpec)> {
     let job: WorkerJob = serde_json::from_str(job_json)
         .map_err(|e| PyValueError::new_err(format!("invalid job: {e}")))?;
@@ -349,6 +350,7 @@ fn job_and_spec(
         observation_space: parse_space("observation", observation_space)?,
         action_space: parse_space("action", action_space)?,
         max_episode_steps,
+        render_fps,
         pid: std::process::id(),
     };
     Ok((job, ready))
@@ -384,10 +386,15 @@ fn serve(
 
 /// Serves `envs` (wrappers made by `envhub.worker`) for the job `job_json` until the client
 /// closes the session or exits: prints the ready line on the file descriptor `reply_fd`,
-/// then answers requests. `max_episode_steps` is the limit the envs apply themselves
-/// (reported to the client). Releases the GIL while waiting for requests.
+/// then answers requests. `max_episode_steps` is the limit the envs apply themselves and
+/// `render_fps` their `metadata["render_fps"]` (both reported to the client). Releases the
+/// GIL while waiting for requests.
 #[pyfunction]
-#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, envs, reply_fd))]
+#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, envs, reply_fd, render_fps=None))]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the Python function's parameters, one each"
+)]
 pub(crate) fn serve_worker(
     py: Python<'_>,
     job_json: &str,
@@ -396,8 +403,15 @@ pub(crate) fn serve_worker(
     max_episode_steps: Option<u32>,
     envs: Vec<Py<PyAny>>,
     reply_fd: i32,
+    render_fps: Option<f64>,
 ) -> PyResult<()> {
-    let (job, ready) = job_and_spec(job_json, observation_space, action_space, max_episode_steps)?;
+    let (job, ready) = job_and_spec(
+        job_json,
+        observation_space,
+        action_space,
+        max_episode_steps,
+        render_fps,
+    )?;
     let batch: Vec<Box<dyn Env>> = envs
         .into_iter()
         .map(|env| {
@@ -417,7 +431,11 @@ pub(crate) fn serve_worker(
 /// envs (its `num_envs`; the loop refuses a count that is not the job's): it steps them
 /// together and autoresets them itself.
 #[pyfunction]
-#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, vector_env, reply_fd))]
+#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, vector_env, reply_fd, render_fps=None))]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the Python function's parameters, one each"
+)]
 pub(crate) fn serve_vector_worker(
     py: Python<'_>,
     job_json: &str,
@@ -426,8 +444,15 @@ pub(crate) fn serve_vector_worker(
     max_episode_steps: Option<u32>,
     vector_env: Py<PyAny>,
     reply_fd: i32,
+    render_fps: Option<f64>,
 ) -> PyResult<()> {
-    let (job, ready) = job_and_spec(job_json, observation_space, action_space, max_episode_steps)?;
+    let (job, ready) = job_and_spec(
+        job_json,
+        observation_space,
+        action_space,
+        max_episode_steps,
+        render_fps,
+    )?;
     let num_envs: usize = vector_env.getattr(py, "num_envs")?.extract(py)?;
     let batch = PyVectorEnv {
         env: vector_env,

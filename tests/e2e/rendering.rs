@@ -45,3 +45,33 @@ fn frames_come_through_the_hub() {
     cart.reset(Some(0), &ResetOptions::new()).unwrap();
     assert!(cart.render().unwrap().is_none());
 }
+
+/// Each env's frame rate (Gymnasium's `metadata["render_fps"]`) comes through the worker's
+/// ready line to the client: the classic envs' constants, MuJoCo's `round(1 / dt)`.
+#[test]
+fn render_fps_reaches_the_client() {
+    let t = TestHub::new("render_fps");
+    for (id, fps) in [("gym-cartpole", 50.0), ("gym-acrobot", 15.0)] {
+        let env = t.hub.make(id, &EnvConfig::default()).unwrap();
+        assert_eq!(env.render_fps(), Some(fps), "{id}");
+    }
+    let config = EnvConfig {
+        workers: Some(2),
+        ..EnvConfig::default()
+    };
+    let envs = t.hub.make_vec("gym-pendulum", 4, &config).unwrap();
+    assert_eq!(envs.render_fps(), Some(30.0));
+
+    let adapters = t.hub.adapters().unwrap();
+    let mujoco = adapters.iter().find(|a| a.name == "mujoco").unwrap();
+    if !mujoco.availability.is_available() {
+        eprintln!("skipped the MuJoCo part: {:?}", mujoco.availability);
+        return;
+    }
+    let hopper = t.hub.make("mujoco-hopper", &EnvConfig::default()).unwrap();
+    assert_eq!(hopper.render_fps(), Some(125.0)); // dt = 0.002 s × 4
+    let mut config = EnvConfig::default();
+    config.extra.insert("frame_skip".into(), 2.into());
+    let hopper = t.hub.make("mujoco-hopper", &config).unwrap();
+    assert_eq!(hopper.render_fps(), Some(250.0));
+}

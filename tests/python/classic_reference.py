@@ -5,8 +5,8 @@ Gymnasium env with the seed, then takes random actions; before every step it rec
 internal state (`env.unwrapped.state`), and after it the action, observation, reward and
 `terminated`. On termination, or after the run's episode length limit (as `TimeLimit` would
 truncate), it resets again without a seed (the env's generator continues, as in a real episode
-loop) and records the new initial state under `reset_state`. It prints one JSON document on
-stdout.
+loop) and records the new initial state under `reset_state`. Each run also records the env's
+`metadata["render_fps"]`. It prints one JSON document on stdout.
 
 Run by `adapters/classic/tests/gymnasium_parity.rs`; by hand:
     python tests/python/classic_reference.py [--steps N] > reference.json
@@ -89,6 +89,7 @@ def record(
     return {
         "env_id": env_id,
         "kwargs": kwargs,
+        "render_fps": env.metadata["render_fps"],
         "options": options or {},
         "seed": seed,
         "reset_state": reset_state,

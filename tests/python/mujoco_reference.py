@@ -5,7 +5,8 @@ Gymnasium's `TimeLimit` truncates), resets it with the seed and records the init
 observation and state (`qpos`, `qvel`), then takes random float32 actions uniform in the action
 space, recording per step the action, observation, reward, `terminated` and `truncated`. When an
 episode ends it resets without a seed (the generator continues, as in a real episode loop) and
-records the new initial observation and state.
+records the new initial observation and state. Each run also records the env's
+`metadata["render_fps"]`.
 
 A run with `"set_state": true` instead starts from a state it sets itself after the seeded reset
 (the seeded one, perturbed), through `MujocoEnv.set_state`: the Rust side passes that state as
@@ -86,7 +87,8 @@ def record(env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool) ->
     rng = np.random.default_rng(seed + 1000)
     obs, _ = env.reset(seed=seed)
     run = {"env_id": env_id, "kwargs": kwargs, "seed": seed,
-           "max_episode_steps": env.spec.max_episode_steps}
+           "max_episode_steps": env.spec.max_episode_steps,
+           "render_fps": env.metadata["render_fps"]}
     if set_state:
         qpos = raw.data.qpos.copy() + 0.01 * rng.standard_normal(raw.model.nq)
         qvel = raw.data.qvel.copy() + 0.1 * rng.standard_normal(raw.model.nv)

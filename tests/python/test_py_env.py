@@ -183,3 +183,77 @@ def test_render_rgb_array():
     with pytest.raises(envhub.MakeError, match="render"):
         envhub.make("gym-cartpole", render_mode="rgb_array")
     assert envhub.make("gym-cartpole").render() is None
+
+
+@pytest.mark.parametrize(
+    ("entry_id", "gym_id"),
+    [
+        ("gym-cartpole", "CartPole-v1"),
+        ("gym-pendulum", "Pendulum-v1"),
+        ("gym-mountain-car", "MountainCar-v0"),
+        ("gym-mountain-car-continuous", "MountainCarContinuous-v0"),
+        ("gym-acrobot", "Acrobot-v1"),
+        ("mujoco-hopper", "Hopper-v5"),
+        ("mujoco-ant", "Ant-v5"),
+        ("mujoco-reacher", "Reacher-v5"),
+    ],
+)
+def test_render_fps_is_gymnasiums(entry_id, gym_id):
+    """`metadata["render_fps"]` (what video writers and `HumanRendering` read) is Gymnasium's,
+    on `envhub.make`, `gymnasium.make("envhub/...")` and `envhub.make_vec`."""
+    env = _runnable_or_skip(entry_id)
+    try:
+        want = gymnasium.make(gym_id).metadata["render_fps"]
+        assert env.metadata["render_fps"] == want
+        assert type(env.metadata["render_fps"]) is int
+    finally:
+        env.close()
+    env = gymnasium.make(f"envhub/{entry_id}")
+    try:
+        assert env.metadata["render_fps"] == want
+    finally:
+        env.close()
+    envs = envhub.make_vec(entry_id, 2, num_workers=1)
+    try:
+        assert envs.metadata["render_fps"] == want
+    finally:
+        envs.close()
+
+
+def test_render_fps_follows_frame_skip():
+    """MuJoCo's rate is `round(1 / dt)`, and `dt` grows with `frame_skip`."""
+    env = _runnable_or_skip("mujoco-hopper")
+    env.close()
+    env = envhub.make("mujoco-hopper", frame_skip=2)
+    try:
+        want = gymnasium.make("Hopper-v5", frame_skip=2).metadata["render_fps"]
+        assert env.metadata["render_fps"] == want == 250
+    finally:
+        env.close()
+
+
+def test_rendering_wrappers_accept_envhub_envs(tmp_path):
+    """`HumanRendering` needs `render_fps`; `RecordVideo` writes its video at that rate."""
+    if "mujoco" not in envhub.AdapterRegistry().list_available():
+        pytest.skip("envhub's MuJoCo adapter is not available here")
+    env = envhub.make("mujoco-reacher", render_mode="rgb_array", width=64, height=64)
+    try:
+        human = gymnasium.wrappers.HumanRendering(env)  # raises without `render_fps`
+        assert human.metadata["render_fps"] == 50
+    finally:
+        env.close()
+    pytest.importorskip("moviepy", reason="RecordVideo needs moviepy")
+    videos = tmp_path / "videos"
+    env = gymnasium.wrappers.RecordVideo(
+        envhub.make("mujoco-reacher", render_mode="rgb_array", width=64, height=64),
+        str(videos),
+        episode_trigger=lambda _: True,
+    )
+    try:
+        assert env.frames_per_sec == 50
+        env.reset(seed=0)
+        for _ in range(10):
+            env.step(env.action_space.sample())
+    finally:
+        env.close()
+    assert list(videos.glob("*.mp4")), "no video written"

@@ -134,6 +134,27 @@ def test_cartpole_native_and_python_hosted_agree(registry):
         hosted.close()
 
 
+def test_render_fps_of_python_hosted_envs(registry, user_adapters):
+    """A Python-hosted env's `metadata["render_fps"]` reaches the client (from the worker's
+    ready line); an env that declares none has no `render_fps`."""
+    want = gymnasium.make("CartPole-v1").metadata["render_fps"]
+    env = envhub.make("cp-python", registry=registry)
+    try:
+        assert env.metadata["render_fps"] == want
+    finally:
+        env.close()
+    envs = envhub.make_vec("cp-python", 4, registry=registry, num_workers=2)
+    try:
+        assert envs.metadata["render_fps"] == want
+    finally:
+        envs.close()
+    env = envhub.make("mysim-echo", registry=registry)
+    try:
+        assert "render_fps" not in env.metadata
+    finally:
+        env.close()
+
+
 def test_max_episode_steps_from_the_entry(registry):
     env = envhub.make("cp-python-short", registry=registry)
     try:

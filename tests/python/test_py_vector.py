@@ -70,6 +70,7 @@ def test_spaces_and_metadata():
         assert envs.observation_space.shape == (4, 3)
         assert envs.action_space.shape == (4, 1)
         assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+        assert envs.metadata["render_fps"] == gymnasium.make("Pendulum-v1").metadata["render_fps"]
         obs, info = envs.reset(seed=0)
         assert obs in envs.observation_space and info == {}
         obs, rewards, terminated, truncated, info = envs.step(envs.action_space.sample())

@@ -10,6 +10,10 @@ use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transitio
 use std::f64::consts::PI;
 
 const ID: &str = "Acrobot-v1";
+
+/// Gymnasium's `metadata["render_fps"]`.
+const RENDER_FPS: f64 = 15.0;
+
 const OPTIONS: &[&str] = &[];
 const STATE_NAMES: &[&str] = &["theta1", "theta2", "dtheta1", "dtheta2"];
 
@@ -120,6 +124,10 @@ impl Env for Acrobot {
 
     fn action_space(&self) -> &Space {
         &self.action_space
+    }
+
+    fn render_fps(&self) -> Option<f64> {
+        Some(RENDER_FPS)
     }
 
     fn reset(

@@ -8,6 +8,10 @@ use crate::rng::{NumpyRng, reseed};
 use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 
 const ID: &str = "CartPole-v1";
+
+/// Gymnasium's `metadata["render_fps"]`.
+const RENDER_FPS: f64 = 50.0;
+
 const OPTIONS: &[&str] = &["sutton_barto_reward"];
 const STATE_NAMES: &[&str] = &["x", "x_dot", "theta", "theta_dot"];
 
@@ -82,6 +86,10 @@ impl Env for CartPole {
 
     fn action_space(&self) -> &Space {
         &self.action_space
+    }
+
+    fn render_fps(&self) -> Option<f64> {
+        Some(RENDER_FPS)
     }
 
     fn reset(

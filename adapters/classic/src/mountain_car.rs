@@ -8,6 +8,10 @@ use crate::rng::{NumpyRng, reseed};
 use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 
 const ID: &str = "MountainCar-v0";
+
+/// Gymnasium's `metadata["render_fps"]`.
+const RENDER_FPS: f64 = 30.0;
+
 const OPTIONS: &[&str] = &["goal_velocity"];
 const STATE_NAMES: &[&str] = &["position", "velocity"];
 
@@ -69,6 +73,10 @@ impl Env for MountainCar {
 
     fn action_space(&self) -> &Space {
         &self.action_space
+    }
+
+    fn render_fps(&self) -> Option<f64> {
+        Some(RENDER_FPS)
     }
 
     fn reset(

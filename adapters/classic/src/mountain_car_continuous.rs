@@ -10,6 +10,10 @@ use crate::rng::{NumpyRng, reseed};
 use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 
 const ID: &str = "MountainCarContinuous-v0";
+
+/// Gymnasium's `metadata["render_fps"]`.
+const RENDER_FPS: f64 = 30.0;
+
 const OPTIONS: &[&str] = &["goal_velocity"];
 const STATE_NAMES: &[&str] = &["position", "velocity"];
 
@@ -125,6 +129,10 @@ impl Env for MountainCarContinuous {
 
     fn action_space(&self) -> &Space {
         &self.action_space
+    }
+
+    fn render_fps(&self) -> Option<f64> {
+        Some(RENDER_FPS)
     }
 
     fn reset(

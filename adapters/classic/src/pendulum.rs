@@ -10,6 +10,10 @@ use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transitio
 use std::f64::consts::PI;
 
 const ID: &str = "Pendulum-v1";
+
+/// Gymnasium's `metadata["render_fps"]`.
+const RENDER_FPS: f64 = 30.0;
+
 const OPTIONS: &[&str] = &["g"];
 const STATE_NAMES: &[&str] = &["theta", "theta_dot"];
 
@@ -83,6 +87,10 @@ impl Env for Pendulum {
 
     fn action_space(&self) -> &Space {
         &self.action_space
+    }
+
+    fn render_fps(&self) -> Option<f64> {
+        Some(RENDER_FPS)
     }
 
     fn reset(

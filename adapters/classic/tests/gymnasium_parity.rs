@@ -5,7 +5,8 @@
 //! observation, reward and `terminated` after it, with a fresh initial state whenever an
 //! episode ends. This test replays them: the same seed must give the same initial states (NumPy's
 //! generator is reproduced bit for bit), and the same actions the same observations (within
-//! float32 rounding), rewards (within 1e-9 relative) and terminations.
+//! float32 rounding), rewards (within 1e-9 relative) and terminations; `render_fps` must be the
+//! env's `metadata["render_fps"]`.
 //!
 //! With the same C library as NumPy (glibc on Linux), every step is bit-identical (the summary
 //! printed with `--nocapture` counts any that are not); the tolerances leave room for another
@@ -87,6 +88,11 @@ fn matches_gymnasium() {
             "{at}: seeded initial state"
         );
         check_obs(&obs, &run["reset_obs"], &format!("{at}: reset"));
+        assert_eq!(
+            env.render_fps(),
+            run["render_fps"].as_f64(),
+            "{at}: metadata[\"render_fps\"]"
+        );
 
         for (i, step) in run["steps"].as_array().unwrap().iter().enumerate() {
             let at = format!("{at} step {i}");

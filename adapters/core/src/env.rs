@@ -120,6 +120,13 @@ pub trait Env: Send {
         Ok(None)
     }
 
+    /// Frames per second a recording of the rendered frames plays at: Gymnasium's
+    /// `metadata["render_fps"]` (video writers such as `RecordVideo` read it). `None` when the
+    /// env does not say.
+    fn render_fps(&self) -> Option<f64> {
+        None
+    }
+
     /// Releases what the env holds. Called once; the env is not used afterwards.
     fn close(&mut self) {}
 }

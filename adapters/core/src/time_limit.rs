@@ -63,6 +63,10 @@ impl<E: Env> Env for TimeLimit<E> {
         self.inner.render()
     }
 
+    fn render_fps(&self) -> Option<f64> {
+        self.inner.render_fps()
+    }
+
     fn close(&mut self) {
         self.inner.close()
     }
@@ -100,7 +104,55 @@ impl Env for Box<dyn Env> {
         (**self).render()
     }
 
+    fn render_fps(&self) -> Option<f64> {
+        (**self).render_fps()
+    }
+
     fn close(&mut self) {
         (**self).close()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An env that only says its frame rate.
+    struct Fps(Option<f64>);
+
+    impl Env for Fps {
+        fn observation_space(&self) -> &Space {
+            unimplemented!()
+        }
+
+        fn action_space(&self) -> &Space {
+            unimplemented!()
+        }
+
+        fn reset(
+            &mut self,
+            _: Option<u64>,
+            _: &ResetOptions,
+            _: &mut [u8],
+            _: &mut Info,
+        ) -> Result<(), EnvError> {
+            Ok(())
+        }
+
+        fn step(&mut self, _: &[u8], _: &mut [u8], _: &mut Info) -> Result<Transition, EnvError> {
+            Ok(Transition::default())
+        }
+
+        fn render_fps(&self) -> Option<f64> {
+            self.0
+        }
+    }
+
+    #[test]
+    fn wrappers_pass_the_render_fps_on() {
+        let boxed: Box<dyn Env> = Box::new(Fps(Some(12.5)));
+        assert_eq!(boxed.render_fps(), Some(12.5));
+        assert_eq!(TimeLimit::new(boxed, Some(3)).render_fps(), Some(12.5));
+        assert_eq!(TimeLimit::new(Fps(None), None).render_fps(), None);
     }
 }

@@ -9,7 +9,7 @@
 
 use crate::gym_env::MujocoEnv;
 use crate::obs::ObsWriter;
-use crate::render::{self, RenderSetup};
+use crate::render::{self, CameraConfig, RenderSetup};
 use crate::sim::{ModelCache, Sim};
 use crate::tasks::{Task, uniform_noise};
 use envhub_core::{EnvConfig, EnvError, ExtraKeys, Info, NumpyRng, Space};
@@ -36,7 +36,7 @@ pub(crate) fn make(
 ) -> Result<MujocoEnv, EnvError> {
     let options: Vec<&str> = OPTIONS.iter().chain(render::OPTIONS).copied().collect();
     let keys = config.extra_keys(env_id, &options)?;
-    let render = RenderSetup::from_config(env_id, config, &keys)?;
+    let render = RenderSetup::from_config(env_id, config, &keys, CameraConfig::NONE)?;
     let path = config
         .asset_path
         .as_ref()

@@ -51,7 +51,8 @@ impl MujocoEnv {
             .copied()
             .collect();
         let keys = config.extra_keys(entry.id, &options)?;
-        let render = RenderSetup::from_config(entry.id, config, &keys)?;
+        let render =
+            RenderSetup::from_config(entry.id, config, &keys, entry.default_camera_config)?;
         let frame_skip = keys.u64("frame_skip", entry.frame_skip)?;
         if frame_skip == 0 {
             return Err(keys.error("frame_skip", "must be at least 1"));
@@ -251,10 +252,15 @@ impl Env for MujocoEnv {
             return Ok(None);
         };
         if self.renderer.is_none() {
-            self.renderer = Some(Renderer::new(&self.env_id, setup, self.sim.model())?);
+            self.renderer = Some(Renderer::new(&self.env_id, setup, &self.sim.data)?);
         }
         let renderer = self.renderer.as_mut().expect("created above");
         renderer.render(&self.env_id, &mut self.sim.data).map(Some)
+    }
+
+    /// Gymnasium's `metadata["render_fps"]`: `int(np.round(1.0 / dt))`.
+    fn render_fps(&self) -> Option<f64> {
+        Some((1.0 / self.sim.dt()).round_ties_even())
     }
 
     fn close(&mut self) {

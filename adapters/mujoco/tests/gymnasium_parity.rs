@@ -7,7 +7,8 @@
 //! state (NumPy's generator is reproduced bit for bit), and the same actions the same
 //! observations and rewards within 1e-6 relative, and the same flags. Some runs start from a
 //! state set through `MujocoEnv.set_state`, which the Rust env takes as `qpos`/`qvel` reset
-//! options.
+//! options. Each run's `metadata["render_fps"]` (`int(np.round(1 / dt))`, so it follows
+//! `frame_skip`) must be the env's `render_fps`.
 //!
 //! Both sides step the same libmujoco build, so the simulator state is expected to stay
 //! bit-identical; what can differ in the last bits is NumPy's own arithmetic (its SIMD `sin`,
@@ -98,6 +99,11 @@ fn matches_gymnasium() {
         assert_eq!(qpos, floats(&run["reset_qpos"]), "{at}: initial qpos");
         assert_eq!(qvel, floats(&run["reset_qvel"]), "{at}: initial qvel");
         check_obs(&obs, &run["reset_obs"], &format!("{at}: reset"));
+        assert_eq!(
+            env.render_fps(),
+            run["render_fps"].as_f64(),
+            "{at}: metadata[\"render_fps\"]"
+        );
 
         for (i, step) in run["steps"].as_array().unwrap().iter().enumerate() {
             let at = format!("{at} step {i}");

@@ -42,6 +42,10 @@ pub struct ReadySpec {
     pub action_space: Space,
     /// Episode limit applied (truncation), if any.
     pub max_episode_steps: Option<u32>,
+    /// Frames per second of the env's rendering (Gymnasium's `metadata["render_fps"]`), if it
+    /// says. Absent from the lines of workers that predate it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_fps: Option<f64>,
     /// The worker's pid.
     pub pid: u32,
 }
@@ -54,4 +58,38 @@ pub enum WorkerReply {
     Ready(ReadySpec),
     /// It could not start; the message says why and how to fix it.
     Error(String),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_fps_is_optional_in_the_ready_line() {
+        let spec = ReadySpec {
+            observation_space: Space::box_f32(&[2], -1.0, 1.0),
+            action_space: Space::discrete(2),
+            max_episode_steps: Some(500),
+            render_fps: Some(50.0),
+            pid: 7,
+        };
+        let line = serde_json::to_string(&WorkerReply::Ready(spec.clone())).unwrap();
+        assert!(line.contains(r#""render_fps":50.0"#), "{line}");
+        match serde_json::from_str(&line).unwrap() {
+            WorkerReply::Ready(back) => assert_eq!(back, spec),
+            WorkerReply::Error(e) => panic!("{e}"),
+        }
+        // A worker that predates the field (or an env that does not say) leaves it out.
+        let old = line.replace(r#","render_fps":50.0"#, "");
+        match serde_json::from_str(&old).unwrap() {
+            WorkerReply::Ready(back) => assert_eq!(back.render_fps, None),
+            WorkerReply::Error(e) => panic!("{e}"),
+        }
+        let none = ReadySpec {
+            render_fps: None,
+            ..spec
+        };
+        let line = serde_json::to_string(&none).unwrap();
+        assert!(!line.contains("render_fps"), "{line}");
+    }
 }

@@ -245,6 +245,7 @@ mod tests {
             observation_space: Space::box_f32(&[1], -1e9, 1e9),
             action_space: Space::discrete(10),
             max_episode_steps: None,
+            render_fps: None,
             pid: std::process::id(),
         }
     }

@@ -39,6 +39,7 @@ pub(crate) fn make_envs(job: &WorkerJob) -> Result<(EnvBatch, ReadySpec), String
         observation_space: spec.observation_space,
         action_space: spec.action_space,
         max_episode_steps: limit,
+        render_fps: envs.first().and_then(|env| env.render_fps()),
         pid: std::process::id(),
     };
     Ok((EnvBatch::new(envs, job.config.autoreset_mode), ready))

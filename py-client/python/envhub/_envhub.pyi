@@ -22,6 +22,7 @@ def serve_worker(
     max_episode_steps: int | None,
     envs: Sequence[object],
     reply_fd: int,
+    render_fps: float | None = None,
 ) -> None: ...
 def serve_vector_worker(
     job_json: str,
@@ -30,6 +31,7 @@ def serve_vector_worker(
     max_episode_steps: int | None,
     vector_env: object,
     reply_fd: int,
+    render_fps: float | None = None,
 ) -> None: ...
 def make_session(
     id: str,
@@ -123,6 +125,8 @@ class Session:
     def owner_pid(self) -> int: ...
     @property
     def max_episode_steps(self) -> int | None: ...
+    @property
+    def render_fps(self) -> float | None: ...
     @property
     def autoreset_mode(self) -> str: ...
     @property

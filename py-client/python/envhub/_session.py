@@ -55,3 +55,13 @@ def check_seed(seed: Any) -> int | None:
     if isinstance(seed, bool) or not hasattr(seed, "__index__") or seed.__index__() < 0:
         raise InvalidConfigError(f"invalid seed: {seed!r}; use a non-negative integer or None")
     return int(seed.__index__())
+
+
+def fps_metadata(session: Any) -> dict[str, Any]:
+    """`{"render_fps": n}` for a session whose env declares its frame rate (Gymnasium's
+    `metadata["render_fps"]`, an int where it is whole, as Gymnasium's envs give it), else
+    `{}`."""
+    fps = session.render_fps
+    if fps is None:
+        return {}
+    return {"render_fps": int(fps) if float(fps).is_integer() else float(fps)}

@@ -10,7 +10,7 @@ import numpy as np
 
 
 from . import _spaces
-from ._session import RegistryArg, check_seed, start
+from ._session import RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 
 __all__ = ["Env"]
@@ -62,7 +62,11 @@ class Env(gymnasium.Env[Any, Any]):
         self.render_mode = render_mode
         # Render modes are known per env only once one rendered: the adapter refuses a mode
         # it cannot draw when the env is made.
-        self.metadata = {**self.metadata, "render_modes": [render_mode] if render_mode else []}
+        self.metadata = {
+            **self.metadata,
+            "render_modes": [render_mode] if render_mode else [],
+            **fps_metadata(s),
+        }
         self.registry_id = registry_id
         # `seed=` seeds the first reset that is not given one (RoboSmith's make_env ignores it).
         self._first_seed = check_seed(seed)

@@ -11,7 +11,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _spaces
-from ._session import RegistryArg, check_seed, start
+from ._session import RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
 
@@ -117,7 +117,11 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self.single_action_space = _spaces.to_gymnasium(json.loads(s.action_space_json))
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.metadata = {"autoreset_mode": mode, "render_modes": [render_mode] if render_mode else []}
+        self.metadata = {
+            "autoreset_mode": mode,
+            "render_modes": [render_mode] if render_mode else [],
+            **fps_metadata(s),
+        }
         self.render_mode = render_mode
         self._last_obs: np.ndarray | None = None
         # `seed=` seeds the first reset that is not given one (env `i` with `seed + i`).

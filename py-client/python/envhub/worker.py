@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import traceback
@@ -386,6 +387,17 @@ def make_batch(
     return [HostedEnv(e, obs_desc, act_desc) for e in raw], obs_desc, act_desc, limit
 
 
+def render_fps(env: Any) -> float | None:
+    """The env's `metadata["render_fps"]` as a number, or None where it declares none (or
+    something that is not a positive number)."""
+    fps = (getattr(env, "metadata", None) or {}).get("render_fps")
+    try:
+        fps = float(fps)
+    except (TypeError, ValueError):
+        return None
+    return fps if math.isfinite(fps) and fps > 0 else None
+
+
 def serve(job_json: str) -> int:
     # The ready line goes to the original stdout; everything printed later goes to stderr.
     reply_fd = os.dup(1)
@@ -401,9 +413,11 @@ def serve(job_json: str) -> int:
         return 0
     spaces = (json.dumps(obs_desc), json.dumps(act_desc))
     if isinstance(batch, HostedVectorEnv):
-        _envhub.serve_vector_worker(job_json, *spaces, limit, batch, reply_fd)
+        fps = render_fps(batch.env)
+        _envhub.serve_vector_worker(job_json, *spaces, limit, batch, reply_fd, render_fps=fps)
     else:
-        _envhub.serve_worker(job_json, *spaces, limit, batch, reply_fd)
+        fps = render_fps(batch[0].env)
+        _envhub.serve_worker(job_json, *spaces, limit, batch, reply_fd, render_fps=fps)
     return 0
 
 

@@ -1,16 +1,23 @@
 //! `Ant-v5`: a four-legged robot that learns to move forward (`gymnasium/envs/mujoco/ant_v5.py`).
 
-use super::{EnvEntry, Task, normal_noise, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, normal_noise, uniform_noise};
 use crate::numeric::{norm, sum_squares_clipped, sum_squares_f32};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    distance: Some(4.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Ant-v5",
     xml_file: "ant.xml",
     frame_skip: 5,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",

@@ -1,16 +1,23 @@
 //! `HalfCheetah-v5`: a planar two-legged runner (`gymnasium/envs/mujoco/half_cheetah_v5.py`).
 
-use super::{EnvEntry, Task, normal_noise, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, normal_noise, uniform_noise};
 use crate::numeric::sum_squares_f32;
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    distance: Some(4.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "HalfCheetah-v5",
     xml_file: "half_cheetah.xml",
     frame_skip: 5,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",

@@ -1,16 +1,26 @@
 //! `Hopper-v5`: a planar one-legged hopper (`gymnasium/envs/mujoco/hopper_v5.py`).
 
-use super::{EnvEntry, Task, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, uniform_noise};
 use crate::numeric::{clip, sum_squares_f32};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(2),
+    distance: Some(3.0),
+    lookat: Some([0.0, 0.0, 1.15]),
+    elevation: Some(-20.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Hopper-v5",
     xml_file: "hopper.xml",
     frame_skip: 4,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",

@@ -1,16 +1,26 @@
 //! `Humanoid-v5`: a 3D biped that learns to walk forward (`gymnasium/envs/mujoco/humanoid_v5.py`).
 
-use super::{EnvEntry, Task, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, uniform_noise};
 use crate::numeric::{sum, sum_squares};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, InfoValue, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(1),
+    distance: Some(4.0),
+    lookat: Some([0.0, 0.0, 2.0]),
+    elevation: Some(-20.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Humanoid-v5",
     xml_file: "humanoid.xml",
     frame_skip: 5,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",

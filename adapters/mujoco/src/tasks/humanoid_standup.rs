@@ -2,17 +2,27 @@
 //! (`gymnasium/envs/mujoco/humanoidstandup_v5.py`).
 
 use super::humanoid::{HumanoidObs, tendon_info};
-use super::{EnvEntry, Task, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, uniform_noise};
 use crate::numeric::{clip, sum_squares};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(1),
+    distance: Some(4.0),
+    lookat: Some([0.0, 0.0, 0.8925]),
+    elevation: Some(-20.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "HumanoidStandup-v5",
     xml_file: "humanoidstandup.xml",
     frame_skip: 5,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "uph_cost_weight",
         "ctrl_cost_weight",

@@ -1,17 +1,24 @@
 //! `InvertedDoublePendulum-v5`: balance two poles on a cart
 //! (`gymnasium/envs/mujoco/inverted_double_pendulum_v5.py`).
 
-use super::{EnvEntry, Task, normal_noise, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, normal_noise, uniform_noise};
 use crate::numeric::{clip, py_square};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{Info, NumpyRng};
+
+/// Gymnasium's default `default_camera_config` is `None`: the free camera as
+/// `OffScreenViewer._init_camera` aims it.
+/// (The module's `DEFAULT_CAMERA_CONFIG` is not what `__init__` defaults to, so
+/// Gymnasium does not use it.)
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig::NONE;
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "InvertedDoublePendulum-v5",
     xml_file: "inverted_double_pendulum.xml",
     frame_skip: 5,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &["healthy_reward", "reset_noise_scale"],
     make: |keys, _| {
         Ok(Box::new(InvertedDoublePendulum {

@@ -1,15 +1,23 @@
 //! `InvertedPendulum-v5`: balance a pole on a cart (`gymnasium/envs/mujoco/inverted_pendulum_v5.py`).
 
-use super::{EnvEntry, Task, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, uniform_noise};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{Info, InfoValue, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(0),
+    distance: Some(2.04),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "InvertedPendulum-v5",
     xml_file: "inverted_pendulum.xml",
     frame_skip: 2,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &["reset_noise_scale"],
     make: |keys, _| {
         Ok(Box::new(InvertedPendulum {

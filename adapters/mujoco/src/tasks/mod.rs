@@ -14,6 +14,7 @@ mod swimmer;
 mod walker2d;
 
 use crate::obs::ObsWriter;
+pub(crate) use crate::render::CameraConfig;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng, Space};
 
@@ -57,6 +58,9 @@ pub(crate) struct EnvEntry {
     pub(crate) frame_skip: u64,
     /// `max_episode_steps` as Gymnasium registers the id.
     pub(crate) max_episode_steps: u32,
+    /// The camera Gymnasium renders from: its `default_camera_config` default (which the
+    /// `default_camera_config` option replaces).
+    pub(crate) default_camera_config: CameraConfig,
     /// The task's own `extra` keys (its `__init__` kwargs).
     pub(crate) options: &'static [&'static str],
     /// Creates the task for a loaded model, reading its options.

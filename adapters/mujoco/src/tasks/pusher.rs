@@ -1,17 +1,25 @@
 //! `Pusher-v5`: a seven-joint arm pushing a cylinder to a goal
 //! (`gymnasium/envs/mujoco/pusher_v5.py`).
 
-use super::{EnvEntry, Task};
+use super::{CameraConfig, EnvEntry, Task};
 use crate::numeric::{norm, sum_squares_f32};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(-1),
+    distance: Some(4.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Pusher-v5",
     xml_file: "pusher_v5.xml",
     frame_skip: 5,
     max_episode_steps: 100,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "reward_near_weight",
         "reward_dist_weight",

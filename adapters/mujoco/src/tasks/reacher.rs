@@ -1,17 +1,24 @@
 //! `Reacher-v5`: a two-joint planar arm reaching a random target
 //! (`gymnasium/envs/mujoco/reacher_v5.py`).
 
-use super::{EnvEntry, Task};
+use super::{CameraConfig, EnvEntry, Task};
 use crate::numeric::{norm, sum_squares_f32};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Reacher-v5",
     xml_file: "reacher.xml",
     frame_skip: 2,
     max_episode_steps: 50,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &["reward_dist_weight", "reward_control_weight"],
     make: |keys, sim| Ok(Box::new(Reacher::new(keys, sim)?)),
 };

@@ -1,16 +1,21 @@
 //! `Swimmer-v5`: a three-link swimmer in a viscous fluid (`gymnasium/envs/mujoco/swimmer_v5.py`).
 
-use super::{EnvEntry, Task, uniform_noise};
+use super::{CameraConfig, EnvEntry, Task, uniform_noise};
 use crate::numeric::{norm, sum_squares_f32};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{EnvError, ExtraKeys, Info, NumpyRng};
+
+/// Gymnasium's default `default_camera_config` is `None`: the free camera as
+/// `OffScreenViewer._init_camera` aims it.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig::NONE;
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Swimmer-v5",
     xml_file: "swimmer.xml",
     frame_skip: 4,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",

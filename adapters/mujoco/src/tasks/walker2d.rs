@@ -1,16 +1,26 @@
 //! `Walker2d-v5`: a planar biped (`gymnasium/envs/mujoco/walker2d_v5.py`).
 
 use super::hopper::Planar;
-use super::{EnvEntry, Task};
+use super::{CameraConfig, EnvEntry, Task};
 use crate::obs::ObsWriter;
 use crate::sim::Sim;
 use envhub_core::{Info, NumpyRng};
+
+/// Gymnasium's `DEFAULT_CAMERA_CONFIG`.
+const DEFAULT_CAMERA_CONFIG: CameraConfig = CameraConfig {
+    trackbodyid: Some(2),
+    distance: Some(4.0),
+    lookat: Some([0.0, 0.0, 1.15]),
+    elevation: Some(-20.0),
+    ..CameraConfig::NONE
+};
 
 pub(crate) const ENTRY: EnvEntry = EnvEntry {
     id: "Walker2d-v5",
     xml_file: "walker2d_v5.xml",
     frame_skip: 4,
     max_episode_steps: 1000,
+    default_camera_config: DEFAULT_CAMERA_CONFIG,
     options: &[
         "forward_reward_weight",
         "ctrl_cost_weight",
