@@ -26,8 +26,18 @@ FEATURES := --features envhub-worker/mujoco
 # Offscreen rendering without a GPU: Mesa's software EGL (Debian packages).
 MESA_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
 MESA_STAMP := .build/mesa.installed
+# Opt-in ManiSkill3 (`make maniskill`): SAPIEN needs a Vulkan device even for state
+# observations. Without a GPU that is Mesa's CPU driver, lavapipe, and Debian 12's (Mesa 22.3)
+# lacks a feature SAPIEN requires, so Mesa 25's is unpacked from bookworm-backports into
+# .build/ (the system's Mesa, which MuJoCo's EGL rendering uses, is left alone).
+LAVAPIPE_DIR := .build/lavapipe
+LAVAPIPE_ICD := $(LAVAPIPE_DIR)/lvp_icd.json
+MANISKILL_STAMP := $(VENV)/.maniskill-installed
+ifneq ($(wildcard $(LAVAPIPE_ICD)),)
+export VK_ICD_FILENAMES ?= $(abspath $(LAVAPIPE_ICD))
+endif
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -35,6 +45,7 @@ help:
 	@echo "make lint   cargo fmt --check and clippy -D warnings"
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
+	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 
 $(VENV_STAMP): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -61,6 +72,28 @@ $(MESA_STAMP):
 	touch $@
 
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
+
+$(MANISKILL_STAMP): $(VENV_STAMP) requirements-maniskill.txt
+	$(VPY) -m pip install --quiet -r requirements-maniskill.txt
+	touch $@
+
+# lavapipe from bookworm-backports with private apt lists (nothing installed system-wide).
+$(LAVAPIPE_ICD):
+	. /etc/os-release; test "$${VERSION_CODENAME:-}" = bookworm || { \
+		echo "error: the lavapipe recipe is for Debian 12 (bookworm), this is $${PRETTY_NAME:-unknown}" >&2; \
+		echo "hint: install a Vulkan driver with descriptorBindingPartiallyBound (Mesa >= 24 lavapipe, or a GPU driver)" >&2; exit 1; }
+	rm -rf $(LAVAPIPE_DIR) && mkdir -p $(LAVAPIPE_DIR)/apt/lists/partial $(LAVAPIPE_DIR)/apt/cache/archives/partial $(LAVAPIPE_DIR)/debs
+	echo "deb http://deb.debian.org/debian bookworm-backports main" > $(LAVAPIPE_DIR)/apt/sources.list
+	apt_opts="-o Dir::Etc::SourceList=$(abspath $(LAVAPIPE_DIR))/apt/sources.list -o Dir::Etc::SourceParts=/dev/null \
+		-o Dir::State::Lists=$(abspath $(LAVAPIPE_DIR))/apt/lists -o Dir::Cache=$(abspath $(LAVAPIPE_DIR))/apt/cache"; \
+	apt-get -qq $$apt_opts update && cd $(LAVAPIPE_DIR)/debs && apt-get -qq $$apt_opts download mesa-vulkan-drivers/bookworm-backports
+	dpkg-deb -x $(LAVAPIPE_DIR)/debs/mesa-vulkan-drivers_*.deb $(LAVAPIPE_DIR)/root
+	lib=$(abspath $(LAVAPIPE_DIR))/root/usr/lib/x86_64-linux-gnu/libvulkan_lvp.so; test -f "$$lib"; \
+	printf '{"file_format_version": "1.0.0", "ICD": {"library_path": "%s", "api_version": "1.4.305"}}\n' "$$lib" > $@.tmp
+	mv $@.tmp $@
+
+maniskill: $(MANISKILL_STAMP) $(LAVAPIPE_ICD)
+	VK_ICD_FILENAMES=$(abspath $(LAVAPIPE_ICD)) $(VPY) -c 'import gymnasium as gym, mani_skill.envs; e = gym.make("PickCube-v1", obs_mode="state", sim_backend="cpu", num_envs=1); e.reset(seed=0); e.close(); print("ManiSkill runs: PickCube-v1 on the CPU simulator")'
 
 build: setup
 	$(CARGO) build --release --workspace --bins $(FEATURES)

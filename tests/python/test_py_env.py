@@ -21,13 +21,35 @@ def _runnable_or_skip(entry_id: str):
         return envhub.make(entry_id)
     except (envhub.AdapterUnavailableError, envhub.NoAdapterError) as exc:
         pytest.skip(f"`{entry_id}` cannot run here: {str(exc).splitlines()[0]}")
+    except envhub.MakeError as exc:
+        # ManiSkill tasks whose assets are downloaded on first use (from GitHub or Hugging
+        # Face): the adapter names the download command; anything else is a real failure.
+        if "download_asset" not in str(exc):
+            raise
+        pytest.skip(f"`{entry_id}` needs assets that are not downloaded here")
+
+
+#: Envs whose own implementation fails one of `check_env`'s checks (verified in-process, not
+#: through envhub): the check and why.
+UPSTREAM_CHECK_FAILURES = {
+    "maniskill": (
+        "non-deterministic",
+        "ManiSkill 3.0.1 (in-process too): a seedless reset() after reset(seed=s) differs from run to run",
+    ),
+}
 
 
 @pytest.mark.parametrize("entry_id", REGISTRY.list_ids())
 def test_check_env(entry_id):
     env = _runnable_or_skip(entry_id)
+    known = UPSTREAM_CHECK_FAILURES.get(REGISTRY.get(entry_id).framework)
     try:
-        check_env(env)
+        try:
+            check_env(env)
+        except AssertionError as exc:
+            if known is None or known[0] not in str(exc):
+                raise
+            pytest.xfail(known[1])
         assert isinstance(env, gymnasium.Env)
         assert isinstance(env.observation_space, gymnasium.spaces.Space)
     finally:
