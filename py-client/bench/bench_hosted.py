@@ -7,6 +7,11 @@ envhub: `make_vec` over a registry entry pinned to the `gymnasium` adapter (so t
 in Python inside `python -m envhub.worker` processes, not natively), `num_workers` workers.
 Gymnasium: `AsyncVectorEnv(shared_memory=True)` with `num_envs` processes. Random actions
 from a pre-drawn pool; autoreset on in both.
+
+With `--vector-entry-point` the env is Gymnasium's own vectorised implementation
+(`vectorization_mode: vector_entry_point`, e.g. `CartPoleVectorEnv`), served whole by each
+worker (`EnvAdapter.make_vec`); the peer is then that vector env stepped in this process
+(the ceiling: no IPC at all), so the ratio is what serving it out of process costs.
 """
 
 from __future__ import annotations
@@ -40,14 +45,16 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--seconds", type=float, default=3.0)
+    p.add_argument("--vector-entry-point", action="store_true")
     args = p.parse_args()
+    kwargs = ", kwargs: {vectorization_mode: vector_entry_point}" if args.vector_entry_point else ""
     reg = os.path.join(tempfile.mkdtemp(), "bench.yaml")
     with open(reg, "w") as f:
         f.write(
             textwrap.dedent(
                 f"""\
                 environments:
-                  - {{id: hosted, name: hosted, framework: gymnasium, env_id: {args.env}, adapter: gymnasium, robot_type: custom, env_type: floor}}
+                  - {{id: hosted, name: hosted, framework: gymnasium, env_id: {args.env}, adapter: gymnasium, robot_type: custom, env_type: floor{kwargs}}}
                 """
             )
         )
@@ -61,7 +68,11 @@ def main() -> None:
     hub = rate(envs.step, actions, args.seconds, args.envs)
     envs.close()
 
-    gym_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make(args.env)] * args.envs, shared_memory=True)
+    if args.vector_entry_point:
+        peer, gym_envs = "gymnasium_vector_entry_point_in_process", gymnasium.make_vec(args.env, args.envs, "vector_entry_point")
+    else:
+        peer = "gymnasium_async"
+        gym_envs = gymnasium.vector.AsyncVectorEnv([lambda: gymnasium.make(args.env)] * args.envs, shared_memory=True)
     gym_envs.reset(seed=0)
     asy = rate(gym_envs.step, actions, args.seconds, args.envs)
     gym_envs.close()
@@ -73,7 +84,7 @@ def main() -> None:
                 "num_envs": args.envs,
                 "envhub_python_hosted_workers": args.workers,
                 "envhub_steps_per_s": round(hub),
-                "gymnasium_async_steps_per_s": round(asy),
+                f"{peer}_steps_per_s": round(asy),
                 "ratio": round(hub / asy, 2),
                 "cpus": os.cpu_count(),
             }
