@@ -14,7 +14,6 @@ pub struct EnvBatch {
     /// next_step mode: the env finished last step and resets on this one.
     pending_reset: Vec<bool>,
     infos: Vec<Info>,
-    has_reset: bool,
 }
 
 impl EnvBatch {
@@ -30,23 +29,19 @@ impl EnvBatch {
             act_bytes,
             pending_reset: vec![false; n],
             infos: vec![Info::default(); n],
-            has_reset: false,
         }
     }
+}
 
-    /// Number of envs.
-    pub fn len(&self) -> usize {
+/// The serve loop's view of the batch (the worker loop and in-process runs alike).
+impl ServedBatch for EnvBatch {
+    fn len(&self) -> usize {
         self.envs.len()
-    }
-
-    /// Whether the batch is empty.
-    pub fn is_empty(&self) -> bool {
-        self.envs.is_empty()
     }
 
     /// Resets the envs whose flag has [`env_flag::SELECTED`], seeding those with
     /// [`env_flag::SEEDED`]. Returns the info section.
-    pub fn reset(
+    fn reset(
         &mut self,
         flags: &[u8],
         seeds: &[u64],
@@ -74,18 +69,12 @@ impl EnvBatch {
             out.truncated[i] = 0;
             out.final_mask[i] = 0;
         }
-        self.has_reset = true;
         Ok(info_section(&self.infos))
-    }
-
-    /// Whether a reset has happened (stepping before one is an error).
-    pub fn has_reset(&self) -> bool {
-        self.has_reset
     }
 
     /// Steps the selected envs, applying the autoreset mode. Unselected envs keep their
     /// slots untouched except for the flags, which are cleared.
-    pub fn step(
+    fn step(
         &mut self,
         flags: &[u8],
         actions: &[u8],
@@ -137,7 +126,7 @@ impl EnvBatch {
     }
 
     /// Renders the selected envs: their frames in order, as [`frames_section`] lays them out.
-    pub fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
         let mut frames = Vec::new();
         for (env, &flag) in self.envs.iter_mut().zip(flags) {
             if flag & env_flag::SELECTED != 0 {
@@ -148,45 +137,10 @@ impl EnvBatch {
     }
 
     /// Closes every env.
-    pub fn close(&mut self) {
+    fn close(&mut self) {
         for env in &mut self.envs {
             env.close();
         }
-    }
-}
-
-/// The serve loop's view of the batch; the inherent methods stay for callers that step a
-/// batch directly (in-process benchmarks).
-impl ServedBatch for EnvBatch {
-    fn len(&self) -> usize {
-        EnvBatch::len(self)
-    }
-
-    fn reset(
-        &mut self,
-        flags: &[u8],
-        seeds: &[u64],
-        options: &ResetOptions,
-        out: &mut ResponseBlocksMut<'_>,
-    ) -> Result<Vec<u8>, EnvError> {
-        EnvBatch::reset(self, flags, seeds, options, out)
-    }
-
-    fn step(
-        &mut self,
-        flags: &[u8],
-        actions: &[u8],
-        out: &mut ResponseBlocksMut<'_>,
-    ) -> Result<Vec<u8>, EnvError> {
-        EnvBatch::step(self, flags, actions, out)
-    }
-
-    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
-        EnvBatch::render(self, flags)
-    }
-
-    fn close(&mut self) {
-        EnvBatch::close(self);
     }
 }
 

@@ -3,7 +3,7 @@
 
 use crate::serve::make_envs;
 use anyhow::Context;
-use envhub_shm::{Layout, WorkerJob, env_flag};
+use envhub_shm::{Layout, ServedBatch, WorkerJob, env_flag};
 use rand::SeedableRng;
 use std::time::Instant;
 
