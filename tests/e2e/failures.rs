@@ -2,7 +2,7 @@
 //! hub and other sessions keep working.
 
 use envhub::{EnvConfig, HubError};
-use envhub_e2e::{TestHub, shm_files};
+use envhub_e2e::{TestHub, kill_worker_expect_died, shm_files, sigkill};
 use std::time::{Duration, Instant};
 
 fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
@@ -14,14 +14,6 @@ fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
         config.extra.insert(k.to_string(), (*v).into());
     }
     config
-}
-
-fn sigkill(pid: u32) {
-    let status = std::process::Command::new("kill")
-        .args(["-9", &pid.to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
 }
 
 #[test]
@@ -50,28 +42,8 @@ fn kill_9_mid_rollout_errors_within_a_second_and_hub_lives_on() {
         env.step(&actions).unwrap();
     }
     let victim = env.worker_pids()[1];
-    sigkill(victim);
-    let start = Instant::now();
-    let err = loop {
-        match env.step(&actions) {
-            Ok(_) => assert!(
-                start.elapsed() < Duration::from_secs(1),
-                "no error within 1 s"
-            ),
-            Err(e) => break e,
-        }
-    };
-    let took = start.elapsed();
-    assert!(took < Duration::from_secs(1), "detected after {took:?}");
-    match &err {
-        HubError::WorkerDied {
-            worker, pid, why, ..
-        } => {
-            assert_eq!((*worker, *pid), (1, victim));
-            assert!(why.contains("signal 9") || why.contains("SIGKILL"), "{why}");
-        }
-        other => panic!("expected WorkerDied, got {other}"),
-    }
+    let (err, why) = kill_worker_expect_died(1, victim, || env.step(&actions).map(drop));
+    assert!(why.contains("signal 9") || why.contains("SIGKILL"), "{why}");
     assert!(err.to_string().contains("hint:"));
     // The session is closed for good; the other one and new ones work.
     assert!(matches!(env.step(&actions), Err(HubError::InvalidState(_))));

@@ -7,9 +7,8 @@
 
 use envhub::env_vars::ENVHUB_ADAPTERS;
 use envhub::{EnvConfig, HubError, Registry, VecEnv};
-use envhub_e2e::{PyModule, TestHub, python_worker_available};
+use envhub_e2e::{PyModule, TestHub, kill_worker_expect_died, python_worker_available};
 use rand::SeedableRng;
-use std::time::{Duration, Instant};
 
 /// Entries pinned to the Python host, beside the built-in (native) ones.
 const REGISTRY: &str = "
@@ -207,32 +206,8 @@ fn a_killed_python_worker_is_worker_died_within_a_second() {
         env.step_i64(&actions).unwrap();
     }
     let victim = env.worker_pids()[1];
-    let killed = std::process::Command::new("kill")
-        .args(["-9", &victim.to_string()])
-        .status()
-        .unwrap();
-    assert!(killed.success());
-    let start = Instant::now();
-    let err = loop {
-        match env.step_i64(&actions) {
-            Ok(_) => assert!(
-                start.elapsed() < Duration::from_secs(1),
-                "no error within 1 s"
-            ),
-            Err(e) => break e,
-        }
-    };
-    let took = start.elapsed();
-    assert!(took < Duration::from_secs(1), "detected after {took:?}");
-    match &err {
-        HubError::WorkerDied {
-            worker, pid, why, ..
-        } => {
-            assert_eq!((*worker, *pid), (1, victim));
-            assert!(why.contains("signal: 9"), "{why}");
-        }
-        other => panic!("expected WorkerDied, got {other}"),
-    }
+    let (_, why) = kill_worker_expect_died(1, victim, || env.step_i64(&actions).map(drop));
+    assert!(why.contains("signal: 9"), "{why}");
     assert!(matches!(
         env.step_i64(&actions),
         Err(HubError::InvalidState(_))

@@ -1,8 +1,8 @@
 //! Helpers for envhub's end-to-end tests: an isolated hub per test and the built binaries.
 
-use envhub::{Hub, Registry, SessionOptions};
+use envhub::{Hub, HubError, Registry, SessionOptions};
 use std::path::PathBuf;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// The folder holding the workspace's built binaries (`target/<profile>`).
 pub fn bin_dir() -> PathBuf {
@@ -142,4 +142,49 @@ impl Drop for PyModule {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
+}
+
+/// Sends SIGKILL to `pid`.
+pub fn sigkill(pid: u32) {
+    let status = std::process::Command::new("kill")
+        .args(["-9", &pid.to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// Kills worker `worker` (process `victim`) with SIGKILL, then calls `step` until it fails:
+/// the failure must come within a second and be `WorkerDied` for that worker and pid.
+/// Returns the error and its `why` (the exit status text) for the caller's own checks.
+pub fn kill_worker_expect_died(
+    worker: usize,
+    victim: u32,
+    mut step: impl FnMut() -> Result<(), HubError>,
+) -> (HubError, String) {
+    sigkill(victim);
+    let start = Instant::now();
+    let err = loop {
+        match step() {
+            Ok(_) => assert!(
+                start.elapsed() < Duration::from_secs(1),
+                "no error within 1 s"
+            ),
+            Err(e) => break e,
+        }
+    };
+    let took = start.elapsed();
+    assert!(took < Duration::from_secs(1), "detected after {took:?}");
+    let why = match &err {
+        HubError::WorkerDied {
+            worker: w,
+            pid,
+            why,
+            ..
+        } => {
+            assert_eq!((*w, *pid), (worker, victim));
+            why.clone()
+        }
+        other => panic!("expected WorkerDied, got {other}"),
+    };
+    (err, why)
 }
