@@ -23,6 +23,13 @@ MUJOCO_VERSION := 3.17.0
 MUJOCO_LIB_DIR := .build/mujoco/lib
 MUJOCO_LIB := $(MUJOCO_LIB_DIR)/libmujoco.so.$(MUJOCO_VERSION)
 FEATURES := --features envhub-worker/mujoco
+# One build serves everything: the binaries, the Python extension (pyo3 told to build an
+# extension module for the venv's interpreter, as maturin would) and, in the same release
+# profile, the tests. Every cargo command sees the same variables and features, so the
+# dependency tree is compiled once (plus clippy's metadata-only check).
+export PYO3_PYTHON := $(abspath $(VPY))
+export PYO3_BUILD_EXTENSION_MODULE := 1
+PROFILE := --release
 # Offscreen rendering without a GPU: Mesa's software EGL (Debian packages).
 MESA_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
 MESA_STAMP := .build/mesa.installed
@@ -96,7 +103,7 @@ maniskill: $(MANISKILL_STAMP) $(LAVAPIPE_ICD)
 	VK_ICD_FILENAMES=$(abspath $(LAVAPIPE_ICD)) $(VPY) -c 'import gymnasium as gym, mani_skill.envs; e = gym.make("PickCube-v1", obs_mode="state", sim_backend="cpu", num_envs=1); e.reset(seed=0); e.close(); print("ManiSkill runs: PickCube-v1 on the CPU simulator")'
 
 build: setup
-	$(CARGO) build --release --workspace --bins $(FEATURES)
+	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
 
 demo: build py-install
 	./target/release/envhub match "balance a pole on a cart"
@@ -107,26 +114,32 @@ demo: build py-install
 
 lint: setup
 	$(CARGO) fmt --all -- --check
-	$(CARGO) clippy --workspace --all-targets $(FEATURES) -- -D warnings
+	$(CARGO) clippy $(PROFILE) --workspace --all-targets $(FEATURES) -- -D warnings
 
 fmt:
 	$(CARGO) fmt --all
 
+# Tests run in the release profile: they reuse `make build`'s compiled tree (dependencies are
+# optimised in every profile anyway), and end-to-end tests start the release binaries.
 rust-test: setup py-install
-	# End-to-end tests start the real binaries: build them first.
-	$(CARGO) build --workspace --bins $(FEATURES)
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) test --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
 	fi
-	$(CARGO) test --workspace --doc $(FEATURES)
+	$(CARGO) test $(PROFILE) --workspace --doc $(FEATURES)
 
-# The Python package `envhub` into .venv/ (editable): maturin builds py-client in its own
-# target dir, so it never rebuilds what cargo built; the release worker goes beside it.
+# The Python package `envhub` into .venv/, editable: the extension module `make build`
+# compiled goes next to the pure-Python sources, which a .pth file puts on the venv's path,
+# and the release worker goes beside them. (`make wheel` is where maturin packages it.)
+PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+PY_EXT_SUFFIX = $(shell $(VPY) -c 'import importlib.machinery as m; print(m.EXTENSION_SUFFIXES[0])')
 py-install: build
-	cd py-client && VIRTUAL_ENV=$(abspath $(VENV)) CARGO_TARGET_DIR=$(abspath target/maturin) \
-		$(abspath $(VPY)) -m maturin develop --release --quiet
+	cp target/release/lib_envhub.so py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
+	mv -f py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp py-client/python/envhub/_envhub$(PY_EXT_SUFFIX)
+	rm -f $(PY_SITE)/envhub.pth $(PY_SITE)/_envhub.pth
+	$(VPY) -m pip uninstall --quiet --yes envhub 2>/dev/null || true
+	echo "$(abspath py-client/python)" > $(PY_SITE)/envhub.pth
 	mkdir -p py-client/python/envhub/bin
 	cp target/release/envhub-worker py-client/python/envhub/bin/envhub-worker.tmp
 	mv -f py-client/python/envhub/bin/envhub-worker.tmp py-client/python/envhub/bin/envhub-worker

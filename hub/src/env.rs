@@ -92,7 +92,7 @@ impl Env {
     }
 
     /// Renders the env (`render_mode = "rgb_array"`); `None` if it renders nothing.
-    pub fn render(&mut self) -> Result<Option<crate::vec_env::Frame>, HubError> {
+    pub fn render(&mut self) -> Result<Option<crate::batch::Frame>, HubError> {
         Ok(self.inner.render()?.pop().flatten())
     }
 

@@ -78,14 +78,23 @@ pub enum HubError {
         /// What happened (exit status, timeout).
         why: String,
     },
-    /// An env raised an error while stepping or resetting.
-    #[error("env error in worker {worker}: {message}")]
+    /// An env raised an error while stepping or resetting. The other envs of the call
+    /// stepped as usual (their results are in `VecEnv::last_batch`); the failed ones must be
+    /// reset before they step again.
+    #[error(
+        "env error in worker {worker} (envs {envs:?}): {message}\nhint: the other envs stepped as usual; reset envs {envs:?} before stepping them again"
+    )]
     EnvFailed {
         /// Worker index.
         worker: usize,
+        /// The envs (session indices) that failed.
+        envs: Vec<usize>,
         /// The env's message.
         message: String,
     },
+    /// A wait on the workers was interrupted (Ctrl-C); the session was aborted.
+    #[error("interrupted while waiting for the workers; the session was closed")]
+    Interrupted,
     /// The shared-memory layer failed.
     #[error(transparent)]
     DataPlane(#[from] DataPlaneError),

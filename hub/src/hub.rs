@@ -11,8 +11,9 @@ use crate::launcher::Launcher;
 use crate::python_host::UserAdapters;
 use crate::registry::Registry;
 use crate::routing::{Route, route};
+use crate::session_options::SessionOptions;
 use crate::settings::Settings;
-use crate::vec_env::{SessionOptions, VecEnv};
+use crate::vec_env::VecEnv;
 use envhub_core::{AutoresetMode, EnvConfig};
 
 /// The hub logic: resolves registry ids to adapters and starts worker sessions — here

@@ -5,6 +5,8 @@
 //! memory. It is small (tens to hundreds of entries), so search is a linear scan that keeps
 //! file order as the tie-breaker, which makes results predictable for people.
 
+mod async_step;
+mod batch;
 mod catalog;
 mod daemon;
 mod daemon_client;
@@ -17,26 +19,31 @@ mod launcher;
 mod matching;
 mod python_host;
 mod registry;
+mod results;
 mod routing;
+mod session_options;
 mod settings;
 mod tags;
 mod vec_env;
 mod worker_binary;
 mod worker_link;
 
+pub use batch::{Batch, Frame};
 pub use catalog::{AdapterInfo, Host, refresh_adapters};
 pub use daemon::{default_socket, serve};
 pub use daemon_client::DaemonClient;
 pub use entry::EnvEntry;
 pub use env::{Env, Step};
 pub use envhub_core::{AutoresetMode, EnvConfig, ResetOptions, Space};
-pub use envhub_shm::{MAX_BORROWED_RESPONSES, Response};
+pub use envhub_shm::SlotLease;
 pub use error::HubError;
 pub use hub::{Hub, make, make_vec};
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
 pub use python_host::{python_interpreter, set_default_python};
 pub use registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery};
 pub use routing::{Route, merge_config};
+pub use session_options::SessionOptions;
 pub use settings::{CONFIG_FILE_NAME, OneOrMany, Settings, SettingsError};
-pub use vec_env::{Batch, Frame, SessionOptions, VecEnv};
+pub use vec_env::VecEnv;
 pub use worker_binary::{set_default_worker_binary, worker_binary};
+pub use worker_link::InterruptCheck;

@@ -1,201 +1,47 @@
 //! `VecEnv`: a batch of envs spread over worker processes, stepped through shared memory.
+//!
+//! Every request names a batch slot ([`envhub_shm::SlotPool`]); each worker writes its envs'
+//! rows of it, so the results of a lock-step call are one contiguous block per field, viewed
+//! in place. Asynchronous stepping (`send`/`recv`) lives in `async_step.rs`, the collection of
+//! responses into results in `results.rs`.
 
+use crate::batch::{Batch, Frame};
 use crate::error::HubError;
 use crate::launcher::Launcher;
+use crate::results::Results;
 use crate::routing::Route;
-use crate::worker_link::{WorkerLink, split_envs};
+use crate::session_options::SessionOptions;
+use crate::worker_link::{InterruptCheck, WorkerLink, split_envs};
 use envhub_core::{AutoresetMode, DType, Space};
-use envhub_shm::{ChannelName, Response, WaitPolicy, WorkerJob, status};
-use std::time::Duration;
-
-/// How a session behaves, beyond what `EnvConfig` says about the envs.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SessionOptions {
-    /// A worker that takes longer than this for one request is treated as hung and killed.
-    pub step_timeout: Duration,
-    /// Time allowed for a worker to create its envs and report ready.
-    pub start_timeout: Duration,
-    /// Restart a worker that died; its envs come back truncated, with `worker_restarted`
-    /// in their info.
-    pub restart_on_crash: bool,
-    /// Spin at least this long on a response before blocking (0: always block at once).
-    pub spin: Duration,
-    /// Spin at most this long: the spin adapts to the usual wait up to this bound, so a
-    /// step of a millisecond is caught without a wake-up (tens of µs on a VM).
-    pub max_spin: Duration,
-    /// iceoryx2 namespace (file prefix) of the session's channels.
-    pub namespace: String,
-}
-
-impl Default for SessionOptions {
-    fn default() -> Self {
-        SessionOptions {
-            step_timeout: Duration::from_secs(60),
-            start_timeout: Duration::from_secs(60),
-            restart_on_crash: false,
-            spin: Duration::from_micros(50),
-            max_spin: Duration::from_millis(2),
-            namespace: std::env::var(crate::env_vars::ENVHUB_NAMESPACE)
-                .unwrap_or_else(|_| "envhub_".to_string()),
-        }
-    }
-}
-
-impl SessionOptions {
-    /// How the client waits for its workers. Spinning yields the core on every round, so it
-    /// costs nothing when another process needs the core, and saves a wake-up (tens of µs on
-    /// a VM) when the answer is close; the 5 ms tick bounds how late a dead worker is seen.
-    fn wait_policy(&self) -> WaitPolicy {
-        WaitPolicy {
-            spin: self.spin,
-            max_spin: self.max_spin,
-            tick: Duration::from_millis(5),
-        }
-    }
-}
+use envhub_shm::{BatchLayout, ChannelName, SlotPool, SlotsName, WorkerJob};
+use std::sync::Arc;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Phase {
+pub(crate) enum Phase {
     Created,
     Running,
     Closed,
 }
 
-/// The results of a reset or step, for every env of the batch (or, from
-/// [`VecEnv::recv`], for the envs listed in `env_ids`). With one worker, the observations,
-/// rewards and flags are viewed in place in its shared-memory sample.
-#[derive(Debug)]
-pub struct Batch<'a> {
-    /// The envs these results belong to, in order.
-    pub env_ids: &'a [usize],
-    /// Observations, `observation_space().byte_len()` bytes per env, contiguous.
-    pub obs: &'a [u8],
-    /// Rewards.
-    pub rewards: &'a [f64],
-    /// Terminated flags.
-    pub terminated: &'a [bool],
-    /// Truncated flags.
-    pub truncated: &'a [bool],
-    infos: &'a [serde_json::Value],
-    final_obs: &'a [Option<Vec<u8>>],
-    in_place: bool,
-}
-
-static NO_INFO: serde_json::Value = serde_json::Value::Null;
-
-impl<'a> Batch<'a> {
-    /// Observations as `f32` (when the observation space is a `float32` box).
-    pub fn obs_f32(&self) -> &'a [f32] {
-        bytemuck::cast_slice(self.obs)
-    }
-
-    /// The info of the `k`-th env of the batch (`Null` if it reported none).
-    pub fn info(&self, k: usize) -> &'a serde_json::Value {
-        self.infos.get(k).unwrap_or(&NO_INFO)
-    }
-
-    /// Whether any env reported info.
-    pub fn has_info(&self) -> bool {
-        !self.infos.is_empty()
-    }
-
-    /// Whether the observations are viewed in place in the worker's shared-memory response
-    /// (which [`VecEnv::take_response`] can then hand over), rather than gathered.
-    pub fn in_place(&self) -> bool {
-        self.in_place
-    }
-
-    /// same_step autoreset: the final observation of the `k`-th env if its episode ended
-    /// in this step.
-    pub fn final_obs(&self, k: usize) -> Option<&'a [u8]> {
-        self.final_obs.get(k).and_then(Option::as_deref)
-    }
-}
-
-/// An RGB frame, row-major, 3 bytes per pixel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Frame {
-    /// Rows.
-    pub height: usize,
-    /// Columns.
-    pub width: usize,
-    /// `height × width × 3` bytes.
-    pub rgb: Vec<u8>,
-}
-
-impl Frame {
-    /// Reads one frame as the worker encodes it (`u32` height, `u32` width, pixels);
-    /// `Some(None)` for an env that rendered nothing.
-    fn parse(bytes: &[u8]) -> Option<(Option<Frame>, &[u8])> {
-        let h = u32::from_le_bytes(bytes.get(..4)?.try_into().ok()?) as usize;
-        let w = u32::from_le_bytes(bytes.get(4..8)?.try_into().ok()?) as usize;
-        let n = h * w * 3;
-        let rgb = bytes.get(8..8 + n)?;
-        let frame = (n > 0).then(|| Frame {
-            height: h,
-            width: w,
-            rgb: rgb.to_vec(),
-        });
-        Some((frame, &bytes[8 + n..]))
-    }
-}
-
-/// Buffers the results are gathered into when they span several workers.
-#[derive(Default)]
-struct Gathered {
-    env_ids: Vec<usize>,
-    obs: Vec<u64>,
-    obs_len: usize,
-    rewards: Vec<f64>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
-    infos: Vec<serde_json::Value>,
-    final_obs: Vec<Option<Vec<u8>>>,
-}
-
-impl Gathered {
-    fn clear(&mut self) {
-        self.env_ids.clear();
-        self.obs_len = 0;
-        self.rewards.clear();
-        self.terminated.clear();
-        self.truncated.clear();
-        self.infos.clear();
-        self.final_obs.clear();
-    }
-
-    fn push_obs(&mut self, bytes: &[u8]) {
-        let end = self.obs_len + bytes.len();
-        if self.obs.len() * 8 < end {
-            self.obs.resize(end.div_ceil(8), 0);
-        }
-        let all: &mut [u8] = bytemuck::cast_slice_mut(&mut self.obs);
-        all[self.obs_len..end].copy_from_slice(bytes);
-        self.obs_len = end;
-    }
-
-    fn obs_bytes(&self) -> &[u8] {
-        &bytemuck::cast_slice(&self.obs)[..self.obs_len]
-    }
-}
-
 /// A batch of `num_envs` envs of one kind, hosted by worker processes and stepped in lock
 /// step ([`VecEnv::step`]) or asynchronously ([`VecEnv::send`] / [`VecEnv::recv`]).
 pub struct VecEnv {
-    id: String,
-    route: Route,
-    session: String,
-    options: SessionOptions,
-    workers: Vec<WorkerLink>,
-    observation_space: Space,
-    action_space: Space,
-    num_envs: usize,
-    /// `0..num_envs`, for validating a full batch without allocating.
-    all_env_ids: Vec<usize>,
-    phase: Phase,
-    gathered: Gathered,
-    /// Whether the last results are viewed straight in the one worker's sample.
-    direct: bool,
+    pub(crate) id: String,
+    pub(crate) route: Route,
+    pub(crate) session: String,
+    pub(crate) options: SessionOptions,
+    pub(crate) workers: Vec<WorkerLink>,
+    pub(crate) observation_space: Space,
+    pub(crate) action_space: Space,
+    pub(crate) num_envs: usize,
+    pub(crate) phase: Phase,
+    pub(crate) pool: SlotPool,
+    pub(crate) results: Results,
+    /// Envs whose last step or reset failed: they must be reset before they step again.
+    pub(crate) must_reset: Vec<bool>,
+    pub(crate) interrupt: Arc<InterruptCheck>,
+    /// Observation bytes copied on the client so far (0 unless results had to be gathered).
+    pub(crate) obs_bytes_copied: u64,
 }
 
 fn session_name() -> String {
@@ -237,8 +83,11 @@ impl VecEnv {
             });
         }
         let session = session_name();
+        let slots = SlotsName {
+            prefix: options.namespace.clone(),
+            session: session.clone(),
+        };
         let policy = options.wait_policy();
-        let spin = policy.spin;
         let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
             .into_iter()
             .map(|(env_offset, count)| {
@@ -250,12 +99,14 @@ impl VecEnv {
                     config,
                     env_offset,
                     num_envs: count,
+                    session_envs: num_envs,
                     channel: ChannelName {
                         prefix: options.namespace.clone(),
                         service: String::new(),
                     },
+                    slots: slots.clone(),
                     owner_pid: std::process::id(),
-                    spin_us: spin.as_micros() as u64,
+                    spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
                 }
             })
@@ -287,6 +138,12 @@ impl VecEnv {
         let links = started.into_iter().collect::<Result<Vec<_>, _>>()?;
         let observation_space = links[0].spec.observation_space.clone();
         let action_space = links[0].spec.action_space.clone();
+        let layout = BatchLayout::new(
+            num_envs,
+            observation_space.byte_len(),
+            route.config.autoreset_mode == AutoresetMode::SameStep,
+        );
+        let pool = SlotPool::new(slots, layout, options.pool_bytes);
         Ok(VecEnv {
             id: id.to_string(),
             route,
@@ -296,10 +153,12 @@ impl VecEnv {
             observation_space,
             action_space,
             num_envs,
-            all_env_ids: (0..num_envs).collect(),
             phase: Phase::Created,
-            gathered: Gathered::default(),
-            direct: false,
+            pool,
+            results: Results::default(),
+            must_reset: vec![false; num_envs],
+            interrupt: Arc::new(|| false),
+            obs_bytes_copied: 0,
         })
     }
 
@@ -340,13 +199,13 @@ impl VecEnv {
 
     /// The episode limit applied, if any.
     pub fn max_episode_steps(&self) -> Option<u32> {
-        self.workers[0].spec.max_episode_steps
+        self.workers.first().and_then(|w| w.spec.max_episode_steps)
     }
 
     /// Frames per second of the envs' rendering (Gymnasium's `metadata["render_fps"]`), if
     /// the env says.
     pub fn render_fps(&self) -> Option<f64> {
-        self.workers[0].spec.render_fps
+        self.workers.first().and_then(|w| w.spec.render_fps)
     }
 
     /// Autoreset mode.
@@ -354,14 +213,37 @@ impl VecEnv {
         self.route.config.autoreset_mode
     }
 
-    fn check_open(&self) -> Result<(), HubError> {
+    /// Observation bytes this session has copied on the client so far. Results are viewed in
+    /// place in shared memory, so this stays 0 except for `recv` of envs that do not lie
+    /// contiguously in one slot.
+    pub fn obs_bytes_copied(&self) -> u64 {
+        self.obs_bytes_copied
+    }
+
+    /// Batch slots created so far (each one whole batch of results in shared memory).
+    pub fn slots_in_use(&self) -> usize {
+        self.pool.len()
+    }
+
+    /// Sets what is asked every few milliseconds while waiting on workers: when it answers
+    /// `true`, the wait stops with [`HubError::Interrupted`] and the session is aborted (its
+    /// workers killed and its shared memory removed). The Python client checks for Ctrl-C.
+    pub fn set_interrupt(&mut self, check: Arc<InterruptCheck>) {
+        self.interrupt = check;
+    }
+
+    pub(crate) fn check_open(&self) -> Result<(), HubError> {
         if self.phase == Phase::Closed {
             return Err(HubError::InvalidState(format!(
                 "`{}` is closed; make a new env",
                 self.id
             )));
         }
-        if self.workers.iter().any(|w| w.pending) {
+        if self
+            .workers
+            .iter()
+            .any(|w| w.pending || w.response.is_some())
+        {
             return Err(HubError::InvalidState(
                 "results of an earlier `send` have not been received; call `recv` first".into(),
             ));
@@ -379,7 +261,7 @@ impl VecEnv {
     }
 
     /// Resets the envs where `mask` is true (all if `None`), each with its seed, passing
-    /// `options` to every env's reset. Unselected envs keep their state; their slots in the
+    /// `options` to every env's reset. Unselected envs keep their state; their rows in the
     /// results are not meaningful.
     pub fn reset_with(
         &mut self,
@@ -404,15 +286,21 @@ impl VecEnv {
         } else {
             serde_json::to_string(options).expect("options serialize")
         };
+        let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
-            w.response = None;
             w.channel.send_reset(
+                slot,
                 &seeds[range.clone()],
-                mask.map(|m| &m[range]),
+                mask.map(|m| &m[range.clone()]),
                 &options_json,
             )?;
-            w.pending = true;
+            w.sent(slot, range);
+        }
+        for (i, done) in self.must_reset.iter_mut().enumerate() {
+            if mask.is_none_or(|m| m[i]) {
+                *done = false;
+            }
         }
         let all: Vec<usize> = (0..self.workers.len()).collect();
         self.collect(&all)?;
@@ -420,8 +308,8 @@ impl VecEnv {
         Ok(self.batch())
     }
 
-    /// Validates a batch of actions (`n` actions back to back) against the action space.
-    fn batch_shape(&self, n: usize) -> String {
+    /// Describes a batch of `n` actions' shape and dtype.
+    pub(crate) fn batch_shape(&self, n: usize) -> String {
         let mut shape = vec![n];
         shape.extend(self.action_space.shape().unwrap_or_default());
         let dtype = self
@@ -449,21 +337,23 @@ impl VecEnv {
     /// Steps every env with `actions` (one per env, back to back in the action space's layout).
     pub fn step(&mut self, actions: &[u8]) -> Result<Batch<'_>, HubError> {
         self.check_steppable()?;
-        self.validate_actions(actions, &self.all_env_ids)?;
+        let all: Vec<usize> = (0..self.num_envs).collect();
+        self.check_not_failed(&all)?;
+        self.validate_actions(actions, self.num_envs)?;
         let ab = self.action_space.byte_len();
+        let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let (lo, n) = (w.job.env_offset, w.job.num_envs);
-            w.response = None;
             w.channel
-                .send_step(&actions[lo * ab..(lo + n) * ab], None)?;
-            w.pending = true;
+                .send_step(slot, &actions[lo * ab..(lo + n) * ab], None)?;
+            w.sent(slot, lo..lo + n);
         }
         let workers: Vec<usize> = (0..self.workers.len()).collect();
         self.collect(&workers)?;
         Ok(self.batch())
     }
 
-    fn check_steppable(&self) -> Result<(), HubError> {
+    pub(crate) fn check_steppable(&self) -> Result<(), HubError> {
         self.check_open()?;
         if self.phase == Phase::Created {
             return Err(HubError::InvalidState(format!(
@@ -474,24 +364,40 @@ impl VecEnv {
         Ok(())
     }
 
-    /// Checks `env_ids.len()` actions back to back against the action space; an error names
-    /// the env (by its id) and the valid range or shape.
-    fn validate_actions(&self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
+    /// Refuses to step envs whose last step or reset failed (their state is unknown).
+    pub(crate) fn check_not_failed(&self, env_ids: &[usize]) -> Result<(), HubError> {
+        let failed: Vec<usize> = env_ids
+            .iter()
+            .copied()
+            .filter(|&e| self.must_reset[e])
+            .collect();
+        if failed.is_empty() {
+            return Ok(());
+        }
+        Err(HubError::InvalidState(format!(
+            "env {failed:?} of `{}` failed in its last step or reset and must be reset first\nhint: reset them (a full reset, or `reset_with` a mask that selects them; in Python `reset(options={{\"reset_mask\": mask}})`)",
+            self.id
+        )))
+    }
+
+    /// Checks `n` actions back to back against the action space; an error names the env
+    /// (its index among the `n`) and the valid range or shape.
+    pub(crate) fn validate_actions(&self, actions: &[u8], n: usize) -> Result<(), HubError> {
         self.action_space
-            .validate_batch(actions, env_ids.len())
+            .validate_batch(actions, n)
             .map_err(|(k, e)| match e {
                 envhub_core::SpaceError::Length { .. } => HubError::InvalidAction {
                     reason: format!(
                         "got {} bytes of actions for {} envs; each action of {} is {} bytes",
                         actions.len(),
-                        env_ids.len(),
+                        n,
                         self.action_space,
                         self.action_space.byte_len()
                     ),
-                    hint: format!("pass an array of shape {}", self.batch_shape(env_ids.len())),
+                    hint: format!("pass an array of shape {}", self.batch_shape(n)),
                 },
                 e => HubError::InvalidAction {
-                    reason: format!("env {}: {e}", env_ids[k]),
+                    reason: format!("env {k}: {e}"),
                     hint: format!("actions must lie in {}", self.action_space),
                 },
             })
@@ -509,263 +415,11 @@ impl VecEnv {
         self.step(&bytes)
     }
 
-    /// Sends actions to the envs in `env_ids` (one action each, in that order) without
-    /// waiting. Envs of a worker not named keep their state. Collect with [`VecEnv::recv`].
-    pub fn send(&mut self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
-        self.check_steppable()?;
-        if let Some(&bad) = env_ids.iter().find(|&&e| e >= self.num_envs) {
-            return Err(HubError::InvalidAction {
-                reason: format!("env id {bad} is out of range"),
-                hint: format!("env ids go from 0 to {}", self.num_envs - 1),
-            });
-        }
-        self.validate_actions(actions, env_ids)?;
-        let ab = self.action_space.byte_len();
-        for w in &mut self.workers {
-            let (lo, n) = (w.job.env_offset, w.job.num_envs);
-            let mut selected = vec![false; n];
-            let mut block = vec![0u8; n * ab];
-            let mut any = false;
-            for (k, &env) in env_ids.iter().enumerate() {
-                if (lo..lo + n).contains(&env) {
-                    selected[env - lo] = true;
-                    block[(env - lo) * ab..(env - lo + 1) * ab]
-                        .copy_from_slice(&actions[k * ab..(k + 1) * ab]);
-                    any = true;
-                }
-            }
-            if any {
-                w.response = None;
-                w.channel.send_step(&block, Some(&selected))?;
-                w.pending = true;
-            }
-        }
-        Ok(())
-    }
-
-    /// Waits until at least one worker with work in flight has answered and returns the
-    /// results of every worker that has (EnvPool's async `recv`).
-    pub fn recv(&mut self) -> Result<Batch<'_>, HubError> {
-        if !self.workers.iter().any(|w| w.pending) {
-            return Err(HubError::InvalidState(
-                "nothing was sent; call `send` first".into(),
-            ));
-        }
-        let timeout = self.options.step_timeout;
-        let started = std::time::Instant::now();
-        let mut ready = Vec::new();
-        loop {
-            for i in 0..self.workers.len() {
-                if self.workers[i].pending {
-                    match self.workers[i].poll() {
-                        Ok(Some(r)) => {
-                            self.workers[i].response = Some(r);
-                            ready.push(i);
-                        }
-                        Ok(None) => {}
-                        Err(e) => {
-                            self.recover(i, e)?;
-                            ready.push(i);
-                        }
-                    }
-                }
-            }
-            if !ready.is_empty() || self.workers.iter().all(|w| !w.pending) {
-                break;
-            }
-            // Block briefly on the first pending worker; the others' answers queue meanwhile.
-            let i = self
-                .workers
-                .iter()
-                .position(|w| w.pending)
-                .expect("one is pending");
-            if started.elapsed() >= timeout {
-                let err = self.workers[i].hung(timeout);
-                self.recover(i, err)?;
-                ready.push(i);
-                continue;
-            }
-            match self.workers[i].wait_for(Duration::from_millis(1)) {
-                Ok(Some(r)) => {
-                    self.workers[i].response = Some(r);
-                    ready.push(i);
-                }
-                Ok(None) => {}
-                Err(e) => {
-                    self.recover(i, e)?;
-                    ready.push(i);
-                }
-            }
-        }
-        self.collect_ready(&ready)?;
-        Ok(self.batch())
-    }
-
-    /// Handles a worker failure: restarts it if allowed, else closes the session and errs.
-    fn recover(&mut self, i: usize, err: HubError) -> Result<(), HubError> {
-        if !matches!(err, HubError::WorkerDied { .. }) || !self.options.restart_on_crash {
-            if matches!(err, HubError::WorkerDied { .. }) {
-                self.fail();
-            }
-            return Err(err);
-        }
-        tracing::warn!(worker = i, error = %err, "restarting worker");
-        let policy = self.options.wait_policy();
-        self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
-        let n = self.workers[i].job.num_envs;
-        let seeds = vec![None; n];
-        self.workers[i].channel.send_reset(&seeds, None, "")?;
-        self.workers[i].pending = true;
-        let r = self.workers[i].wait(self.options.step_timeout)?;
-        self.workers[i].response = Some(r);
-        Ok(())
-    }
-
-    /// Waits for the listed workers and gathers their results.
-    fn collect(&mut self, workers: &[usize]) -> Result<(), HubError> {
-        let timeout = self.options.step_timeout;
-        for &i in workers {
-            if !self.workers[i].pending {
-                continue;
-            }
-            match self.workers[i].wait(timeout) {
-                Ok(r) => self.workers[i].response = Some(r),
-                Err(e) => self.recover(i, e)?,
-            }
-        }
-        self.collect_ready(workers)
-    }
-
-    /// Gathers the responses of `workers` into the batch buffers.
-    fn collect_ready(&mut self, workers: &[usize]) -> Result<(), HubError> {
-        for &i in workers {
-            if let Some(r) = &self.workers[i].response
-                && r.header().status == status::ERROR
-            {
-                let message = r.error().unwrap_or_default();
-                return Err(HubError::EnvFailed { worker: i, message });
-            }
-        }
-        let ob = self.observation_space.byte_len();
-        self.gathered.clear();
-        self.direct = workers.len() == 1 && self.workers.len() == 1;
-        let any_info = workers.iter().any(|&i| {
-            let w = &self.workers[i];
-            w.restarted || w.response.as_ref().is_some_and(|r| r.header().info_len > 0)
-        });
-        let any_final = workers.iter().any(|&i| {
-            self.workers[i]
-                .response
-                .as_ref()
-                .is_some_and(|r| r.blocks().final_mask.iter().any(|&f| f != 0))
-        });
-        for &i in workers {
-            let w = &mut self.workers[i];
-            let restarted = std::mem::take(&mut w.restarted);
-            let restarts = w.restarts;
-            let Some(r) = &w.response else { continue };
-            let b = r.blocks();
-            let n = w.job.num_envs;
-            if as_bools(b.terminated).is_none() || as_bools(b.truncated).is_none() {
-                return Err(HubError::DataPlane(envhub_shm::DataPlaneError::Protocol(
-                    format!("worker {i} sent done flags other than 0 and 1"),
-                )));
-            }
-            self.gathered
-                .env_ids
-                .extend(w.job.env_offset..w.job.env_offset + n);
-            if !self.direct {
-                self.gathered.push_obs(&b.obs[..n * ob]);
-                self.gathered.rewards.extend_from_slice(b.rewards);
-                self.gathered
-                    .terminated
-                    .extend(b.terminated.iter().map(|&t| t != 0));
-                self.gathered
-                    .truncated
-                    .extend(b.truncated.iter().map(|&t| t != 0 || restarted));
-            }
-            if any_info {
-                let infos = parse_infos(r);
-                for k in 0..n {
-                    let mut info = infos
-                        .as_ref()
-                        .and_then(|v| v.get(k).cloned())
-                        .unwrap_or_default();
-                    if restarted {
-                        let mut map = info.as_object().cloned().unwrap_or_default();
-                        map.insert("worker_restarted".into(), true.into());
-                        map.insert("worker_restarts".into(), restarts.into());
-                        info = serde_json::Value::Object(map);
-                    }
-                    self.gathered.infos.push(info);
-                }
-            }
-            if any_final {
-                for k in 0..n {
-                    self.gathered.final_obs.push(
-                        (b.final_mask[k] != 0).then(|| b.final_obs[k * ob..(k + 1) * ob].to_vec()),
-                    );
-                }
-            }
-            if self.direct && restarted {
-                // A restart must show in the flags, which the direct view cannot change.
-                self.direct = false;
-                self.gathered.push_obs(&b.obs[..n * ob]);
-                self.gathered.rewards.extend_from_slice(b.rewards);
-                self.gathered
-                    .terminated
-                    .extend(b.terminated.iter().map(|&t| t != 0));
-                self.gathered.truncated.extend(std::iter::repeat_n(true, n));
-            }
-        }
-        Ok(())
-    }
-
-    fn batch(&self) -> Batch<'_> {
-        let g = &self.gathered;
-        if self.direct {
-            let w = &self.workers[0];
-            let r = w.response.as_ref().expect("a response was collected");
-            let b = r.blocks();
-            let n = w.job.num_envs;
-            return Batch {
-                env_ids: &g.env_ids,
-                obs: &b.obs[..n * self.observation_space.byte_len()],
-                rewards: b.rewards,
-                terminated: as_bools(b.terminated).expect("checked when collected"),
-                truncated: as_bools(b.truncated).expect("checked when collected"),
-                infos: &g.infos,
-                final_obs: &g.final_obs,
-                in_place: true,
-            };
-        }
-        Batch {
-            env_ids: &g.env_ids,
-            obs: g.obs_bytes(),
-            rewards: &g.rewards,
-            terminated: &g.terminated,
-            truncated: &g.truncated,
-            infos: &g.infos,
-            final_obs: &g.final_obs,
-            in_place: false,
-        }
-    }
-
-    /// Takes the shared-memory response behind the last results out of the session, so that
-    /// views into it stay valid after later steps: the sample lives as long as the returned
-    /// [`Response`] (the Python client hands it to numpy this way). `None` unless the last
-    /// results were viewed in place (one worker, see [`Batch`]); then they were gathered into
-    /// the session's own buffers, which the next call overwrites.
-    ///
-    /// iceoryx2 lets a client hold at most [`envhub_shm::MAX_BORROWED_RESPONSES`] responses
-    /// per worker, the session's own latest one included: keep fewer than that taken, or
-    /// copy instead, or the next receive fails.
-    pub fn take_response(&mut self) -> Option<Response> {
-        if !self.direct {
-            return None;
-        }
-        self.direct = false;
-        self.workers.first_mut().and_then(|w| w.response.take())
+    /// The results of the last reset, step or `recv`. After an [`HubError::EnvFailed`], these
+    /// are the results of the envs that did not fail (the failed envs' rows are not
+    /// meaningful); `None` before the first results.
+    pub fn last_batch(&self) -> Option<Batch<'_>> {
+        (self.phase != Phase::Closed && self.results.is_set()).then(|| self.batch())
     }
 
     /// Renders every env (`render_mode = "rgb_array"`): one frame per env, `None` where the
@@ -775,20 +429,25 @@ impl VecEnv {
         for w in &mut self.workers {
             w.channel.send_render(None)?;
             w.pending = true;
+            w.sent_at = std::time::Instant::now();
         }
         let mut frames = Vec::with_capacity(self.num_envs);
         for i in 0..self.workers.len() {
-            let response = match self.workers[i].wait(self.options.step_timeout) {
+            let response = match self.workers[i].wait(self.options.step_timeout, &*self.interrupt) {
                 Ok(r) => r,
-                Err(e) => {
-                    if matches!(e, HubError::WorkerDied { .. }) {
-                        self.fail();
-                    }
-                    return Err(e);
-                }
+                Err(e) => return Err(self.give_up(e)),
             };
             if let Some(message) = response.error() {
-                return Err(HubError::EnvFailed { worker: i, message });
+                // The other workers' answers are read and dropped, so the next request starts
+                // clean.
+                for w in &mut self.workers[i + 1..] {
+                    let _ = w.wait(self.options.step_timeout, &|| false);
+                }
+                return Err(HubError::EnvFailed {
+                    worker: i,
+                    envs: self.workers[i].sent.clone(),
+                    message,
+                });
             }
             let mut bytes = response.info_bytes();
             for _ in 0..self.workers[i].job.num_envs {
@@ -813,12 +472,28 @@ impl VecEnv {
         out
     }
 
-    fn fail(&mut self) {
+    /// After a worker died (without restart) or the caller interrupted a wait: the session is
+    /// over. Kills what is left, removes its shared memory, and passes the error on.
+    pub(crate) fn give_up(&mut self, err: HubError) -> HubError {
+        if matches!(err, HubError::WorkerDied { .. } | HubError::Interrupted) {
+            self.abort();
+        }
+        err
+    }
+
+    /// Ends the session at once: workers killed, shared memory removed. For when waiting for
+    /// a clean close is not an option (a dead worker, Ctrl-C).
+    pub fn abort(&mut self) {
+        if self.phase == Phase::Closed {
+            return;
+        }
         self.phase = Phase::Closed;
         for w in &mut self.workers {
-            w.response = None;
+            w.abort();
         }
         self.workers.clear();
+        self.pool.close();
+        let _ = envhub_shm::cleanup_dead_nodes(&self.options.namespace);
     }
 
     /// Closes the envs and stops the workers. Further calls are errors; closing twice is fine.
@@ -831,6 +506,7 @@ impl VecEnv {
             w.close();
         }
         self.workers.clear();
+        self.pool.close();
     }
 }
 
@@ -838,19 +514,4 @@ impl Drop for VecEnv {
     fn drop(&mut self) {
         self.close();
     }
-}
-
-/// Views flag bytes as `bool`s, if every byte is 0 or 1 (the worker writes nothing else;
-/// a corrupted sample is caught when the response is collected).
-fn as_bools(flags: &[u8]) -> Option<&[bool]> {
-    flags.iter().all(|&f| f <= 1).then(|| {
-        // SAFETY: every byte is 0 or 1, the two valid bit patterns of `bool`, which has the
-        // size and alignment of `u8`.
-        unsafe { std::slice::from_raw_parts(flags.as_ptr().cast::<bool>(), flags.len()) }
-    })
-}
-
-/// The per-env infos of a response, if any env reported info.
-fn parse_infos(r: &Response) -> Option<Vec<serde_json::Value>> {
-    serde_json::from_str(r.info_json()?).ok()
 }

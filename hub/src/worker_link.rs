@@ -5,6 +5,10 @@ use crate::launcher::{Launcher, WorkerProcess};
 use envhub_shm::{
     ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy, WorkerJob,
 };
+
+/// Asked while waiting on workers: `true` stops the wait with [`HubError::Interrupted`] (the
+/// Python client checks for Ctrl-C this way).
+pub type InterruptCheck = dyn Fn() -> bool + Send + Sync;
 use std::time::{Duration, Instant};
 
 /// A running worker and the client's end of its channel.
@@ -19,8 +23,14 @@ pub(crate) struct WorkerLink {
     generation: u32,
     /// A request is in flight.
     pub pending: bool,
-    /// The latest response (holding it keeps its shared-memory sample alive).
+    /// A response received but not yet handed to the caller (`recv` returns it later).
     pub response: Option<Response>,
+    /// The batch slot of the last request with results.
+    pub slot: u32,
+    /// The envs (session ids, ascending) the last step or reset request selected.
+    pub sent: Vec<usize>,
+    /// When the request in flight was sent.
+    pub sent_at: Instant,
     /// The worker was restarted since the last results were read.
     pub restarted: bool,
     /// Restarts so far.
@@ -40,9 +50,7 @@ impl WorkerLink {
     ) -> Result<WorkerLink, HubError> {
         job.channel.service = format!("envhub/{session}/{index}/{generation}");
         let node_name = format!("client-{}-{index}", std::process::id());
-        // The request size grows to the real layout on first use (power-of-two allocation).
-        let placeholder = Layout::new(job.num_envs, 0, 0, false);
-        let mut channel = ClientChannel::create(&job.channel, &node_name, placeholder, policy)?;
+        let mut channel = ClientChannel::create(&job.channel, &node_name, policy)?;
         let (process, spec) = launcher.launch(&job, start_timeout).map_err(|e| match e {
             HubError::WorkerDied { pid, why, envs, .. } => HubError::WorkerDied {
                 worker: index,
@@ -59,12 +67,7 @@ impl WorkerLink {
             pid,
             why: format!("vanished right after starting: {e}"),
         })?;
-        channel.set_layout(Layout::new(
-            job.num_envs,
-            spec.observation_space.byte_len(),
-            spec.action_space.byte_len(),
-            job.config.autoreset_mode == envhub_core::AutoresetMode::SameStep,
-        ));
+        channel.set_layout(Layout::new(job.num_envs, spec.action_space.byte_len()))?;
         tracing::debug!(worker = index, pid, envs = %env_range(&job), "worker ready");
         Ok(WorkerLink {
             index,
@@ -77,6 +80,9 @@ impl WorkerLink {
             generation,
             pending: false,
             response: None,
+            slot: 0,
+            sent: Vec::new(),
+            sent_at: Instant::now(),
             restarted: false,
             restarts: 0,
         })
@@ -87,26 +93,35 @@ impl WorkerLink {
         self.spec.pid
     }
 
-    /// Waits for the response to the request in flight. A worker that exits, or does not
-    /// answer within `timeout` (then it is killed), is reported as [`HubError::WorkerDied`].
-    pub fn wait(&mut self, timeout: Duration) -> Result<Response, HubError> {
-        match self.wait_for(timeout)? {
-            Some(response) => Ok(response),
-            None => Err(self.hung(timeout)),
-        }
+    /// Notes a request just sent: its slot and the envs it selected.
+    pub fn sent(&mut self, slot: u32, envs: impl IntoIterator<Item = usize>) {
+        self.pending = true;
+        self.response = None;
+        self.slot = slot;
+        self.sent.clear();
+        self.sent.extend(envs);
+        self.sent_at = Instant::now();
     }
 
-    /// Waits at most `slice` for the response: `None` if it has not come yet. A worker that
-    /// exited is an error.
-    pub fn wait_for(&mut self, slice: Duration) -> Result<Option<Response>, HubError> {
-        const SLICE_OVER: &str = "slice over";
-        let deadline = Instant::now() + slice;
+    /// Waits for the response to the request in flight. A worker that exits, or does not
+    /// answer within `timeout` of the request (then it is killed), is reported as
+    /// [`HubError::WorkerDied`]; `interrupt` is asked every tick.
+    pub fn wait(
+        &mut self,
+        timeout: Duration,
+        interrupt: &InterruptCheck,
+    ) -> Result<Response, HubError> {
+        const INTERRUPTED: &str = "interrupted";
+        const TIMED_OUT: &str = "timed out";
+        let deadline = self.sent_at + timeout;
         let watch = &self.watch;
         let result = self.channel.receive(|| {
             if watch.exited() {
                 Err(DataPlaneError::PeerGone("exited".into()))
+            } else if interrupt() {
+                Err(DataPlaneError::PeerGone(INTERRUPTED.into()))
             } else if Instant::now() >= deadline {
-                Err(DataPlaneError::PeerGone(SLICE_OVER.into()))
+                Err(DataPlaneError::PeerGone(TIMED_OUT.into()))
             } else {
                 Ok(())
             }
@@ -114,9 +129,10 @@ impl WorkerLink {
         match result {
             Ok(response) => {
                 self.pending = false;
-                Ok(Some(response))
+                Ok(response)
             }
-            Err(DataPlaneError::PeerGone(why)) if why == SLICE_OVER => Ok(None),
+            Err(DataPlaneError::PeerGone(why)) if why == INTERRUPTED => Err(HubError::Interrupted),
+            Err(DataPlaneError::PeerGone(why)) if why == TIMED_OUT => Err(self.hung(timeout)),
             Err(DataPlaneError::PeerGone(_)) => Err(self.exited()),
             Err(e) => {
                 self.pending = false;
@@ -125,8 +141,29 @@ impl WorkerLink {
         }
     }
 
+    /// Whether the request in flight has been waited on for longer than `timeout`.
+    pub fn overdue(&self, timeout: Duration) -> bool {
+        self.pending && self.sent_at.elapsed() >= timeout
+    }
+
+    /// The response if it has arrived, without asking whether the worker lives (cheap: for
+    /// spinning).
+    pub fn try_take(&mut self) -> Result<Option<Response>, HubError> {
+        if !self.pending {
+            return Ok(None);
+        }
+        let r = self.channel.try_receive()?;
+        if r.is_some() {
+            self.pending = false;
+        }
+        Ok(r)
+    }
+
     /// The response if it has arrived; a dead worker is an error.
     pub fn poll(&mut self) -> Result<Option<Response>, HubError> {
+        if !self.pending {
+            return Ok(None);
+        }
         if let Some(r) = self.channel.try_receive()? {
             self.pending = false;
             return Ok(Some(r));
@@ -190,11 +227,19 @@ impl WorkerLink {
     pub fn close(&mut self) {
         self.response = None;
         if self.channel.send_close().is_ok() {
-            let _ = self.wait(Duration::from_secs(2));
+            self.sent_at = Instant::now();
+            let _ = self.wait(Duration::from_secs(2), &|| false);
         }
         if self.process.exit_status(Duration::from_secs(2)).is_none() {
             self.process.kill();
         }
+    }
+
+    /// Kills the worker at once (the caller gave up on the session, e.g. on Ctrl-C).
+    pub fn abort(&mut self) {
+        self.response = None;
+        self.pending = false;
+        self.process.kill();
     }
 }
 

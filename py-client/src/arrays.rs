@@ -3,8 +3,8 @@
 
 use envhub_core::DType;
 use numpy::ndarray::{ArrayViewD, IxDyn};
-use numpy::npyffi::{_PyArray_GET_ITEM_DATA, NPY_ARRAY_WRITEABLE};
-use numpy::{Element, PyArray, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::npyffi::_PyArray_GET_ITEM_DATA;
+use numpy::{PyArray, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 /// Calls `$body` with `$t` bound to the Rust type of `$dtype` (`u8` for raw bytes).
@@ -77,21 +77,28 @@ impl ArrayLayout {
     }
 }
 
-fn set_readonly<T: Element>(array: &Bound<'_, PyArray<T, IxDyn>>) {
-    // SAFETY: the array was just created by us and is not shared yet; clearing WRITEABLE only
-    // restricts what Python may do with it.
-    unsafe {
-        (*_PyArray_GET_ITEM_DATA(array.as_array_ptr())).flags &= !NPY_ARRAY_WRITEABLE;
-    }
-}
+/// Rewards as arrays see them: one `float64` per env.
+pub(crate) const REWARDS: ArrayLayout = ArrayLayout {
+    dtype: Some(DType::Float64),
+    shape: Vec::new(),
+    bytes: 8,
+};
 
-/// A read-only array of `n` values (one value without a leading axis when `n` is `None`)
-/// viewing the memory at `ptr`, with `owner` as its base: the memory must stay valid and
-/// unchanged as long as `owner` lives.
+/// Done flags as arrays see them: one `bool` per env.
+pub(crate) const FLAGS: ArrayLayout = ArrayLayout {
+    dtype: Some(DType::Bool),
+    shape: Vec::new(),
+    bytes: 1,
+};
+
+/// A writeable array of `n` values (one value without a leading axis when `n` is `None`)
+/// viewing the memory at `ptr`, with `owner` as its base: the memory must stay valid, and
+/// written by no one else, as long as `owner` lives.
 ///
 /// # Safety
-/// `ptr` must point to `n.unwrap_or(1) * layout.bytes` readable bytes, aligned for the dtype,
-/// that stay valid and unmodified while `owner` is alive.
+/// `ptr` must point to `n.unwrap_or(1) * layout.bytes` bytes, aligned for the dtype, holding
+/// valid values of it, that stay valid and are neither read nor written by anyone else while
+/// `owner` is alive.
 pub(crate) unsafe fn view<'py>(
     layout: &ArrayLayout,
     n: Option<usize>,
@@ -104,7 +111,6 @@ pub(crate) unsafe fn view<'py>(
         let view = unsafe { ArrayViewD::<T>::from_shape_ptr(IxDyn(&shape), ptr.cast::<T>()) };
         // SAFETY: `owner` keeps the memory alive for as long as the array (its base) lives.
         let array = unsafe { PyArray::<T, IxDyn>::borrow_from_array(&view, owner) };
-        set_readonly(&array);
         Ok(array.into_any())
     })
 }

@@ -76,7 +76,17 @@ pub(crate) fn hub_error(py: Python<'_>, e: HubError) -> PyErr {
             .unwrap_or_default();
             raise(py, "WorkerDiedError", message, attrs)
         }
-        HubError::EnvFailed { .. } => raise(py, "EnvFailedError", message, vec![]),
+        HubError::EnvFailed { worker, envs, .. } => {
+            let attrs = (|| -> PyResult<Vec<(&'static str, Bound<'_, PyAny>)>> {
+                Ok(vec![
+                    ("worker", worker.into_pyobject(py)?.into_any()),
+                    ("env_ids", pyo3::types::PyList::new(py, envs)?.into_any()),
+                ])
+            })()
+            .unwrap_or_default();
+            raise(py, "EnvFailedError", message, attrs)
+        }
+        HubError::Interrupted => pyo3::exceptions::PyKeyboardInterrupt::new_err(message),
         HubError::DataPlane(_) => raise(py, "DataPlaneError", message, vec![]),
         HubError::Remote(_) | HubError::Daemon { .. } => {
             raise(py, "HubDaemonError", message, vec![])

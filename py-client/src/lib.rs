@@ -3,11 +3,11 @@
 //! Thin on purpose: sessions, the registry and task matching are the Rust client's, results
 //! cross as numpy arrays and metadata as JSON, and everything Gymnasium-shaped lives in the
 //! pure-Python package on top, where Python users can read it. The one decision made here is
-//! ownership of shared memory: a batch's observations are a read-only numpy array viewing
-//! the worker's response in place, and the array's base object owns that response, so an
-//! array the user keeps stays valid and unchanged. The price is a bounded pool: past
-//! `MAX_BORROWED_RESPONSES - 1` arrays alive at once, observations are copied instead.
-//! Waiting on workers releases the GIL.
+//! ownership of shared memory: a batch's observations, rewards and flags are numpy arrays
+//! viewing the session's batch slot in place, and their base object holds a lease on the
+//! slot, so arrays a user keeps stay valid and unchanged. The price is memory: a slot stays
+//! while arrays view it, up to the session's cap (`pool_bytes`), past which results are
+//! copied. Waiting on workers releases the GIL and checks for Ctrl-C every few milliseconds.
 
 mod arrays;
 mod convert;
@@ -83,9 +83,8 @@ fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(worker::serve_vector_worker, m)?)?;
     m.add_function(wrap_pyfunction!(worker::space_leaves_json, m)?)?;
     m.add_class::<session::Session>()?;
-    m.add_class::<session::SampleOwner>()?;
+    m.add_class::<session::SlotOwner>()?;
     m.add_class::<registry::PyRegistry>()?;
-    m.add("MAX_LENT_SAMPLES", session::LENDABLE)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -1,117 +1,55 @@
-//! `Session`: a `VecEnv` shared with Python, and `SharedSample`, the owner object through
-//! which numpy arrays keep a worker's shared-memory response alive.
+//! `Session`: a `VecEnv` shared with Python, and `SharedSlot`, the owner object through which
+//! numpy arrays keep a shared-memory batch slot alive.
 //!
-//! Ownership: when a batch's observations lie in place in the one worker's response, the
-//! response is taken out of the `VecEnv` (so the next step cannot drop it) and parked in the
-//! session's `held` map; a `SharedSample` names it and is the numpy array's base. When the
-//! last array viewing it goes away, the sample is released. iceoryx2 lets a client borrow at
-//! most `MAX_BORROWED_RESPONSES` samples per worker, one of which the session needs for the
-//! next response, so at most `LENDABLE` are lent: past that, observations are copied into a
-//! fresh array instead of blocking the worker or failing. Sessions with several workers have
-//! their observations in several samples; those are gathered by the hub and copied into one
-//! fresh array (one numpy array per batch either way).
+//! Ownership: results lie in a batch slot that all the session's workers write into. When a
+//! call returns, the arrays of its observations, rewards and flags view that slot, and their
+//! base object holds a lease on it: the slot is not written again, nor unmapped, until the
+//! last array viewing it is gone, so arrays a user keeps (a frame stack, a replay buffer) stay
+//! valid and unchanged. The session then writes into another slot; when every slot the memory
+//! cap allows is lent, results land in a scratch slot and are copied into fresh arrays, so a
+//! call never waits on the user. Arrays are writeable either way, as Gymnasium's are.
 
 use crate::arrays::{self, ArrayLayout};
 use crate::convert::info_to_py;
 use crate::errors::{forked, hub_error, raise};
 use crate::registry::PyRegistry;
-use envhub::{
-    AutoresetMode, Batch, EnvConfig, Hub, HubError, MAX_BORROWED_RESPONSES, ResetOptions, Response,
-    VecEnv,
-};
+use envhub::{AutoresetMode, Batch, EnvConfig, Hub, HubError, ResetOptions, SlotLease, VecEnv};
 use numpy::{PyArray1, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyList, PyTuple};
-use std::collections::HashMap;
-use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, TryLockError};
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
-/// Responses lent to Python at once per session; the session keeps one for itself.
-pub(crate) const LENDABLE: usize = MAX_BORROWED_RESPONSES - 1;
-
-/// Everything of a session that touches iceoryx2.
+/// A session's `VecEnv` and the process that made it.
 struct State {
-    vec: ManuallyDrop<VecEnv>,
-    /// Responses lent to numpy arrays, by slot.
-    held: ManuallyDrop<HashMap<u64, Response>>,
-    next_slot: u64,
+    vec: std::mem::ManuallyDrop<VecEnv>,
     pid: u32,
 }
-
-// SAFETY: iceoryx2's `ipc` ports and samples count their shared parts without atomics, so
-// they must never be used from two threads at the same time. Every one of them lives in a
-// `State` (the session's ports in `vec`, the lent samples in `held`), and a `State` is only
-// reached through the `Mutex` of its `Shared`: uses are serialized, and moving the whole
-// group between threads is sound.
-unsafe impl Send for State {}
 
 impl Drop for State {
     fn drop(&mut self) {
         if std::process::id() != self.pid {
-            // A forked child's copy: the workers and samples are the parent's; closing or
-            // releasing them here would corrupt the parent's session. Leak them.
+            // A forked child's copy: the workers and slots are the parent's; closing them here
+            // would end the parent's session. Leak them.
             return;
         }
         // SAFETY: dropped once, here, and never used again.
-        unsafe {
-            ManuallyDrop::drop(&mut self.held);
-            ManuallyDrop::drop(&mut self.vec);
-        }
+        unsafe { std::mem::ManuallyDrop::drop(&mut self.vec) };
     }
 }
 
-/// A session's state and the queue of samples released while it was busy.
-struct Shared {
-    state: Mutex<State>,
-    released: Mutex<Vec<u64>>,
-    pid: u32,
-}
-
-impl Shared {
-    /// Locks the state and releases the samples queued meanwhile.
-    fn lock(&self) -> MutexGuard<'_, State> {
-        let mut st = self.state.lock().unwrap_or_else(PoisonError::into_inner);
-        let queued =
-            std::mem::take(&mut *self.released.lock().unwrap_or_else(PoisonError::into_inner));
-        for slot in queued {
-            st.held.remove(&slot);
-        }
-        st
-    }
-
-    /// Releases a lent sample now, or queues it when the session is busy (a step in another
-    /// thread): never waits, so dropping an array never blocks on a step.
-    fn release(&self, slot: u64) {
-        match self.state.try_lock() {
-            Ok(mut st) => {
-                st.held.remove(&slot);
-            }
-            Err(TryLockError::Poisoned(p)) => {
-                p.into_inner().held.remove(&slot);
-            }
-            Err(TryLockError::WouldBlock) => self
-                .released
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .push(slot),
-        }
-    }
-}
-
-/// The base object of observation arrays that view a worker's shared-memory response: while
-/// it lives, the response is not reused.
-#[pyclass(name = "SharedSample", module = "envhub._envhub", frozen)]
-pub(crate) struct SampleOwner {
-    shared: Arc<Shared>,
-    slot: u64,
+/// The base object of arrays that view a batch slot: while it lives, the slot is neither
+/// written again nor unmapped.
+#[pyclass(name = "SharedSlot", module = "envhub._envhub", frozen)]
+pub(crate) struct SlotOwner {
+    lease: SlotLease,
     address: usize,
     nbytes: usize,
 }
 
 #[pymethods]
-impl SampleOwner {
+impl SlotOwner {
     /// Address of the observations in shared memory.
     #[getter]
     fn address(&self) -> usize {
@@ -124,65 +62,66 @@ impl SampleOwner {
         self.nbytes
     }
 
+    /// The batch slot's index in its session.
+    #[getter]
+    fn slot(&self) -> u32 {
+        self.lease.index()
+    }
+
     fn __repr__(&self) -> String {
         format!(
-            "<envhub shared-memory sample: {} bytes at {:#x}>",
-            self.nbytes, self.address
+            "<envhub shared-memory batch slot {}: {} bytes of observations at {:#x}>",
+            self.lease.index(),
+            self.nbytes,
+            self.address
         )
     }
 }
 
-impl Drop for SampleOwner {
-    fn drop(&mut self) {
-        if std::process::id() == self.shared.pid {
-            self.shared.release(self.slot);
-        }
-    }
-}
-
-/// Where a batch's observations went.
-enum Obs {
-    /// Left in the worker's response, lent under `slot`.
-    Lent { slot: u64, address: usize },
-    /// Copied into the array allocated before the call.
-    Filled,
-    /// Copied here.
-    Copied(Vec<u8>),
+/// Where a batch's observations, rewards and flags are.
+enum Place {
+    /// In a batch slot, at these addresses, lent through `lease`.
+    Lent {
+        lease: SlotLease,
+        obs: usize,
+        rewards: usize,
+        terminated: usize,
+        truncated: usize,
+    },
+    /// Copied (results in the scratch slot, or gathered).
+    Copied {
+        obs: Vec<u8>,
+        rewards: Vec<f64>,
+        terminated: Vec<bool>,
+        truncated: Vec<bool>,
+    },
 }
 
 /// A batch's results, taken out of the session (no borrow of it left).
 struct Results {
     env_ids: Vec<usize>,
-    obs: Obs,
-    rewards: Vec<f64>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
+    place: Place,
     infos: Option<Vec<serde_json::Value>>,
     final_obs: Option<Vec<Option<Vec<u8>>>>,
 }
 
-/// Runs `op` on the session and takes its results out: the observations lent if they lie in
-/// place and the pool allows, else copied (into `fill`, an array of the whole batch, when
-/// given).
-fn run(
-    st: &mut State,
-    fill: Option<usize>,
-    op: impl for<'a> FnOnce(&'a mut VecEnv) -> Result<Batch<'a>, HubError>,
-) -> Result<Results, HubError> {
-    let same_step = st.vec.autoreset_mode() == AutoresetMode::SameStep;
-    let can_lend = fill.is_none() && st.held.len() < LENDABLE;
-    let (mut results, lend) = {
-        let batch = op(&mut st.vec)?;
+impl Results {
+    fn of(batch: &Batch<'_>, lease: Option<SlotLease>, same_step: bool) -> Results {
         let n = batch.env_ids.len();
-        let lend = can_lend && batch.in_place();
-        let obs = if lend {
-            Obs::Filled // replaced below, once the batch no longer borrows the session
-        } else if let Some(dst) = fill {
-            // SAFETY: `fill` is a fresh array of the whole batch that only this call sees.
-            unsafe { arrays::copy_into(dst, batch.obs) };
-            Obs::Filled
-        } else {
-            Obs::Copied(batch.obs.to_vec())
+        let place = match lease {
+            Some(lease) => Place::Lent {
+                lease,
+                obs: batch.obs.as_ptr() as usize,
+                rewards: batch.rewards.as_ptr() as usize,
+                terminated: batch.terminated.as_ptr() as usize,
+                truncated: batch.truncated.as_ptr() as usize,
+            },
+            None => Place::Copied {
+                obs: batch.obs.to_vec(),
+                rewards: batch.rewards.to_vec(),
+                terminated: batch.terminated.to_vec(),
+                truncated: batch.truncated.to_vec(),
+            },
         };
         let final_obs = if same_step {
             let all: Vec<Option<Vec<u8>>> = (0..n)
@@ -192,38 +131,44 @@ fn run(
         } else {
             None
         };
-        let results = Results {
+        Results {
             env_ids: batch.env_ids.to_vec(),
-            obs,
-            rewards: batch.rewards.to_vec(),
-            terminated: batch.terminated.to_vec(),
-            truncated: batch.truncated.to_vec(),
+            place,
             infos: batch
                 .has_info()
                 .then(|| (0..n).map(|k| batch.info(k).clone()).collect()),
             final_obs,
-        };
-        (results, lend)
-    };
-    if lend {
-        let response = st
-            .vec
-            .take_response()
-            .expect("results in place have a response to take");
-        let address = response.blocks().obs.as_ptr() as usize;
-        let slot = st.next_slot;
-        st.next_slot += 1;
-        st.held.insert(slot, response);
-        results.obs = Obs::Lent { slot, address };
+        }
     }
-    Ok(results)
+}
+
+/// Runs `op` on the session and takes its results out. An env failure comes back with the
+/// results of the envs that did not fail.
+fn run(
+    vec: &mut VecEnv,
+    op: impl for<'a> FnOnce(&'a mut VecEnv) -> Result<Batch<'a>, HubError>,
+) -> Result<Results, (HubError, Option<Results>)> {
+    let same_step = vec.autoreset_mode() == AutoresetMode::SameStep;
+    match op(vec) {
+        Ok(batch) => Ok(Results::of(&batch, batch.lease(), same_step)),
+        Err(e @ HubError::EnvFailed { .. }) => {
+            let partial = vec
+                .last_batch()
+                .map(|b| Results::of(&b, b.lease(), same_step));
+            Err((e, partial))
+        }
+        Err(e) => Err((e, None)),
+    }
 }
 
 /// A batch of envs in worker processes (the compiled half of `envhub.VectorEnv` and
 /// `envhub.Env`).
 #[pyclass(name = "Session", module = "envhub._envhub", frozen)]
 pub(crate) struct Session {
-    shared: Arc<Shared>,
+    state: Mutex<State>,
+    pid: u32,
+    /// The exception (KeyboardInterrupt) that interrupted the last wait, to re-raise.
+    interrupted: Arc<Mutex<Option<PyErr>>>,
     closed: AtomicBool,
     id: String,
     adapter: String,
@@ -241,12 +186,6 @@ pub(crate) struct Session {
     obs: ArrayLayout,
     act: ArrayLayout,
 }
-
-/// A session made without the GIL, not yet shared with Python.
-struct Made(State);
-
-// SAFETY: as for `State`: nothing else refers to its iceoryx2 parts.
-unsafe impl Send for Made {}
 
 pub(crate) fn leaves_json(space: &envhub::Space) -> String {
     let leaves: Vec<serde_json::Value> = space
@@ -273,7 +212,8 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 /// `EnvConfig` as JSON (unknown fields are an error); `registry` replaces the one found the
 /// usual way.
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None))]
+#[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
     id: String,
@@ -282,6 +222,7 @@ pub(crate) fn make_session(
     registry: Option<PyRef<'_, PyRegistry>>,
     step_timeout: Option<f64>,
     restart_on_crash: bool,
+    pool_bytes: Option<usize>,
 ) -> PyResult<Session> {
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
@@ -297,7 +238,7 @@ pub(crate) fn make_session(
     };
     let registry = registry.map(|r| r.inner.clone());
     let made = py
-        .detach(move || -> Result<Made, HubError> {
+        .detach(move || -> Result<State, HubError> {
             let hub = match registry {
                 None => Hub::from_env()?,
                 Some(registry) => {
@@ -312,16 +253,19 @@ pub(crate) fn make_session(
                 options.step_timeout = t;
             }
             options.restart_on_crash = restart_on_crash;
+            if let Some(bytes) = pool_bytes {
+                options.pool_bytes = bytes;
+            }
             let vec = hub.with_options(options).make_vec(&id, num_envs, &config)?;
-            Ok(Made(State {
-                vec: ManuallyDrop::new(vec),
-                held: ManuallyDrop::new(HashMap::new()),
-                next_slot: 0,
+            Ok(State {
+                vec: std::mem::ManuallyDrop::new(vec),
                 pid: std::process::id(),
-            }))
+            })
         })
         .map_err(|e| hub_error(py, e))?;
-    let st = made.0;
+    let mut st = made;
+    let interrupted: Arc<Mutex<Option<PyErr>>> = Arc::default();
+    st.vec.set_interrupt(ctrl_c_check(interrupted.clone()));
     let v = &*st.vec;
     let session = Session {
         closed: AtomicBool::new(false),
@@ -343,34 +287,72 @@ pub(crate) fn make_session(
         action_leaves: leaves_json(v.action_space()),
         obs: ArrayLayout::of(v.observation_space()),
         act: ArrayLayout::of(v.action_space()),
-        shared: Arc::new(Shared {
-            pid: st.pid,
-            state: Mutex::new(st),
-            released: Mutex::new(Vec::new()),
-        }),
+        pid: st.pid,
+        state: Mutex::new(st),
+        interrupted,
     };
     Ok(session)
 }
 
+/// What a session asks while it waits on workers: whether Python has a signal to handle (Ctrl-C).
+/// The exception it raises is kept for the caller to re-raise once the wait has ended.
+fn ctrl_c_check(slot: Arc<Mutex<Option<PyErr>>>) -> Arc<envhub::InterruptCheck> {
+    Arc::new(move || {
+        Python::attach(|py| match py.check_signals() {
+            Ok(()) => false,
+            Err(e) => {
+                *slot.lock().unwrap_or_else(PoisonError::into_inner) = Some(e);
+                true
+            }
+        })
+    })
+}
+
 impl Session {
     fn check_pid(&self, py: Python<'_>) -> PyResult<()> {
-        if std::process::id() != self.shared.pid {
-            return Err(forked(py, &self.id, self.shared.pid));
+        if std::process::id() != self.pid {
+            return Err(forked(py, &self.id, self.pid));
         }
         Ok(())
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The Python exception for `e`: the Ctrl-C that interrupted a wait is re-raised as it
+    /// came (the session was closed), an env failure carries the other envs' results.
+    fn error(&self, py: Python<'_>, e: HubError, partial: Option<Results>) -> PyErr {
+        if matches!(e, HubError::Interrupted) {
+            self.closed.store(true, Ordering::SeqCst);
+            if let Some(err) = self
+                .interrupted
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .take()
+            {
+                return err;
+            }
+            return pyo3::exceptions::PyKeyboardInterrupt::new_err(e.to_string());
+        }
+        let err = hub_error(py, e);
+        if let Some(partial) = partial
+            && let Ok(tuple) = self.batch_tuple(py, partial, false)
+        {
+            let _ = err.value(py).setattr("results", tuple);
+        }
+        err
     }
 
     /// Runs `op` without the GIL (waiting on workers) and takes its results out.
     fn call(
         &self,
         py: Python<'_>,
-        fill: Option<usize>,
         op: impl for<'a> FnOnce(&'a mut VecEnv) -> Result<Batch<'a>, HubError> + Send,
     ) -> PyResult<Results> {
         self.check_pid(py)?;
-        let shared = &self.shared;
-        py.detach(move || run(&mut shared.lock(), fill, op))
-            .map_err(|e| hub_error(py, e))
+        py.detach(|| run(&mut self.lock().vec, op))
+            .map_err(|(e, partial)| self.error(py, e, partial))
     }
 
     /// Actions as bytes, checked against the action space's dtype.
@@ -403,44 +385,78 @@ impl Session {
         })
     }
 
-    /// The observation array of `results` (`n` values, or one without a leading axis).
-    fn obs_array<'py>(
+    /// `(obs, rewards, terminated, truncated)` arrays of `results`: views of the batch slot
+    /// with its lease as their base, or fresh arrays. `n` `None`: one env, no leading axis.
+    fn arrays<'py>(
         &self,
         py: Python<'py>,
-        obs: Obs,
+        place: Place,
         n: Option<usize>,
-        filled: Option<Bound<'py, PyAny>>,
-    ) -> PyResult<Bound<'py, PyAny>> {
+    ) -> PyResult<[Bound<'py, PyAny>; 4]> {
         let count = n.unwrap_or(1);
-        match obs {
-            Obs::Lent { slot, address } => {
-                let owner = SampleOwner {
-                    shared: self.shared.clone(),
-                    slot,
-                    address,
-                    nbytes: count * self.obs.bytes,
-                };
-                let owner = Bound::new(py, owner)?;
-                // SAFETY: the sample in `slot` holds these bytes, aligned for any dtype
-                // (blocks start on 8-byte boundaries), and is neither reused nor freed until
-                // the owner, the array's base, is dropped.
-                unsafe { arrays::view(&self.obs, n, address as *const u8, owner.into_any()) }
+        match place {
+            Place::Lent {
+                lease,
+                obs,
+                rewards,
+                terminated,
+                truncated,
+            } => {
+                let owner = Bound::new(
+                    py,
+                    SlotOwner {
+                        lease,
+                        address: obs,
+                        nbytes: count * self.obs.bytes,
+                    },
+                )?
+                .into_any();
+                // SAFETY: the slot holds these blocks (observations aligned for any dtype:
+                // blocks start on 8-byte boundaries, rows are whole observations; rewards
+                // f64, flags 0/1 bytes), and the lease in `owner`, the arrays' base, keeps the
+                // slot mapped and unwritten while any of them lives.
+                unsafe {
+                    Ok([
+                        arrays::view(&self.obs, n, obs as *const u8, owner.clone())?,
+                        arrays::view(
+                            &arrays::REWARDS,
+                            Some(count),
+                            rewards as *const u8,
+                            owner.clone(),
+                        )?,
+                        arrays::view(
+                            &arrays::FLAGS,
+                            Some(count),
+                            terminated as *const u8,
+                            owner.clone(),
+                        )?,
+                        arrays::view(&arrays::FLAGS, Some(count), truncated as *const u8, owner)?,
+                    ])
+                }
             }
-            Obs::Filled => Ok(filled.expect("a filled array was allocated")),
-            Obs::Copied(bytes) => Ok(arrays::copy(py, &self.obs, n, &bytes)),
+            Place::Copied {
+                obs,
+                rewards,
+                terminated,
+                truncated,
+            } => Ok([
+                arrays::copy(py, &self.obs, n, &obs),
+                PyArray1::from_vec(py, rewards).into_any(),
+                PyArray1::from_vec(py, terminated).into_any(),
+                PyArray1::from_vec(py, truncated).into_any(),
+            ]),
         }
     }
 
-    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None)`.
+    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids])`.
     fn batch_tuple<'py>(
         &self,
         py: Python<'py>,
         r: Results,
-        filled: Option<Bound<'py, PyAny>>,
         with_ids: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = r.env_ids.len();
-        let obs = self.obs_array(py, r.obs, Some(n), filled)?;
+        let [obs, rewards, terminated, truncated] = self.arrays(py, r.place, Some(n))?;
         let infos = match &r.infos {
             None => py.None().into_bound(py),
             Some(infos) => {
@@ -464,14 +480,7 @@ impl Session {
                 list.into_any()
             }
         };
-        let mut items = vec![
-            obs,
-            PyArray1::from_vec(py, r.rewards).into_any(),
-            PyArray1::from_vec(py, r.terminated).into_any(),
-            PyArray1::from_vec(py, r.truncated).into_any(),
-            infos,
-            final_obs,
-        ];
+        let mut items = vec![obs, rewards, terminated, truncated, infos, final_obs];
         if with_ids {
             let ids: Vec<i64> = r.env_ids.iter().map(|&i| i as i64).collect();
             items.push(PyArray1::from_vec(py, ids).into_any());
@@ -479,14 +488,46 @@ impl Session {
         PyTuple::new(py, items)
     }
 
-    /// A fresh array for a whole batch of observations when they will be gathered anyway.
-    fn prealloc<'py>(&self, py: Python<'py>) -> (Option<Bound<'py, PyAny>>, Option<usize>) {
-        if self.num_workers > 1 {
-            let (array, ptr) = arrays::empty(py, &self.obs, Some(self.num_envs));
-            (Some(array), Some(ptr))
-        } else {
-            (None, None)
-        }
+    /// `(obs, reward, terminated, truncated, info)` of one env.
+    fn single<'py>(
+        &self,
+        py: Python<'py>,
+        mut r: Results,
+    ) -> PyResult<(Bound<'py, PyAny>, f64, bool, bool, Bound<'py, PyAny>)> {
+        let info = r.infos.take().and_then(|mut i| i.pop());
+        let (reward, terminated, truncated) = match &r.place {
+            Place::Lent {
+                rewards,
+                terminated,
+                truncated,
+                ..
+            } => {
+                // SAFETY: the lease in `r.place` keeps the slot mapped; one value each.
+                unsafe {
+                    (
+                        *(*rewards as *const f64),
+                        *(*terminated as *const u8) != 0,
+                        *(*truncated as *const u8) != 0,
+                    )
+                }
+            }
+            Place::Copied {
+                rewards,
+                terminated,
+                truncated,
+                ..
+            } => (
+                rewards.first().copied().unwrap_or(0.0),
+                terminated.first().copied().unwrap_or(false),
+                truncated.first().copied().unwrap_or(false),
+            ),
+        };
+        let [obs, ..] = self.arrays(py, r.place, None)?;
+        let info = match &info {
+            Some(i) => info_to_py(py, i)?,
+            None => pyo3::types::PyDict::new(py).into_any(),
+        };
+        Ok((obs, reward, terminated, truncated, info))
     }
 }
 
@@ -514,15 +555,8 @@ impl Session {
         options_json: Option<&str>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let options = parse_options(py, options_json)?;
-        let (filled, fill) = if mask.is_none() {
-            self.prealloc(py)
-        } else {
-            (None, None)
-        };
-        let r = self.call(py, fill, move |v| {
-            v.reset_with(&seeds, mask.as_deref(), &options)
-        })?;
-        self.batch_tuple(py, r, filled, false)
+        let r = self.call(py, move |v| v.reset_with(&seeds, mask.as_deref(), &options))?;
+        self.batch_tuple(py, r, false)
     }
 
     /// Steps every env with `actions` (an array of the action space's dtype, C-contiguous).
@@ -532,9 +566,8 @@ impl Session {
         actions: &Bound<'py, PyUntypedArray>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let bytes = self.action_bytes(py, actions)?;
-        let (filled, fill) = self.prealloc(py);
-        let r = self.call(py, fill, move |v| v.step(&bytes))?;
-        self.batch_tuple(py, r, filled, false)
+        let r = self.call(py, move |v| v.step(&bytes))?;
+        self.batch_tuple(py, r, false)
     }
 
     /// One env: `(obs, info)` of a reset with `seed`.
@@ -546,13 +579,8 @@ impl Session {
         options_json: Option<&str>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let options = parse_options(py, options_json)?;
-        let mut r = self.call(py, None, move |v| v.reset_with(&[seed], None, &options))?;
-        let info = r.infos.take().and_then(|mut i| i.pop());
-        let obs = self.obs_array(py, r.obs, None, None)?;
-        let info = match &info {
-            Some(i) => info_to_py(py, i)?,
-            None => pyo3::types::PyDict::new(py).into_any(),
-        };
+        let r = self.call(py, move |v| v.reset_with(&[seed], None, &options))?;
+        let (obs, _, _, _, info) = self.single(py, r)?;
         PyTuple::new(py, [obs, info])
     }
 
@@ -563,16 +591,8 @@ impl Session {
         action: &Bound<'py, PyUntypedArray>,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let bytes = self.action_bytes(py, action)?;
-        let mut r = self.call(py, None, move |v| v.step(&bytes))?;
-        let info = r.infos.take().and_then(|mut i| i.pop());
-        let reward = r.rewards.first().copied().unwrap_or(0.0);
-        let terminated = r.terminated.first().copied().unwrap_or(false);
-        let truncated = r.truncated.first().copied().unwrap_or(false);
-        let obs = self.obs_array(py, r.obs, None, None)?;
-        let info = match &info {
-            Some(i) => info_to_py(py, i)?,
-            None => pyo3::types::PyDict::new(py).into_any(),
-        };
+        let r = self.call(py, move |v| v.step(&bytes))?;
+        let (obs, reward, terminated, truncated, info) = self.single(py, r)?;
         PyTuple::new(
             py,
             [
@@ -589,10 +609,9 @@ impl Session {
     /// `None` for an env that rendered nothing. Frames are copies (large, and rare).
     fn render<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
         self.check_pid(py)?;
-        let shared = &self.shared;
         let frames = py
-            .detach(move || shared.lock().vec.render())
-            .map_err(|e| hub_error(py, e))?;
+            .detach(|| self.lock().vec.render())
+            .map_err(|e| self.error(py, e, None))?;
         let list = PyList::empty(py);
         for frame in frames {
             match frame {
@@ -616,38 +635,44 @@ impl Session {
     ) -> PyResult<()> {
         self.check_pid(py)?;
         let bytes = self.action_bytes(py, actions)?;
-        let shared = &self.shared;
-        py.detach(move || shared.lock().vec.send(&bytes, &env_ids))
-            .map_err(|e| hub_error(py, e))
+        py.detach(|| self.lock().vec.send(&bytes, &env_ids))
+            .map_err(|e| self.error(py, e, None))
     }
 
-    /// Waits for the first workers to finish; their results with the env ids as a 7th item.
+    /// Waits for the first workers to finish; the results of exactly the envs they stepped,
+    /// with their env ids as a 7th item.
     fn recv<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
-        let r = self.call(py, None, |v| v.recv())?;
-        self.batch_tuple(py, r, None, true)
+        let r = self.call(py, |v| v.recv())?;
+        self.batch_tuple(py, r, true)
     }
 
     /// Stops the workers. Closing twice is fine; in a forked child it only marks this copy
-    /// closed (the workers are the parent's).
+    /// closed (the workers are the parent's). Arrays already returned stay valid.
     fn close(&self, py: Python<'_>) {
-        if self.closed.swap(true, Ordering::SeqCst) || std::process::id() != self.shared.pid {
+        if self.closed.swap(true, Ordering::SeqCst) || std::process::id() != self.pid {
             return;
         }
-        let shared = &self.shared;
-        py.detach(move || shared.lock().vec.close());
+        py.detach(|| self.lock().vec.close());
     }
 
-    /// Whether `close` was called.
+    /// Whether `close` was called (or the session ended on Ctrl-C).
     #[getter]
     fn closed(&self) -> bool {
         self.closed.load(Ordering::SeqCst)
     }
 
-    /// Samples lent to arrays right now (at most `LENDABLE`; later arrays are copies).
+    /// Batch slots (whole batches of results in shared memory) created so far: slots stay
+    /// while arrays view them, so this grows with the arrays a user keeps, up to the cap.
     #[getter]
-    fn lent(&self, py: Python<'_>) -> usize {
-        let shared = &self.shared;
-        py.detach(move || shared.lock().held.len())
+    fn slots(&self, py: Python<'_>) -> usize {
+        py.detach(|| self.lock().vec.slots_in_use())
+    }
+
+    /// Observation bytes copied on the client so far (0 when every result was viewed in
+    /// place).
+    #[getter]
+    fn obs_bytes_copied(&self, py: Python<'_>) -> u64 {
+        py.detach(|| self.lock().vec.obs_bytes_copied())
     }
 
     /// Registry id.
@@ -689,7 +714,7 @@ impl Session {
     /// Pid of the process that made the session.
     #[getter]
     fn owner_pid(&self) -> u32 {
-        self.shared.pid
+        self.pid
     }
 
     /// The episode limit applied, if any.

@@ -14,6 +14,8 @@ pub struct EnvBatch {
     /// next_step mode: the env finished last step and resets on this one.
     pending_reset: Vec<bool>,
     infos: Vec<Info>,
+    /// Envs that failed in the last call, with the error.
+    failures: Vec<(usize, String)>,
 }
 
 impl EnvBatch {
@@ -29,11 +31,27 @@ impl EnvBatch {
             act_bytes,
             pending_reset: vec![false; n],
             infos: vec![Info::default(); n],
+            failures: Vec::new(),
         }
     }
 }
 
-/// The serve loop's view of the batch (the worker loop and in-process runs alike).
+impl EnvBatch {
+    /// Records env `i`'s failure and leaves it neutral rows; the other envs go on.
+    fn failed(&mut self, i: usize, e: EnvError, out: &mut ResponseBlocksMut<'_>) {
+        self.failures.push((i, e.to_string()));
+        self.infos[i].clear();
+        self.pending_reset[i] = false;
+        out.rewards[i] = 0.0;
+        out.terminated[i] = 0;
+        out.truncated[i] = 0;
+        out.final_mask[i] = 0;
+    }
+}
+
+/// The serve loop's view of the batch (the worker loop and in-process runs alike). One env's
+/// error does not stop the others: they are reset or stepped, and the failed env is reported
+/// (see [`ServedBatch::take_failures`]) so the client can tell its user which env to reset.
 impl ServedBatch for EnvBatch {
     fn len(&self) -> usize {
         self.envs.len()
@@ -54,12 +72,16 @@ impl ServedBatch for EnvBatch {
             if selected {
                 let seed = (flags[i] & env_flag::SEEDED != 0).then_some(seeds[i]);
                 self.infos[i].clear();
-                self.envs[i].reset(
+                let reset = self.envs[i].reset(
                     seed,
                     options,
                     &mut out.obs[i * ob..(i + 1) * ob],
                     &mut self.infos[i],
-                )?;
+                );
+                if let Err(e) = reset {
+                    self.failed(i, e, out);
+                    continue;
+                }
                 self.pending_reset[i] = false;
             } else {
                 self.infos[i].clear();
@@ -94,14 +116,24 @@ impl ServedBatch for EnvBatch {
             let obs = &mut out.obs[i * ob..(i + 1) * ob];
             if self.pending_reset[i] {
                 // next_step: this step only resets, the action is ignored (Gymnasium 1.x).
-                self.envs[i].reset(None, &no_options, obs, &mut self.infos[i])?;
+                if let Err(e) = self.envs[i].reset(None, &no_options, obs, &mut self.infos[i]) {
+                    self.failed(i, e, out);
+                    continue;
+                }
                 self.pending_reset[i] = false;
                 out.rewards[i] = 0.0;
                 out.terminated[i] = 0;
                 out.truncated[i] = 0;
                 continue;
             }
-            let t = self.envs[i].step(&actions[i * ab..(i + 1) * ab], obs, &mut self.infos[i])?;
+            let t = match self.envs[i].step(&actions[i * ab..(i + 1) * ab], obs, &mut self.infos[i])
+            {
+                Ok(t) => t,
+                Err(e) => {
+                    self.failed(i, e, out);
+                    continue;
+                }
+            };
             out.rewards[i] = t.reward;
             out.terminated[i] = t.terminated as u8;
             out.truncated[i] = t.truncated as u8;
@@ -112,7 +144,12 @@ impl ServedBatch for EnvBatch {
                         out.final_obs[i * ob..(i + 1) * ob].copy_from_slice(obs);
                         out.final_mask[i] = 1;
                         let final_info = std::mem::take(&mut self.infos[i]);
-                        self.envs[i].reset(None, &no_options, obs, &mut self.infos[i])?;
+                        if let Err(e) =
+                            self.envs[i].reset(None, &no_options, obs, &mut self.infos[i])
+                        {
+                            self.failed(i, e, out);
+                            continue;
+                        }
                         if !final_info.is_empty() {
                             self.infos[i]
                                 .insert("final_info", InfoValue::Text(info_object(&final_info)));
@@ -141,6 +178,10 @@ impl ServedBatch for EnvBatch {
         for env in &mut self.envs {
             env.close();
         }
+    }
+
+    fn take_failures(&mut self) -> Vec<(usize, String)> {
+        std::mem::take(&mut self.failures)
     }
 }
 

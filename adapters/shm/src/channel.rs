@@ -1,20 +1,31 @@
-//! The two ends of a channel: the client sends requests and reads responses in place; the
-//! worker reads requests in place and writes responses into loaned samples.
+//! The two ends of a channel: the client sends requests and reads responses; the worker reads
+//! requests in place, writes its envs' results into the batch slot the request names, and
+//! answers with a small response (status and info section).
 
 use crate::DataPlaneError;
 use crate::layout::{
-    Layout, RequestHeader, ResponseBlocks, ResponseBlocksMut, ResponseHeader, command, env_flag,
-    status,
+    Layout, RequestHeader, ResponseBlocksMut, ResponseHeader, command, env_flag, status,
 };
-use crate::transport::{ChannelName, Ipc, Ports, client_ports, node, worker_ports};
+use crate::slots::SlotMap;
+use crate::transport::{
+    ChannelName, Ipc, Ports, client_ports, node, request_publisher, worker_ports,
+};
 use crate::wait::{AdaptiveSpin, WaitPolicy, next_sample};
 use iceoryx2::node::Node;
+use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSetBuilder};
 use iceoryx2::sample::Sample;
+use std::time::Duration;
 
-/// Room reserved in every response for the info section; bigger info takes a slower path.
-pub(crate) fn info_reserve(num_envs: usize) -> usize {
+/// Usual room for the info section of a response; more takes a reallocation.
+fn info_reserve(num_envs: usize) -> usize {
     1024 + 256 * num_envs
 }
+
+/// Slack for reset options in a request before the publisher reallocates.
+const OPTIONS_RESERVE: usize = 1024;
+
+/// Slot index of requests that write no results (render, close).
+pub const NO_SLOT: u32 = u32::MAX;
 
 fn send_failed<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> DataPlaneError {
     move |e| DataPlaneError::Ipc {
@@ -26,7 +37,7 @@ fn send_failed<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> Data
 /// The client's end of a channel to one worker.
 pub struct ClientChannel {
     ports: Ports<RequestHeader, ResponseHeader>,
-    layout: Layout,
+    layout: Option<Layout>,
     seq: u64,
     policy: WaitPolicy,
     spin: AdaptiveSpin,
@@ -34,10 +45,9 @@ pub struct ClientChannel {
     _node: Node<Ipc>,
 }
 
-/// A response, viewed in place in shared memory. Holding it keeps the sample alive.
+/// A response: status and info section, viewed in place. Results are in the batch slot.
 pub struct Response {
     sample: Sample<Ipc, [u8], ResponseHeader>,
-    layout: Layout,
 }
 
 impl Response {
@@ -46,50 +56,38 @@ impl Response {
         self.sample.user_header()
     }
 
-    /// The blocks, viewed in place.
-    pub fn blocks(&self) -> ResponseBlocks<'_> {
-        self.layout.response(self.sample.payload())
+    /// The raw info section (frames, for a render).
+    pub fn info_bytes(&self) -> &[u8] {
+        let payload = self.sample.payload();
+        &payload[..(self.header().info_len as usize).min(payload.len())]
     }
 
     /// The info section as JSON text (`[{...}, ...]`, one object per env), if any.
     pub fn info_json(&self) -> Option<&str> {
-        let len = self.header().info_len as usize;
-        (len > 0).then(|| std::str::from_utf8(&self.blocks().info[..len]).unwrap_or(""))
-    }
-
-    /// The raw info section (frames, for a render).
-    pub fn info_bytes(&self) -> &[u8] {
-        &self.blocks().info[..self.header().info_len as usize]
+        let bytes = self.info_bytes();
+        (!bytes.is_empty()).then(|| std::str::from_utf8(bytes).unwrap_or(""))
     }
 
     /// The worker's error message when the status is [`status::ERROR`].
     pub fn error(&self) -> Option<String> {
-        (self.header().status == status::ERROR).then(|| {
-            let len = self.header().info_len as usize;
-            String::from_utf8_lossy(&self.blocks().info[..len]).into_owned()
-        })
-    }
-
-    /// The layout this response was written with.
-    pub fn layout(&self) -> &Layout {
-        &self.layout
+        (self.header().status == status::ERROR)
+            .then(|| String::from_utf8_lossy(self.info_bytes()).into_owned())
     }
 }
 
 impl ClientChannel {
     /// Creates the channel's services and the client's ports. Call before starting the
-    /// worker, which opens them.
+    /// worker, which opens them; then [`ClientChannel::set_layout`] once its spaces are known.
     pub fn create(
         name: &ChannelName,
         node_name: &str,
-        layout: Layout,
         policy: WaitPolicy,
     ) -> Result<ClientChannel, DataPlaneError> {
         let node = node(&name.prefix, node_name)?;
-        let ports = client_ports(&node, name, layout.req_options)?;
+        let ports = client_ports(&node, name)?;
         Ok(ClientChannel {
             ports,
-            layout,
+            layout: None,
             seq: 0,
             policy,
             spin: AdaptiveSpin::default(),
@@ -98,27 +96,35 @@ impl ClientChannel {
         })
     }
 
-    /// The layout of this channel's samples.
-    pub fn layout(&self) -> &Layout {
-        &self.layout
+    /// Sets the request layout once the worker has reported its spaces, and makes the request
+    /// publisher for that size.
+    pub fn set_layout(&mut self, layout: Layout) -> Result<(), DataPlaneError> {
+        self.ports.publisher = None;
+        self.ports.publisher = Some(request_publisher(
+            &self.ports.services.0,
+            layout.req_options + OPTIONS_RESERVE,
+        )?);
+        self.layout = Some(layout);
+        Ok(())
     }
 
-    /// Sets the layout once the worker has reported its spaces.
-    pub fn set_layout(&mut self, layout: Layout) {
-        self.layout = layout;
+    fn layout(&self) -> Result<Layout, DataPlaneError> {
+        self.layout
+            .ok_or_else(|| DataPlaneError::Protocol("the worker has not reported ready".into()))
     }
 
     fn send(
         &mut self,
         command: u32,
+        slot: u32,
         options: &[u8],
         fill: impl FnOnce(&Layout, &mut [u8]),
     ) -> Result<u64, DataPlaneError> {
+        let layout = self.layout()?;
+        let publisher = self.ports.publisher.as_ref().expect("made with the layout");
         self.seq += 1;
-        let len = self.layout.req_options + options.len();
-        let sample = self
-            .ports
-            .publisher
+        let len = layout.req_options + options.len();
+        let sample = publisher
             .loan_slice_uninit(len)
             .map_err(send_failed("loan request"))?;
         // SAFETY: u8 has no invalid values and shared memory is zero-filled when created; every
@@ -127,14 +133,15 @@ impl ClientChannel {
         *sample.user_header_mut() = RequestHeader {
             seq: self.seq,
             command,
-            num_envs: self.layout.num_envs as u32,
+            num_envs: layout.num_envs as u32,
             options_len: options.len() as u32,
-            reserved: 0,
+            slot,
         };
         let payload = sample.payload_mut();
-        payload[self.layout.req_options..].copy_from_slice(options);
-        fill(&self.layout, payload);
+        payload[layout.req_options..].copy_from_slice(options);
+        fill(&layout, payload);
         sample.send().map_err(send_failed("send request"))?;
+        self.sent_at = std::time::Instant::now();
         self.ports
             .notifier
             .notify()
@@ -143,45 +150,54 @@ impl ClientChannel {
     }
 
     /// Sends a step: `actions` holds one action per env; only `selected` envs (all if `None`)
-    /// are stepped.
+    /// are stepped, and their results go to batch slot `slot`.
     pub fn send_step(
         &mut self,
+        slot: u32,
         actions: &[u8],
         selected: Option<&[bool]>,
     ) -> Result<u64, DataPlaneError> {
-        assert_eq!(
-            actions.len(),
-            self.layout.num_envs * self.layout.act_bytes,
-            "one action per env"
-        );
-        self.send(command::STEP, &[], |l, p| {
+        let layout = self.layout()?;
+        if actions.len() != layout.num_envs * layout.act_bytes {
+            return Err(DataPlaneError::Protocol(format!(
+                "{} bytes of actions for {} envs of {} bytes",
+                actions.len(),
+                layout.num_envs,
+                layout.act_bytes
+            )));
+        }
+        self.send(command::STEP, slot, &[], |l, p| {
             p[l.req_actions..l.req_actions + actions.len()].copy_from_slice(actions);
             write_flags(l, p, selected, &[]);
         })
     }
 
-    /// Sends a reset of the `selected` envs (all if `None`), each with its seed if given.
+    /// Sends a reset of the `selected` envs (all if `None`), each with its seed if given; the
+    /// results go to batch slot `slot`.
     pub fn send_reset(
         &mut self,
+        slot: u32,
         seeds: &[Option<u64>],
         selected: Option<&[bool]>,
         options_json: &str,
     ) -> Result<u64, DataPlaneError> {
-        self.send(command::RESET, options_json.as_bytes(), |l, p| {
+        self.send(command::RESET, slot, options_json.as_bytes(), |l, p| {
             write_flags(l, p, selected, seeds);
         })
     }
 
     /// Asks the worker to render the `selected` envs (all if `None`).
     pub fn send_render(&mut self, selected: Option<&[bool]>) -> Result<u64, DataPlaneError> {
-        self.send(command::RENDER, &[], |l, p| {
+        self.send(command::RENDER, NO_SLOT, &[], |l, p| {
             write_flags(l, p, selected, &[])
         })
     }
 
     /// Asks the worker to close its envs and exit.
     pub fn send_close(&mut self) -> Result<u64, DataPlaneError> {
-        self.send(command::CLOSE, &[], |l, p| write_flags(l, p, None, &[]))
+        self.send(command::CLOSE, NO_SLOT, &[], |l, p| {
+            write_flags(l, p, None, &[])
+        })
     }
 
     /// Waits for the response to the last request, calling `alive` every tick while waiting.
@@ -201,10 +217,7 @@ impl ClientChannel {
             // A response to an earlier request (one abandoned after an error) is skipped.
             if sample.user_header().seq == self.seq {
                 self.spin.observe(self.sent_at.elapsed());
-                return Ok(Response {
-                    sample,
-                    layout: self.layout,
-                });
+                return Ok(Response { sample });
             }
         }
     }
@@ -218,14 +231,52 @@ impl ClientChannel {
             .map_err(send_failed("receive"))?
         {
             if sample.user_header().seq == self.seq {
-                return Ok(Some(Response {
-                    sample,
-                    layout: self.layout,
-                }));
+                self.spin.observe(self.sent_at.elapsed());
+                return Ok(Some(Response { sample }));
             }
         }
         Ok(None)
     }
+
+    /// The spin budget this channel's recent waits call for.
+    pub fn spin_budget(&self) -> Duration {
+        self.spin.budget(&self.policy)
+    }
+}
+
+/// Blocks until one of `channels` is notified of a response, or `timeout` passes (an
+/// iceoryx2 WaitSet over their listeners): whichever worker answers first wakes the caller.
+/// Returns at once if a notification is already pending. Callers then poll each channel.
+pub fn wait_any(channels: &[&ClientChannel], timeout: Duration) -> Result<(), DataPlaneError> {
+    if channels.is_empty() {
+        std::thread::sleep(timeout);
+        return Ok(());
+    }
+    let waitset = WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Ipc>()
+        .map_err(send_failed("create wait set"))?;
+    let guards = channels
+        .iter()
+        .map(|c| waitset.attach_notification(&c.ports.listener))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(send_failed("attach to wait set"))?;
+    // At least 1 µs: a zero timeout would mean "forever" further down.
+    waitset
+        .wait_and_process_once_with_timeout(
+            |_| CallbackProgression::Stop,
+            timeout.max(Duration::from_micros(1)),
+        )
+        .map_err(send_failed("wait"))?;
+    drop(guards);
+    // Consume the notifications so the next wait blocks until a new one arrives.
+    for c in channels {
+        c.ports
+            .listener
+            .try_wait(|_| {})
+            .map_err(send_failed("drain notifications"))?;
+    }
+    Ok(())
 }
 
 fn write_flags(l: &Layout, p: &mut [u8], selected: Option<&[bool]>, seeds: &[Option<u64>]) {
@@ -266,40 +317,49 @@ pub struct Request<'a> {
 pub struct WorkerChannel {
     ports: Ports<ResponseHeader, RequestHeader>,
     layout: Layout,
+    slots: SlotMap,
+    first_env: usize,
     policy: WaitPolicy,
     spin: AdaptiveSpin,
     _node: Node<Ipc>,
 }
 
 impl WorkerChannel {
-    /// Opens the channel the client created.
+    /// Opens the channel the client created. The worker's envs are rows
+    /// `first_env..first_env + layout.num_envs` of the session's batch slots.
     pub fn open(
         name: &ChannelName,
         node_name: &str,
         layout: Layout,
+        slots: SlotMap,
+        first_env: usize,
         policy: WaitPolicy,
     ) -> Result<WorkerChannel, DataPlaneError> {
         let node = node(&name.prefix, node_name)?;
-        let ports = worker_ports(
-            &node,
-            name,
-            layout.resp_info + info_reserve(layout.num_envs),
-        )?;
+        let ports = worker_ports(&node, name, info_reserve(layout.num_envs))?;
         Ok(WorkerChannel {
             ports,
             layout,
+            slots,
+            first_env,
             policy,
             spin: AdaptiveSpin::default(),
             _node: node,
         })
     }
 
-    /// Waits for the next request and hands it to `handle`, which writes the response.
+    /// The session's batch slots as this worker maps them.
+    pub fn slots(&self) -> &SlotMap {
+        &self.slots
+    }
+
+    /// Waits for the next request and hands it to `handle` with this worker's rows of the slot
+    /// it names (`None` for a request that writes no results), then sends the response.
     /// `alive` runs every tick while idle (to notice that the client is gone).
     pub fn serve_one(
         &mut self,
         alive: impl FnMut() -> Result<(), DataPlaneError>,
-        handle: impl FnOnce(&Request<'_>, &mut ResponseBlocksMut<'_>) -> Reply,
+        handle: impl FnOnce(&Request<'_>, Option<&mut ResponseBlocksMut<'_>>) -> Reply,
     ) -> Result<u32, DataPlaneError> {
         let idle_since = std::time::Instant::now();
         let sample = next_sample(
@@ -335,44 +395,37 @@ impl WorkerChannel {
             )
             .unwrap_or(""),
         };
-        let capacity = l.resp_info + info_reserve(n);
-        let loan = self
-            .ports
-            .publisher
-            .loan_slice_uninit(capacity)
-            .map_err(send_failed("loan response"))?;
-        // SAFETY: u8 has no invalid values and shared memory is zero-filled when created; the
-        // handler writes every block the client reads for this command.
-        let mut out = unsafe { loan.assume_init() };
-        let reply = {
-            let mut blocks = l.response_mut(out.payload_mut());
-            handle(&request, &mut blocks)
+        let reply = if header.slot == NO_SLOT {
+            handle(&request, None)
+        } else {
+            // SAFETY: the client names a slot for these rows in one request at a time and reads
+            // them only after our response, so they are ours until we send it.
+            match unsafe { self.slots.rows_mut(header.slot, self.first_env, n) } {
+                Ok(mut rows) => handle(&request, Some(&mut rows)),
+                Err(e) => Reply::Error(format!("cannot write the results: {e}")),
+            }
         };
         let command = header.command;
         drop(sample);
+        let report;
         let (status, info) = match &reply {
             Reply::Ok { info } => (status::OK, info.as_slice()),
             Reply::Error(message) => (status::ERROR, message.as_bytes()),
             Reply::Closed => (status::CLOSED, &[][..]),
+            Reply::EnvFailed { failed, info } => {
+                let info: Option<serde_json::Value> = serde_json::from_slice(info).ok();
+                report = serde_json::json!({ "failed": failed, "info": info }).to_string();
+                (status::ENV_FAILED, report.as_bytes())
+            }
         };
-        let out = if info.len() <= capacity - l.resp_info {
-            let mut out = out;
-            out.payload_mut()[l.resp_info..l.resp_info + info.len()].copy_from_slice(info);
-            out
-        } else {
-            // Rare: more info than reserved. Move the blocks into a bigger sample.
-            let bigger = self
-                .ports
-                .publisher
-                .loan_slice_uninit(l.resp_info + info.len())
-                .map_err(send_failed("loan response"))?;
-            // SAFETY: as above; every byte up to the end of the info is written here.
-            let mut bigger = unsafe { bigger.assume_init() };
-            bigger.payload_mut()[..l.resp_info].copy_from_slice(&out.payload()[..l.resp_info]);
-            bigger.payload_mut()[l.resp_info..].copy_from_slice(info);
-            bigger
-        };
-        let mut out = out;
+        let publisher = self.ports.publisher.as_ref().expect("a worker publishes");
+        let out = publisher
+            .loan_slice_uninit(info.len().max(1))
+            .map_err(send_failed("loan response"))?;
+        // SAFETY: u8 has no invalid values; the info bytes are written below and the client
+        // reads no further than `info_len`.
+        let mut out = unsafe { out.assume_init() };
+        out.payload_mut()[..info.len()].copy_from_slice(info);
         *out.user_header_mut() = ResponseHeader {
             seq: header.seq,
             status,
@@ -398,6 +451,13 @@ pub enum Reply {
     },
     /// The request failed; the message goes to the client.
     Error(String),
+    /// Some envs failed (`(index in the worker, message)`); the others' results are written.
+    EnvFailed {
+        /// The envs that failed and why.
+        failed: Vec<(usize, String)>,
+        /// JSON info section of the others (empty for none).
+        info: Vec<u8>,
+    },
     /// The worker closed its envs.
     Closed,
 }

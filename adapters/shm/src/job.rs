@@ -4,7 +4,7 @@
 //! creates its envs, opens the channel and prints one [`WorkerReply`] line on stdout. Only
 //! then does the data plane start.
 
-use crate::ChannelName;
+use crate::{ChannelName, SlotsName};
 use envhub_core::{EnvConfig, Space};
 use serde::{Deserialize, Serialize};
 
@@ -18,12 +18,16 @@ pub struct WorkerJob {
     pub env_id: String,
     /// How to create each env.
     pub config: EnvConfig,
-    /// Index of this worker's first env in the session.
+    /// Index of this worker's first env in the session (its first row in the batch slots).
     pub env_offset: usize,
     /// Envs this worker hosts.
     pub num_envs: usize,
+    /// Envs of the whole session (rows of a batch slot).
+    pub session_envs: usize,
     /// The channel the owner created.
     pub channel: ChannelName,
+    /// The session's batch slots, which the worker writes its results into.
+    pub slots: SlotsName,
     /// The process whose exit ends this worker (the client that uses it).
     pub owner_pid: u32,
     /// Spin at least this long before blocking, in microseconds (0: never spin).

@@ -1,10 +1,11 @@
-//! Byte layout of request and response samples.
+//! Byte layout of request samples and of batch slots.
 //!
-//! One request and one response per worker and round trip, each a single iceoryx2 sample:
-//! a `#[repr(C)]` user header plus a `[u8]` payload cut into blocks, one per field, each block
-//! holding that field for every env of the worker back to back. A reader views a block as a
-//! typed array (`[n, *obs_shape]`) in place; nothing is serialized on the hot path except an
-//! optional info section, written only when some env reports info.
+//! One request and one response per worker and round trip, each a single iceoryx2 sample with
+//! a `#[repr(C)]` user header. A request's payload is cut into blocks, one per field, each
+//! holding that field for every env of the worker back to back; a response's payload is only
+//! the info section (JSON, written only when some env reports info) or an error message. The
+//! results themselves go to a batch slot ([`BatchLayout`]) shared by all the session's
+//! workers, where a reader views each block as a typed `[num_envs, ...]` array in place.
 
 use bytemuck::{Pod, Zeroable};
 use iceoryx2::prelude::ZeroCopySend;
@@ -20,18 +21,21 @@ pub mod command {
     pub const STEP: u32 = 2;
     /// Close the envs and exit.
     pub const CLOSE: u32 = 3;
-    /// Render the selected envs; the frames travel in the info section (see `EnvBatch::render`).
+    /// Render the selected envs; the frames travel as the response payload (see `EnvBatch::render`).
     pub const RENDER: u32 = 4;
 }
 
 /// Statuses a worker answers with.
 pub mod status {
-    /// The blocks hold the result.
+    /// The worker's rows of the named slot hold the results.
     pub const OK: u32 = 0;
-    /// The info section holds an error message (UTF-8); the blocks are undefined.
+    /// The payload is an error message (UTF-8); the slot rows are undefined.
     pub const ERROR: u32 = 1;
     /// The worker closed its envs and is exiting.
     pub const CLOSED: u32 = 2;
+    /// Some envs failed, the others' results are in the slot. The payload is JSON:
+    /// `{"failed": [[env index in the worker, message], ...], "info": <info section or null>}`.
+    pub const ENV_FAILED: u32 = 3;
 }
 
 /// Per-env flags of a request.
@@ -55,8 +59,8 @@ pub struct RequestHeader {
     pub num_envs: u32,
     /// Bytes of JSON reset options after the fixed blocks (0: none).
     pub options_len: u32,
-    /// Reserved.
-    pub reserved: u32,
+    /// The batch slot the results go to.
+    pub slot: u32,
 }
 
 /// Header of a worker → client response.
@@ -70,7 +74,7 @@ pub struct ResponseHeader {
     pub status: u32,
     /// Envs of the worker.
     pub num_envs: u32,
-    /// Bytes of the info section (JSON) after the fixed blocks (0: no env reported info).
+    /// Bytes of the info section (JSON), the whole payload (0: no env reported info).
     pub info_len: u32,
     /// Reserved.
     pub reserved: u32,
@@ -80,18 +84,13 @@ fn align(n: usize) -> usize {
     n.div_ceil(BLOCK_ALIGN) * BLOCK_ALIGN
 }
 
-/// Offsets of every block for a worker with `num_envs` envs.
+/// Offsets of the blocks of one worker's request sample.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Layout {
     /// Envs of the worker.
     pub num_envs: usize,
-    /// Bytes of one observation.
-    pub obs_bytes: usize,
     /// Bytes of one action.
     pub act_bytes: usize,
-    /// Whether responses carry final observations (`same_step` autoreset).
-    pub with_final_obs: bool,
-    // Request blocks.
     /// Actions `[n, act_bytes]`.
     pub req_actions: usize,
     /// Seeds `[n] u64`.
@@ -100,108 +99,146 @@ pub struct Layout {
     pub req_flags: usize,
     /// Start of the reset options; also the fixed size of a request.
     pub req_options: usize,
-    // Response blocks.
-    /// Observations `[n, obs_bytes]`.
-    pub resp_obs: usize,
-    /// Rewards `[n] f64`.
-    pub resp_rewards: usize,
-    /// Terminated `[n] u8`.
-    pub resp_terminated: usize,
-    /// Truncated `[n] u8`.
-    pub resp_truncated: usize,
-    /// Final-observation mask `[n] u8` (same_step: the env finished and was reset).
-    pub resp_final_mask: usize,
-    /// Final observations `[n, obs_bytes]` (only with `with_final_obs`).
-    pub resp_final_obs: usize,
-    /// Start of the info section; also the fixed size of a response.
-    pub resp_info: usize,
 }
 
 impl Layout {
-    /// The layout for `num_envs` envs with the given observation and action sizes.
-    pub fn new(
-        num_envs: usize,
-        obs_bytes: usize,
-        act_bytes: usize,
-        with_final_obs: bool,
-    ) -> Layout {
+    /// The request layout of a worker with `num_envs` envs and actions of `act_bytes`.
+    pub fn new(num_envs: usize, act_bytes: usize) -> Layout {
         let n = num_envs;
         let req_actions = 0;
         let req_seeds = align(req_actions + n * act_bytes);
         let req_flags = req_seeds + n * 8;
         let req_options = align(req_flags + n);
-        let resp_obs = 0;
-        let resp_rewards = align(n * obs_bytes);
-        let resp_terminated = resp_rewards + n * 8;
-        let resp_truncated = resp_terminated + n;
-        let resp_final_mask = resp_truncated + n;
-        let resp_final_obs = align(resp_final_mask + n);
-        let resp_info = align(resp_final_obs + if with_final_obs { n * obs_bytes } else { 0 });
         Layout {
             num_envs,
-            obs_bytes,
             act_bytes,
-            with_final_obs,
             req_actions,
             req_seeds,
             req_flags,
             req_options,
-            resp_obs,
-            resp_rewards,
-            resp_terminated,
-            resp_truncated,
-            resp_final_mask,
-            resp_final_obs,
-            resp_info,
-        }
-    }
-
-    /// Splits a response payload into its blocks.
-    pub fn response<'a>(&self, payload: &'a [u8]) -> ResponseBlocks<'a> {
-        let n = self.num_envs;
-        ResponseBlocks {
-            obs: &payload[self.resp_obs..self.resp_obs + n * self.obs_bytes],
-            rewards: bytemuck::cast_slice(&payload[self.resp_rewards..self.resp_rewards + n * 8]),
-            terminated: &payload[self.resp_terminated..self.resp_terminated + n],
-            truncated: &payload[self.resp_truncated..self.resp_truncated + n],
-            final_mask: &payload[self.resp_final_mask..self.resp_final_mask + n],
-            final_obs: if self.with_final_obs {
-                &payload[self.resp_final_obs..self.resp_final_obs + n * self.obs_bytes]
-            } else {
-                &[]
-            },
-            info: &payload[self.resp_info..],
-        }
-    }
-
-    /// Splits a response payload into its blocks, for writing.
-    pub fn response_mut<'a>(&self, payload: &'a mut [u8]) -> ResponseBlocksMut<'a> {
-        let n = self.num_envs;
-        let (obs, rest) = payload.split_at_mut(self.resp_rewards);
-        let (rewards, rest) = rest.split_at_mut(n * 8);
-        let (terminated, rest) = rest.split_at_mut(n);
-        let (truncated, rest) = rest.split_at_mut(n);
-        let (final_mask, rest) = rest.split_at_mut(n);
-        let rest = &mut rest[self.resp_final_obs - (self.resp_final_mask + n)..];
-        let (final_obs, rest) = rest.split_at_mut(if self.with_final_obs {
-            n * self.obs_bytes
-        } else {
-            0
-        });
-        let info_skip = self.resp_info - (self.resp_final_obs + final_obs.len());
-        ResponseBlocksMut {
-            obs: &mut obs[..n * self.obs_bytes],
-            rewards: bytemuck::cast_slice_mut(rewards),
-            terminated,
-            truncated,
-            final_mask,
-            final_obs,
-            info: &mut rest[info_skip..],
         }
     }
 }
 
-/// The blocks of a received response, viewed in place.
+/// Offsets of the blocks of a batch slot: each field of every env of the session, env after
+/// env, so a block is a `[num_envs, ...]` array whichever worker wrote which rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchLayout {
+    /// Envs of the session.
+    pub num_envs: usize,
+    /// Bytes of one observation.
+    pub obs_bytes: usize,
+    /// Whether slots carry final observations (`same_step` autoreset).
+    pub with_final_obs: bool,
+    /// Observations `[n, obs_bytes]`.
+    pub obs: usize,
+    /// Rewards `[n] f64`.
+    pub rewards: usize,
+    /// Terminated `[n] u8`.
+    pub terminated: usize,
+    /// Truncated `[n] u8`.
+    pub truncated: usize,
+    /// Final-observation mask `[n] u8` (same_step: the env finished and was reset).
+    pub final_mask: usize,
+    /// Final observations `[n, obs_bytes]` (only with `with_final_obs`).
+    pub final_obs: usize,
+    size: usize,
+}
+
+impl BatchLayout {
+    /// The layout for a session of `num_envs` envs with observations of `obs_bytes`.
+    pub fn new(num_envs: usize, obs_bytes: usize, with_final_obs: bool) -> BatchLayout {
+        let n = num_envs;
+        let obs = 0;
+        let rewards = align(n * obs_bytes);
+        let terminated = rewards + n * 8;
+        let truncated = terminated + n;
+        let final_mask = truncated + n;
+        let final_obs = align(final_mask + n);
+        let size = align(final_obs + if with_final_obs { n * obs_bytes } else { 0 });
+        BatchLayout {
+            num_envs,
+            obs_bytes,
+            with_final_obs,
+            obs,
+            rewards,
+            terminated,
+            truncated,
+            final_mask,
+            final_obs,
+            size,
+        }
+    }
+
+    /// Bytes of one slot.
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    fn check_rows(&self, first: usize, n: usize) {
+        assert!(
+            first + n <= self.num_envs,
+            "rows {first}..{} of a batch of {}",
+            first + n,
+            self.num_envs
+        );
+    }
+
+    /// The blocks of envs `first..first + n` in `slot` (`size()` bytes), viewed in place.
+    pub fn rows<'a>(&self, slot: &'a [u8], first: usize, n: usize) -> ResponseBlocks<'a> {
+        self.check_rows(first, n);
+        let ob = self.obs_bytes;
+        let at =
+            |start: usize, width: usize| &slot[start + first * width..start + (first + n) * width];
+        ResponseBlocks {
+            obs: at(self.obs, ob),
+            rewards: bytemuck::cast_slice(at(self.rewards, 8)),
+            terminated: at(self.terminated, 1),
+            truncated: at(self.truncated, 1),
+            final_mask: at(self.final_mask, 1),
+            final_obs: if self.with_final_obs {
+                at(self.final_obs, ob)
+            } else {
+                &[]
+            },
+        }
+    }
+
+    /// The blocks of envs `first..first + n` of the slot at `base`, for writing. Only those
+    /// rows are borrowed: other workers may write the other rows at the same time.
+    ///
+    /// # Safety
+    /// `base` must point to `size()` bytes, 8-byte aligned, and no one else may access these
+    /// rows while the returned blocks live.
+    pub unsafe fn rows_mut<'a>(
+        &self,
+        base: *mut u8,
+        first: usize,
+        n: usize,
+    ) -> ResponseBlocksMut<'a> {
+        self.check_rows(first, n);
+        let ob = self.obs_bytes;
+        // SAFETY: every block lies inside the slot (offsets from `new`, rows checked above) and
+        // the blocks are disjoint; the caller guarantees exclusive access to these rows.
+        let at = |start: usize, width: usize| unsafe {
+            std::slice::from_raw_parts_mut(base.add(start + first * width), n * width)
+        };
+        ResponseBlocksMut {
+            obs: at(self.obs, ob),
+            rewards: bytemuck::cast_slice_mut(at(self.rewards, 8)),
+            terminated: at(self.terminated, 1),
+            truncated: at(self.truncated, 1),
+            final_mask: at(self.final_mask, 1),
+            final_obs: if self.with_final_obs {
+                at(self.final_obs, ob)
+            } else {
+                &mut []
+            },
+        }
+    }
+}
+
+/// The results of some envs, viewed in place in a batch slot.
 pub struct ResponseBlocks<'a> {
     /// Observations, `obs_bytes` per env.
     pub obs: &'a [u8],
@@ -215,11 +252,9 @@ pub struct ResponseBlocks<'a> {
     pub final_mask: &'a [u8],
     /// Final observations (same_step autoreset), else empty.
     pub final_obs: &'a [u8],
-    /// The info section (JSON) or error message; its length is in the header.
-    pub info: &'a [u8],
 }
 
-/// The blocks of a response being written.
+/// The results of one worker's envs being written.
 pub struct ResponseBlocksMut<'a> {
     /// Observations, `obs_bytes` per env.
     pub obs: &'a mut [u8],
@@ -233,8 +268,6 @@ pub struct ResponseBlocksMut<'a> {
     pub final_mask: &'a mut [u8],
     /// Final observations (same_step autoreset), else empty.
     pub final_obs: &'a mut [u8],
-    /// Room for the info section.
-    pub info: &'a mut [u8],
 }
 
 #[cfg(test)]
@@ -245,21 +278,31 @@ mod tests {
     fn blocks_are_aligned_and_disjoint() {
         for n in [1, 3, 8, 64, 257] {
             for (obs, act) in [(16, 8), (4, 4), (108, 32), (1, 1)] {
+                let r = Layout::new(n, act);
+                assert_eq!(r.req_seeds % 8, 0);
+                assert!(r.req_options >= r.req_flags + n);
                 for fin in [false, true] {
-                    let l = Layout::new(n, obs, act, fin);
-                    assert_eq!(l.resp_rewards % 8, 0);
-                    assert_eq!(l.req_seeds % 8, 0);
-                    assert_eq!(l.resp_info % 8, 0);
-                    assert!(l.resp_rewards >= n * obs);
-                    let mut words = vec![0u64; (l.resp_info + 16) / 8];
-                    let buf: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
-                    let b = l.response_mut(buf);
-                    assert_eq!(b.obs.len(), n * obs);
-                    assert_eq!(b.rewards.len(), n);
-                    assert_eq!(b.final_obs.len(), if fin { n * obs } else { 0 });
-                    assert_eq!(b.info.len(), 16);
-                    let r = l.response(buf);
-                    assert_eq!(r.final_mask.len(), n);
+                    let l = BatchLayout::new(n, obs, fin);
+                    assert_eq!(l.rewards % 8, 0);
+                    assert_eq!(l.size() % 8, 0);
+                    assert!(l.rewards >= n * obs);
+                    let mut words = vec![0u64; l.size() / 8];
+                    let base = words.as_mut_ptr().cast::<u8>();
+                    // Two workers' rows, written at once through disjoint borrows.
+                    let half = n / 2;
+                    // SAFETY: `words` holds the slot; the two row ranges are disjoint.
+                    let (a, b) =
+                        unsafe { (l.rows_mut(base, 0, half), l.rows_mut(base, half, n - half)) };
+                    assert_eq!(a.obs.len() + b.obs.len(), n * obs);
+                    a.rewards.fill(1.0);
+                    b.rewards.fill(2.0);
+                    b.terminated.fill(1);
+                    assert_eq!(b.final_obs.len(), if fin { (n - half) * obs } else { 0 });
+                    let bytes: &[u8] = bytemuck::cast_slice(&words);
+                    let all = l.rows(bytes, 0, n);
+                    assert_eq!(all.rewards.iter().filter(|&&r| r == 2.0).count(), n - half);
+                    assert_eq!(all.terminated.iter().filter(|&&t| t == 1).count(), n - half);
+                    assert_eq!(all.final_mask.len(), n);
                 }
             }
         }

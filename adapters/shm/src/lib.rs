@@ -1,11 +1,13 @@
 //! envhub's data plane: iceoryx2 channels between a client and the workers that host its envs.
 //!
 //! Each worker gets its own channel, so the hub is never on the per-step path. A request and
-//! a response are one shared-memory sample each, with one block per field covering all of the
-//! worker's envs (see [`Layout`]): the env writes its observation straight into the response
-//! sample and the client reads it where it lies. The trade-off: a session with several
-//! workers has its observations in several samples, so a contiguous batch over all envs costs
-//! one copy per worker on the client; with one worker nothing is copied.
+//! a response are one iceoryx2 sample each (command, actions, status, info); the results go to
+//! a batch slot ([`SlotPool`]) that all the session's workers share, each writing its own rows:
+//! the env writes its observation straight into the slot, and the client hands the whole
+//! `[num_envs, ...]` block to its user where it lies, whatever the number of workers. The
+//! trade-off: slots are shared-memory objects of envhub's own (iceoryx2 gives each publisher
+//! its own segment, so several workers cannot fill one sample), named per session and removed
+//! when it closes or its owner dies.
 //!
 //! Waiting blocks on iceoryx2 events after a short spin, so idle workers cost no CPU.
 
@@ -15,19 +17,21 @@ mod job;
 mod layout;
 mod process;
 mod serve;
+mod slots;
 mod transport;
 mod wait;
 
 pub use batch::{EnvBatch, Frame, frames_section};
-pub use channel::{ClientChannel, Reply, Request, Response, WorkerChannel};
+pub use channel::{ClientChannel, NO_SLOT, Reply, Request, Response, WorkerChannel, wait_any};
 pub use job::{ReadySpec, WorkerJob, WorkerReply};
 pub use layout::{
-    BLOCK_ALIGN, Layout, RequestHeader, ResponseBlocks, ResponseBlocksMut, ResponseHeader, command,
-    env_flag, status,
+    BLOCK_ALIGN, BatchLayout, Layout, RequestHeader, ResponseBlocks, ResponseBlocksMut,
+    ResponseHeader, command, env_flag, status,
 };
 pub use process::{ProcessWatch, die_with_parent, kill};
 pub use serve::{ServedBatch, serve_batch};
-pub use transport::{ChannelName, MAX_BORROWED_RESPONSES, cleanup_dead_nodes, remove_namespace};
+pub use slots::{MAX_SLOTS, Slot, SlotLease, SlotMap, SlotPool, SlotsName, remove_stale_slots};
+pub use transport::{ChannelName, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
 
 /// A failure of the data plane itself.

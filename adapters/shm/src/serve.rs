@@ -4,8 +4,8 @@
 //! same protocol and only differ in what their envs are.
 
 use crate::{
-    DataPlaneError, Layout, ProcessWatch, ReadySpec, Reply, ResponseBlocksMut, WaitPolicy,
-    WorkerChannel, WorkerJob, WorkerReply, command,
+    BatchLayout, DataPlaneError, Layout, ProcessWatch, ReadySpec, Reply, ResponseBlocksMut,
+    SlotMap, WaitPolicy, WorkerChannel, WorkerJob, WorkerReply, command,
 };
 use envhub_core::{AutoresetMode, EnvError, ResetOptions};
 use std::time::Duration;
@@ -53,6 +53,28 @@ pub trait ServedBatch {
 
     /// Closes every env.
     fn close(&mut self);
+
+    /// The envs whose last reset or step failed while the others went on, with the errors
+    /// (`(index, message)`), taken out of the batch. A batch that fails as a whole returns
+    /// `Err` instead; this is for one env's failure that must not cost the others their step.
+    fn take_failures(&mut self) -> Vec<(usize, String)> {
+        Vec::new()
+    }
+}
+
+/// The reply to a reset or step: the results, or which envs failed.
+fn answer(batch: &mut impl ServedBatch, result: Result<Vec<u8>, EnvError>) -> Reply {
+    match result {
+        Ok(info) => {
+            let failed = batch.take_failures();
+            if failed.is_empty() {
+                Reply::Ok { info }
+            } else {
+                Reply::EnvFailed { failed, info }
+            }
+        }
+        Err(e) => Reply::Error(e.to_string()),
+    }
 }
 
 /// Serves `batch` for `job` until the client closes it or its owner exits. `reply` prints the
@@ -75,11 +97,24 @@ pub fn serve_batch(
         )))
         .map_err(io);
     }
-    let layout = Layout::new(
-        job.num_envs,
-        ready.observation_space.byte_len(),
-        ready.action_space.byte_len(),
-        job.config.autoreset_mode == AutoresetMode::SameStep,
+    if job.env_offset + job.num_envs > job.session_envs {
+        batch.close();
+        return reply(&WorkerReply::Error(format!(
+            "envs {}..{} of a session of {}",
+            job.env_offset,
+            job.env_offset + job.num_envs,
+            job.session_envs
+        )))
+        .map_err(io);
+    }
+    let layout = Layout::new(job.num_envs, ready.action_space.byte_len());
+    let slots = SlotMap::new(
+        job.slots.clone(),
+        BatchLayout::new(
+            job.session_envs,
+            ready.observation_space.byte_len(),
+            job.config.autoreset_mode == AutoresetMode::SameStep,
+        ),
     );
     let policy = WaitPolicy {
         spin: Duration::from_micros(job.spin_us),
@@ -87,7 +122,14 @@ pub fn serve_batch(
         tick: Duration::from_millis(50),
     };
     let node_name = format!("worker-{}", std::process::id());
-    let mut channel = match WorkerChannel::open(&job.channel, &node_name, layout, policy) {
+    let mut channel = match WorkerChannel::open(
+        &job.channel,
+        &node_name,
+        layout,
+        slots,
+        job.env_offset,
+        policy,
+    ) {
         Ok(c) => c,
         Err(e) => {
             return reply(&WorkerReply::Error(format!(
@@ -113,8 +155,8 @@ pub fn serve_batch(
         }
     };
     loop {
-        let outcome = channel.serve_one(alive, |req, out| match req.header.command {
-            command::RESET => {
+        let outcome = channel.serve_one(alive, |req, out| match (req.header.command, out) {
+            (command::RESET, Some(out)) => {
                 let options: ResetOptions = if req.options.is_empty() {
                     ResetOptions::new()
                 } else {
@@ -123,24 +165,25 @@ pub fn serve_batch(
                         Err(e) => return Reply::Error(format!("invalid reset options: {e}")),
                     }
                 };
-                match batch.reset(req.flags, req.seeds, &options, out) {
-                    Ok(info) => Reply::Ok { info },
-                    Err(e) => Reply::Error(e.to_string()),
-                }
+                let result = batch.reset(req.flags, req.seeds, &options, out);
+                answer(&mut batch, result)
             }
-            command::STEP => match batch.step(req.flags, req.actions, out) {
+            (command::STEP, Some(out)) => {
+                let result = batch.step(req.flags, req.actions, out);
+                answer(&mut batch, result)
+            }
+            (command::RENDER, _) => match batch.render(req.flags) {
                 Ok(info) => Reply::Ok { info },
                 Err(e) => Reply::Error(e.to_string()),
             },
-            command::RENDER => match batch.render(req.flags) {
-                Ok(info) => Reply::Ok { info },
-                Err(e) => Reply::Error(e.to_string()),
-            },
-            command::CLOSE => {
+            (command::CLOSE, _) => {
                 batch.close();
                 Reply::Closed
             }
-            other => Reply::Error(format!("unknown command {other}")),
+            (command::RESET | command::STEP, None) => {
+                Reply::Error("a reset or step request must name a batch slot".into())
+            }
+            (other, _) => Reply::Error(format!("unknown command {other}")),
         });
         match outcome {
             Ok(command::CLOSE) => return Ok(()),
@@ -148,6 +191,9 @@ pub fn serve_batch(
             Err(DataPlaneError::PeerGone(why)) => {
                 tracing::debug!(%why, "owner gone, exiting");
                 batch.close();
+                // The owner could not close the session: remove what it left in shared memory.
+                channel.slots().name().unlink_all();
+                let _ = crate::cleanup_dead_nodes(&job.channel.prefix);
                 return Ok(());
             }
             Err(e) => return Err(e),
@@ -158,7 +204,9 @@ pub fn serve_batch(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{ChannelName, ClientChannel, env_flag, remove_namespace, status};
+    use crate::{
+        ChannelName, ClientChannel, SlotPool, SlotsName, env_flag, remove_namespace, status,
+    };
     use envhub_core::{EnvConfig, Space};
     use std::sync::mpsc;
 
@@ -230,9 +278,14 @@ mod tests {
             config: EnvConfig::default(),
             env_offset: 0,
             num_envs,
+            session_envs: num_envs,
             channel: ChannelName {
                 prefix: prefix.into(),
                 service: "envhub/serve-test/0/0".into(),
+            },
+            slots: SlotsName {
+                prefix: prefix.into(),
+                session: format!("{}-serve-test", std::process::id()),
             },
             owner_pid: std::process::id(),
             spin_us: 0,
@@ -254,14 +307,15 @@ mod tests {
     fn serves_any_served_batch_over_a_real_channel() {
         let prefix = format!("shmserve{}_", std::process::id());
         let n = 3;
-        let layout = Layout::new(n, 4, 8, false);
         let policy = WaitPolicy {
             spin: Duration::ZERO,
             max_spin: Duration::ZERO,
             tick: Duration::from_millis(10),
         };
         let job = job(&prefix, n);
-        let mut client = ClientChannel::create(&job.channel, "client", layout, policy).unwrap();
+        let mut client = ClientChannel::create(&job.channel, "client", policy).unwrap();
+        client.set_layout(Layout::new(n, 8)).unwrap();
+        let mut pool = SlotPool::new(job.slots.clone(), BatchLayout::new(n, 4, false), 1 << 20);
         let (tx, rx) = mpsc::channel();
         let worker = std::thread::spawn(move || {
             let batch = Lockstep {
@@ -276,30 +330,35 @@ mod tests {
         assert!(matches!(line, WorkerReply::Ready(_)), "{line:?}");
         let alive = || Ok(());
 
+        let slot = pool.writable().unwrap();
         client
-            .send_reset(&[Some(1), Some(2), Some(3)], None, "")
+            .send_reset(slot.index(), &[Some(1), Some(2), Some(3)], None, "")
             .unwrap();
         assert_eq!(client.receive(alive).unwrap().header().status, status::OK);
 
         let actions: Vec<i64> = vec![4, 5, 6];
         client
-            .send_step(bytemuck::cast_slice(&actions), None)
+            .send_step(slot.index(), bytemuck::cast_slice(&actions), None)
             .unwrap();
         let r = client.receive(alive).unwrap();
         assert_eq!(r.header().status, status::OK);
-        let obs: Vec<f32> = r
-            .blocks()
+        let rows = slot.rows(0, n);
+        let obs: Vec<f32> = rows
             .obs
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
             .collect();
         assert_eq!(obs, [1.0; 3]);
-        assert_eq!(r.blocks().rewards, [4.0, 5.0, 6.0]);
+        assert_eq!(rows.rewards, [4.0, 5.0, 6.0]);
         drop(r);
 
         // The batch's own error reaches the client; the loop keeps serving.
         client
-            .send_step(bytemuck::cast_slice(&actions), Some(&[true, false, true]))
+            .send_step(
+                slot.index(),
+                bytemuck::cast_slice(&actions),
+                Some(&[true, false, true]),
+            )
             .unwrap();
         let err = client.receive(alive).unwrap().error().unwrap();
         assert!(err.contains("steps its envs together"), "{err}");
@@ -310,6 +369,16 @@ mod tests {
             status::CLOSED
         );
         worker.join().unwrap().unwrap();
+        drop(slot);
+        pool.close();
+        assert!(
+            !std::fs::read_dir("/dev/shm").unwrap().any(|e| e
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .contains("serve-test")),
+            "closing the pool removes its slots"
+        );
         drop(client);
         let _ = remove_namespace(&prefix);
     }

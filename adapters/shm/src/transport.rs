@@ -24,8 +24,6 @@ pub(crate) const EVENT_DATA: usize = 0;
 /// Event id iceoryx2 emits when it cleans up a dead node that had a notifier.
 pub(crate) const EVENT_NOTIFIER_DEAD: usize = 7;
 
-/// Responses a client may hold at once (views a user keeps); beyond that it must copy.
-pub const MAX_BORROWED_RESPONSES: usize = 8;
 /// Queue depth: lock-step, one request and one response in flight, plus slack.
 const QUEUE_DEPTH: usize = 2;
 /// Nodes per service: client, worker, and one spare (iceoryx2's cleanup, a monitor).
@@ -94,9 +92,9 @@ pub fn cleanup_dead_nodes(prefix: &str) -> Result<(), DataPlaneError> {
     .map_err(iox("node list"))
 }
 
-type ReqService = publish_subscribe::PortFactory<Ipc, [u8], RequestHeader>;
-type RespService = publish_subscribe::PortFactory<Ipc, [u8], ResponseHeader>;
-type EventService = event::PortFactory<Ipc>;
+pub(crate) type ReqService = publish_subscribe::PortFactory<Ipc, [u8], RequestHeader>;
+pub(crate) type RespService = publish_subscribe::PortFactory<Ipc, [u8], ResponseHeader>;
+pub(crate) type EventService = event::PortFactory<Ipc>;
 
 fn payload_alignment() -> Alignment {
     Alignment::new(BLOCK_ALIGN).expect("a power of two")
@@ -106,7 +104,6 @@ fn pubsub<H: std::fmt::Debug + ZeroCopySend + Default + 'static>(
     node: &Node<Ipc>,
     name: &ServiceName,
     create: bool,
-    borrowed: usize,
 ) -> Result<publish_subscribe::PortFactory<Ipc, [u8], H>, DataPlaneError> {
     let builder = node
         .service_builder(name)
@@ -120,7 +117,8 @@ fn pubsub<H: std::fmt::Debug + ZeroCopySend + Default + 'static>(
             .max_nodes(MAX_NODES)
             .history_size(0)
             .subscriber_max_buffer_size(QUEUE_DEPTH)
-            .subscriber_max_borrowed_samples(borrowed)
+            // Responses are read and released at once (results live in batch slots).
+            .subscriber_max_borrowed_samples(2)
             // A full queue must never drop a sample silently.
             .enable_safe_overflow(false)
             .create()
@@ -154,33 +152,27 @@ fn events(
 
 /// The ports of one side of a channel: publish `Out`, receive `In`, and their events.
 pub(crate) struct Ports<Out: std::fmt::Debug + ZeroCopySend, In: std::fmt::Debug + ZeroCopySend> {
-    pub publisher: Publisher<Ipc, [u8], Out>,
+    /// `None` on the client until it knows the request size (see [`request_publisher`]).
+    pub publisher: Option<Publisher<Ipc, [u8], Out>>,
     pub notifier: Notifier<Ipc>,
     pub subscriber: Subscriber<Ipc, [u8], In>,
     pub listener: Listener<Ipc>,
     // Services outlive the ports built from them; declared last so they drop last.
-    _services: (ReqService, RespService, EventService, EventService),
+    pub services: (ReqService, RespService, EventService, EventService),
 }
 
-/// Client side: creates the services and its ports. `request_bytes` is the usual request size.
+/// Client side: creates the services and its ports, all but the request publisher.
 pub(crate) fn client_ports(
     node: &Node<Ipc>,
     name: &ChannelName,
-    request_bytes: usize,
 ) -> Result<Ports<RequestHeader, ResponseHeader>, DataPlaneError> {
     let (req_name, resp_name) = (name.req()?, name.resp()?);
-    let req: ReqService = pubsub(node, &req_name, true, 1)?;
-    let resp: RespService = pubsub(node, &resp_name, true, MAX_BORROWED_RESPONSES)?;
+    let req: ReqService = pubsub(node, &req_name, true)?;
+    let resp: RespService = pubsub(node, &resp_name, true)?;
     let req_events = events(node, &req_name, true)?;
     let resp_events = events(node, &resp_name, true)?;
     Ok(Ports {
-        publisher: req
-            .publisher_builder()
-            .initial_max_slice_len(request_bytes.max(1))
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .max_loaned_samples(1)
-            .create()
-            .map_err(iox("request publisher"))?,
+        publisher: None,
         notifier: req_events
             .notifier_builder()
             .default_event_id(EventId::new(EVENT_DATA))
@@ -195,8 +187,24 @@ pub(crate) fn client_ports(
             .listener_builder()
             .create()
             .map_err(iox("response listener"))?,
-        _services: (req, resp, req_events, resp_events),
+        services: (req, resp, req_events, resp_events),
     })
+}
+
+/// The client's request publisher, made once the request size is known: a publisher whose
+/// first sample outgrows its segment reallocates it, and a reallocated segment the worker never
+/// mapped makes iceoryx2 warn about a lost chunk when the session closes.
+pub(crate) fn request_publisher(
+    service: &ReqService,
+    request_bytes: usize,
+) -> Result<Publisher<Ipc, [u8], RequestHeader>, DataPlaneError> {
+    service
+        .publisher_builder()
+        .initial_max_slice_len(request_bytes.max(1))
+        .allocation_strategy(AllocationStrategy::PowerOfTwo)
+        .max_loaned_samples(1)
+        .create()
+        .map_err(iox("request publisher"))
 }
 
 /// Worker side: opens the client's services and creates its ports.
@@ -206,18 +214,19 @@ pub(crate) fn worker_ports(
     response_bytes: usize,
 ) -> Result<Ports<ResponseHeader, RequestHeader>, DataPlaneError> {
     let (req_name, resp_name) = (name.req()?, name.resp()?);
-    let req: ReqService = pubsub(node, &req_name, false, 1)?;
-    let resp: RespService = pubsub(node, &resp_name, false, MAX_BORROWED_RESPONSES)?;
+    let req: ReqService = pubsub(node, &req_name, false)?;
+    let resp: RespService = pubsub(node, &resp_name, false)?;
     let req_events = events(node, &req_name, false)?;
     let resp_events = events(node, &resp_name, false)?;
     Ok(Ports {
-        publisher: resp
-            .publisher_builder()
-            .initial_max_slice_len(response_bytes.max(1))
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .max_loaned_samples(2)
-            .create()
-            .map_err(iox("response publisher"))?,
+        publisher: Some(
+            resp.publisher_builder()
+                .initial_max_slice_len(response_bytes.max(1))
+                .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                .max_loaned_samples(2)
+                .create()
+                .map_err(iox("response publisher"))?,
+        ),
         notifier: resp_events
             .notifier_builder()
             .default_event_id(EventId::new(EVENT_DATA))
@@ -232,7 +241,7 @@ pub(crate) fn worker_ports(
             .listener_builder()
             .create()
             .map_err(iox("request listener"))?,
-        _services: (req, resp, req_events, resp_events),
+        services: (req, resp, req_events, resp_events),
     })
 }
 

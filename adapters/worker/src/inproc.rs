@@ -3,7 +3,7 @@
 
 use crate::serve::make_envs;
 use anyhow::Context;
-use envhub_shm::{Layout, ServedBatch, WorkerJob, env_flag};
+use envhub_shm::{BatchLayout, ServedBatch, WorkerJob, env_flag};
 use rand::SeedableRng;
 use std::time::Instant;
 
@@ -23,13 +23,8 @@ pub(crate) fn run(job_json: &str, threads: usize, steps: usize) -> anyhow::Resul
             handles.push(scope.spawn(move || -> Result<usize, String> {
                 let (mut batch, spec) = make_envs(&part)?;
                 let n = part.num_envs;
-                let layout = Layout::new(
-                    n,
-                    spec.observation_space.byte_len(),
-                    spec.action_space.byte_len(),
-                    false,
-                );
-                let mut words = vec![0u64; layout.resp_info.div_ceil(8) + 1];
+                let layout = BatchLayout::new(n, spec.observation_space.byte_len(), false);
+                let mut words = vec![0u64; layout.size() / 8 + 1];
                 let flags = vec![env_flag::SELECTED; n];
                 let seeds: Vec<u64> = (0..n as u64).collect();
                 let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(t as u64);
@@ -40,8 +35,8 @@ pub(crate) fn run(job_json: &str, threads: usize, steps: usize) -> anyhow::Resul
                             .collect()
                     })
                     .collect();
-                let buf: &mut [u8] = bytemuck_cast(&mut words);
-                let mut out = layout.response_mut(buf);
+                // SAFETY: `words` holds a whole slot, 8-byte aligned, used by this thread only.
+                let mut out = unsafe { layout.rows_mut(words.as_mut_ptr().cast(), 0, n) };
                 let seeded = vec![env_flag::SELECTED | env_flag::SEEDED; n];
                 batch
                     .reset(&seeded, &seeds, &Default::default(), &mut out)
@@ -71,9 +66,4 @@ pub(crate) fn run(job_json: &str, threads: usize, steps: usize) -> anyhow::Resul
         serde_json::json!({"steps": total, "seconds": seconds, "steps_per_sec": total as f64 / seconds})
     );
     Ok(())
-}
-
-fn bytemuck_cast(words: &mut [u64]) -> &mut [u8] {
-    // SAFETY: u64 → u8 reinterpretation; u8 has no alignment or validity requirements.
-    unsafe { std::slice::from_raw_parts_mut(words.as_mut_ptr().cast::<u8>(), words.len() * 8) }
 }

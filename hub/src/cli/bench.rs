@@ -4,7 +4,7 @@
 use super::Outcome;
 use envhub::{Hub, VecEnv};
 use envhub_core::EnvConfig;
-use envhub_shm::{ChannelName, WorkerJob};
+use envhub_shm::{ChannelName, SlotsName, WorkerJob};
 use rand::SeedableRng;
 use std::time::{Duration, Instant};
 
@@ -64,9 +64,14 @@ fn inproc_throughput(
         config: route.config.clone(),
         env_offset: 0,
         num_envs: env.num_envs(),
+        session_envs: env.num_envs(),
         channel: ChannelName {
             prefix: String::new(),
             service: String::new(),
+        },
+        slots: SlotsName {
+            prefix: String::new(),
+            session: String::new(),
         },
         owner_pid: std::process::id(),
         spin_us: 0,

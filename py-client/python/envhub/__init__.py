@@ -46,10 +46,6 @@ from .vector import VectorEnv
 
 __version__: str = _envhub.__version__
 
-#: Observation arrays viewing shared memory that may be alive at once per session; later
-#: observations are copies (iceoryx2 lends a bounded number of samples per worker).
-MAX_LENT_SAMPLES: int = _envhub.MAX_LENT_SAMPLES
-
 # The worker binary `make py-install` puts beside this package (`ENVHUB_WORKER` overrides it).
 _envhub.set_worker_binary(str(Path(__file__).resolve().parent / "bin" / "envhub-worker"))
 # Python-hosted adapters run in this interpreter unless ENVHUB_PYTHON or the config names one.
@@ -84,7 +80,6 @@ __all__ = [
     "InvalidActionError",
     "InvalidConfigError",
     "InvalidStateError",
-    "MAX_LENT_SAMPLES",
     "MakeError",
     "MatchResult",
     "NoAdapterError",

@@ -19,9 +19,8 @@ __all__ = ["Env"]
 class Env(gymnasium.Env[Any, Any]):
     """One env of registry entry `registry_id`, hosted by its own worker process.
 
-    Observations are read-only numpy arrays viewing the worker's shared memory; one you keep
-    stays valid and unchanged (at most `MAX_LENT_SAMPLES` are views at once, later ones
-    copies). Episodes end with `terminated` or `truncated` (the entry's `max_episode_steps`
+    Observations are writeable numpy arrays viewing the worker's shared memory; one you keep
+    stays valid and unchanged. Episodes end with `terminated` or `truncated` (the entry's `max_episode_steps`
     applies); then call `reset`. Options the env takes go in `**extra`.
     """
 

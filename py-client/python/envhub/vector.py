@@ -68,10 +68,11 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     """`num_envs` envs of registry entry `registry_id`, spread over `num_workers` worker
     processes (default: one per core, at most one per env).
 
-    With one worker, observations are read-only arrays viewing the worker's shared memory
-    (no copy; an array you keep stays valid and unchanged; at most `MAX_LENT_SAMPLES` are
-    views at once, later ones copies). With several workers, each worker's block is gathered
-    into one fresh array (a copy per worker). Rewards and flags are fresh arrays.
+    Observations, rewards and flags are writeable numpy arrays viewing one shared-memory
+    block that every worker writes its envs' rows into: no copy, whatever the number of
+    workers. An array you keep stays valid and unchanged (its block is not reused while it
+    lives); past the session's memory cap (`pool_bytes`, 512 MiB by default) results are
+    copied rather than waited for.
 
     `autoreset_mode` is Gymnasium's: `next_step` (default), `same_step` (`final_obs` and
     `final_info` in the step's info), or `disabled` (reset finished envs yourself with

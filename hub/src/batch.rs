@@ -1,0 +1,110 @@
+//! What a reset, step or `recv` returns: the results of some envs, viewed in place in a batch
+//! slot when they lie there contiguously, else gathered.
+
+/// The results of a reset or step, for every env of the batch (or, from
+/// [`VecEnv::recv`](crate::VecEnv::recv), for exactly the envs listed in `env_ids`).
+/// Observations, rewards and flags are viewed in place in the session's shared-memory batch
+/// slot, whatever the number of workers; only results that do not lie contiguously there
+/// (`recv` of envs picked out of a worker's) are gathered into a copy.
+#[derive(Debug)]
+pub struct Batch<'a> {
+    /// The envs these results belong to, in order.
+    pub env_ids: &'a [usize],
+    /// Observations, `observation_space().byte_len()` bytes per env, contiguous.
+    pub obs: &'a [u8],
+    /// Rewards.
+    pub rewards: &'a [f64],
+    /// Terminated flags.
+    pub terminated: &'a [bool],
+    /// Truncated flags.
+    pub truncated: &'a [bool],
+    pub(crate) infos: &'a [serde_json::Value],
+    pub(crate) final_mask: &'a [u8],
+    pub(crate) final_obs: &'a [u8],
+    pub(crate) in_place: bool,
+    /// The slot the results lie in, when viewed in place.
+    pub(crate) slot: Option<&'a SlotLease>,
+}
+
+use envhub_shm::SlotLease;
+
+static NO_INFO: serde_json::Value = serde_json::Value::Null;
+
+impl<'a> Batch<'a> {
+    /// Observations as `f32` (when the observation space is a `float32` box).
+    pub fn obs_f32(&self) -> &'a [f32] {
+        bytemuck::cast_slice(self.obs)
+    }
+
+    /// The info of the `k`-th env of the batch (`Null` if it reported none).
+    pub fn info(&self, k: usize) -> &'a serde_json::Value {
+        self.infos.get(k).unwrap_or(&NO_INFO)
+    }
+
+    /// Whether any env reported info.
+    pub fn has_info(&self) -> bool {
+        !self.infos.is_empty()
+    }
+
+    /// Whether the results are viewed in place in a batch slot (else gathered into a copy).
+    pub fn in_place(&self) -> bool {
+        self.in_place
+    }
+
+    /// A lease on the shared-memory slot these results lie in: while it lives, the slot is
+    /// neither written again nor unmapped, so the addresses of this batch's blocks stay valid
+    /// and their contents unchanged (the Python client makes it the base of its numpy
+    /// arrays). `None` when the results were gathered or lie in the scratch slot, which is
+    /// reused: copy them instead.
+    pub fn lease(&self) -> Option<SlotLease> {
+        self.slot.filter(|s| s.lendable()).cloned()
+    }
+
+    /// same_step autoreset: the final observation of the `k`-th env if its episode ended
+    /// in this step.
+    pub fn final_obs(&self, k: usize) -> Option<&'a [u8]> {
+        if self.final_mask.get(k).copied().unwrap_or(0) == 0 {
+            return None;
+        }
+        let ob = self.obs.len() / self.env_ids.len().max(1);
+        self.final_obs.get(k * ob..(k + 1) * ob)
+    }
+}
+
+/// An RGB frame, row-major, 3 bytes per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    /// Rows.
+    pub height: usize,
+    /// Columns.
+    pub width: usize,
+    /// `height × width × 3` bytes.
+    pub rgb: Vec<u8>,
+}
+
+impl Frame {
+    /// Reads one frame as the worker encodes it (`u32` height, `u32` width, pixels);
+    /// `Some(None)` for an env that rendered nothing.
+    pub(crate) fn parse(bytes: &[u8]) -> Option<(Option<Frame>, &[u8])> {
+        let h = u32::from_le_bytes(bytes.get(..4)?.try_into().ok()?) as usize;
+        let w = u32::from_le_bytes(bytes.get(4..8)?.try_into().ok()?) as usize;
+        let n = h * w * 3;
+        let rgb = bytes.get(8..8 + n)?;
+        let frame = (n > 0).then(|| Frame {
+            height: h,
+            width: w,
+            rgb: rgb.to_vec(),
+        });
+        Some((frame, &bytes[8 + n..]))
+    }
+}
+
+/// Views flag bytes as `bool`s, if every byte is 0 or 1 (the worker writes nothing else;
+/// a corrupted slot is caught when the results are collected).
+pub(crate) fn as_bools(flags: &[u8]) -> Option<&[bool]> {
+    flags.iter().all(|&f| f <= 1).then(|| {
+        // SAFETY: every byte is 0 or 1, the two valid bit patterns of `bool`, which has the
+        // size and alignment of `u8`.
+        unsafe { std::slice::from_raw_parts(flags.as_ptr().cast::<bool>(), flags.len()) }
+    })
+}

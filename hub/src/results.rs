@@ -1,0 +1,358 @@
+//! Turning workers' responses into a session's results: status and info from the responses,
+//! observations, rewards and flags where the workers wrote them in the batch slot.
+
+use crate::batch::{Batch, as_bools};
+use crate::error::HubError;
+use crate::vec_env::VecEnv;
+use envhub_shm::{DataPlaneError, status};
+
+/// Where the last results are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum Place {
+    #[default]
+    Nowhere,
+    /// Rows `first..first + env_ids.len()` of batch slot `index`.
+    Slot { index: u32, first: usize },
+    /// Copied into the session's gather buffers.
+    Gathered,
+}
+
+/// Results copied out of the slots because they do not lie contiguously in one.
+#[derive(Default)]
+struct Gathered {
+    obs: Vec<u64>,
+    obs_len: usize,
+    rewards: Vec<f64>,
+    terminated: Vec<bool>,
+    truncated: Vec<bool>,
+    final_mask: Vec<u8>,
+    final_obs: Vec<u8>,
+}
+
+impl Gathered {
+    fn clear(&mut self) {
+        self.obs_len = 0;
+        self.rewards.clear();
+        self.terminated.clear();
+        self.truncated.clear();
+        self.final_mask.clear();
+        self.final_obs.clear();
+    }
+
+    fn push_obs(&mut self, bytes: &[u8]) {
+        let end = self.obs_len + bytes.len();
+        if self.obs.len() * 8 < end {
+            self.obs.resize(end.div_ceil(8), 0);
+        }
+        let all: &mut [u8] = bytemuck::cast_slice_mut(&mut self.obs);
+        all[self.obs_len..end].copy_from_slice(bytes);
+        self.obs_len = end;
+    }
+
+    fn obs_bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.obs)[..self.obs_len]
+    }
+}
+
+/// The session's last results: which envs, where they lie, and their infos.
+#[derive(Default)]
+pub(crate) struct Results {
+    env_ids: Vec<usize>,
+    place: Place,
+    /// One per env of `env_ids` when any reported info, else empty.
+    infos: Vec<serde_json::Value>,
+    gathered: Gathered,
+}
+
+impl Results {
+    pub fn is_set(&self) -> bool {
+        self.place != Place::Nowhere
+    }
+}
+
+/// One env that failed, as a worker reports it (`status::ENV_FAILED`).
+#[derive(serde::Deserialize)]
+struct FailedEnvs {
+    /// `(env index within the worker, message)`.
+    failed: Vec<(usize, String)>,
+    info: Option<serde_json::Value>,
+}
+
+/// A failure found while collecting, reported once every response has been read.
+struct Failure {
+    worker: usize,
+    envs: Vec<usize>,
+    message: String,
+}
+
+impl VecEnv {
+    /// Waits for the listed workers and makes their results the session's.
+    pub(crate) fn collect(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        let timeout = self.options.step_timeout;
+        for &i in workers {
+            if !self.workers[i].pending {
+                continue;
+            }
+            let interrupt = self.interrupt.clone();
+            match self.workers[i].wait(timeout, &*interrupt) {
+                Ok(r) => self.workers[i].response = Some(r),
+                Err(e) => self.recover(i, e)?,
+            }
+        }
+        self.take_results(workers)
+    }
+
+    /// Handles a worker failure: restarts it if allowed (its envs reset into the same slot),
+    /// else ends the session and returns the error.
+    pub(crate) fn recover(&mut self, i: usize, err: HubError) -> Result<(), HubError> {
+        if !matches!(err, HubError::WorkerDied { .. }) || !self.options.restart_on_crash {
+            return Err(self.give_up(err));
+        }
+        tracing::warn!(worker = i, error = %err, "restarting worker");
+        let policy = self.options.wait_policy();
+        let (slot, sent) = (self.workers[i].slot, self.workers[i].sent.clone());
+        self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
+        let n = self.workers[i].job.num_envs;
+        self.workers[i]
+            .channel
+            .send_reset(slot, &vec![None; n], None, "")?;
+        self.workers[i].sent(slot, sent);
+        let interrupt = self.interrupt.clone();
+        match self.workers[i].wait(self.options.step_timeout, &*interrupt) {
+            Ok(r) => {
+                self.workers[i].response = Some(r);
+                Ok(())
+            }
+            Err(e) => Err(self.give_up(e)),
+        }
+    }
+
+    /// Makes the received responses of `workers` (in env order, their envs one contiguous
+    /// run of one slot unless results are to be gathered) the session's results.
+    pub(crate) fn take_results(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        let mut failures = Vec::new();
+        let mut infos: Vec<(usize, Option<serde_json::Value>)> = Vec::new();
+        let mut any_info = false;
+        for &i in workers {
+            let w = &mut self.workers[i];
+            let Some(response) = w.response.take() else {
+                continue;
+            };
+            let header = *response.header();
+            match header.status {
+                status::OK => {
+                    let parsed = response
+                        .info_json()
+                        .and_then(|text| serde_json::from_str(text).ok());
+                    any_info |= parsed.is_some();
+                    infos.push((i, parsed));
+                }
+                status::ENV_FAILED => {
+                    let report: FailedEnvs = serde_json::from_slice(response.info_bytes())
+                        .map_err(|e| {
+                            DataPlaneError::Protocol(format!(
+                                "worker {i} sent an unreadable failure report: {e}"
+                            ))
+                        })?;
+                    let lo = w.job.env_offset;
+                    let envs: Vec<usize> = report.failed.iter().map(|(k, _)| lo + k).collect();
+                    let message = report
+                        .failed
+                        .iter()
+                        .map(|(k, m)| format!("env {}: {m}", lo + k))
+                        .collect::<Vec<_>>()
+                        .join("\n");
+                    any_info |= report.info.is_some();
+                    infos.push((i, report.info));
+                    failures.push(Failure {
+                        worker: i,
+                        envs,
+                        message,
+                    });
+                }
+                status::ERROR => {
+                    failures.push(Failure {
+                        worker: i,
+                        envs: w.sent.clone(),
+                        message: response.error().unwrap_or_default(),
+                    });
+                    infos.push((i, None));
+                }
+                other => {
+                    return Err(DataPlaneError::Protocol(format!(
+                        "worker {i} answered a step or reset with status {other}"
+                    ))
+                    .into());
+                }
+            }
+        }
+        let any_restart = workers.iter().any(|&i| self.workers[i].restarted);
+        self.place_results(workers)?;
+        self.mark_restarts(workers);
+        self.results.infos.clear();
+        if any_info || any_restart {
+            for (i, parsed) in infos {
+                let w = &mut self.workers[i];
+                let restarted = std::mem::take(&mut w.restarted);
+                for (k, _) in w.sent.iter().enumerate() {
+                    let env_in_worker = w.sent[k] - w.job.env_offset;
+                    let mut info = parsed
+                        .as_ref()
+                        .and_then(|v| v.get(env_in_worker).cloned())
+                        .unwrap_or_default();
+                    if restarted {
+                        let mut map = info.as_object().cloned().unwrap_or_default();
+                        map.insert("worker_restarted".into(), true.into());
+                        map.insert("worker_restarts".into(), w.restarts.into());
+                        info = serde_json::Value::Object(map);
+                    }
+                    self.results.infos.push(info);
+                }
+            }
+        }
+        for f in &failures {
+            for &e in &f.envs {
+                self.must_reset[e] = true;
+            }
+        }
+        match failures.into_iter().next() {
+            None => Ok(()),
+            Some(f) => Err(HubError::EnvFailed {
+                worker: f.worker,
+                envs: f.envs,
+                message: f.message,
+            }),
+        }
+    }
+
+    /// Points the results at the workers' rows: in place when they are one contiguous run of
+    /// one slot, else gathered.
+    fn place_results(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        let r = &mut self.results;
+        r.env_ids.clear();
+        for &i in workers {
+            r.env_ids.extend_from_slice(&self.workers[i].sent);
+        }
+        let slot = self.workers[workers[0]].slot;
+        let first = r.env_ids.first().copied().unwrap_or(0);
+        let contiguous = workers.iter().all(|&i| self.workers[i].slot == slot)
+            && r.env_ids.iter().enumerate().all(|(k, &e)| e == first + k);
+        if contiguous {
+            r.place = Place::Slot { index: slot, first };
+            let n = r.env_ids.len();
+            let rows = self.slot_rows(slot, first, n)?;
+            if as_bools(rows.terminated).is_none() || as_bools(rows.truncated).is_none() {
+                return Err(DataPlaneError::Protocol(
+                    "a worker wrote done flags other than 0 and 1".into(),
+                )
+                .into());
+            }
+            return Ok(());
+        }
+        // Results from several slots, or envs picked out of a worker's: copy them together.
+        let mut g = std::mem::take(&mut self.results.gathered);
+        g.clear();
+        for &i in workers {
+            let slot = self.workers[i].slot;
+            for k in 0..self.workers[i].sent.len() {
+                let env = self.workers[i].sent[k];
+                let row = self.slot_rows(slot, env, 1)?;
+                let (Some(term), Some(trunc)) = (as_bools(row.terminated), as_bools(row.truncated))
+                else {
+                    return Err(DataPlaneError::Protocol(
+                        "a worker wrote done flags other than 0 and 1".into(),
+                    )
+                    .into());
+                };
+                g.push_obs(row.obs);
+                g.rewards.push(row.rewards[0]);
+                g.terminated.push(term[0]);
+                g.truncated.push(trunc[0]);
+                g.final_mask.extend_from_slice(row.final_mask);
+                g.final_obs.extend_from_slice(row.final_obs);
+                self.obs_bytes_copied += row.obs.len() as u64;
+            }
+        }
+        self.results.gathered = g;
+        self.results.place = Place::Gathered;
+        Ok(())
+    }
+
+    fn slot_rows(
+        &self,
+        index: u32,
+        first: usize,
+        n: usize,
+    ) -> Result<envhub_shm::ResponseBlocks<'_>, HubError> {
+        let slot = self.pool.get(index).ok_or_else(|| {
+            DataPlaneError::Protocol(format!(
+                "results name batch slot {index}, which is not open"
+            ))
+        })?;
+        Ok(slot.rows(first, n))
+    }
+
+    /// A restarted worker's envs come back truncated: set the flag in its rows.
+    fn mark_restarts(&mut self, workers: &[usize]) {
+        for &i in workers {
+            let w = &self.workers[i];
+            if !w.restarted {
+                continue;
+            }
+            match self.results.place {
+                Place::Slot { index, .. } => {
+                    if let Some(slot) = self.pool.get(index) {
+                        for &env in &w.sent {
+                            // SAFETY: the worker has answered (it writes these rows no more)
+                            // and the slot is not lent yet: these are the results being made.
+                            unsafe { slot.set_truncated(env) };
+                        }
+                    }
+                }
+                Place::Gathered => {
+                    for (k, e) in self.results.env_ids.iter().enumerate() {
+                        if w.sent.contains(e) {
+                            self.results.gathered.truncated[k] = true;
+                        }
+                    }
+                }
+                Place::Nowhere => {}
+            }
+        }
+    }
+
+    /// The last results as a [`Batch`].
+    pub(crate) fn batch(&self) -> Batch<'_> {
+        let r = &self.results;
+        match r.place {
+            Place::Slot { index, first } => {
+                let slot = self.pool.get(index).expect("checked when collected");
+                let rows = slot.rows(first, r.env_ids.len());
+                Batch {
+                    env_ids: &r.env_ids,
+                    obs: rows.obs,
+                    rewards: rows.rewards,
+                    terminated: as_bools(rows.terminated).expect("checked when collected"),
+                    truncated: as_bools(rows.truncated).expect("checked when collected"),
+                    infos: &r.infos,
+                    final_mask: rows.final_mask,
+                    final_obs: rows.final_obs,
+                    in_place: true,
+                    slot: Some(slot),
+                }
+            }
+            Place::Gathered | Place::Nowhere => Batch {
+                env_ids: &r.env_ids,
+                obs: r.gathered.obs_bytes(),
+                rewards: &r.gathered.rewards,
+                terminated: &r.gathered.terminated,
+                truncated: &r.gathered.truncated,
+                infos: &r.infos,
+                final_mask: &r.gathered.final_mask,
+                final_obs: &r.gathered.final_obs,
+                in_place: false,
+                slot: None,
+            },
+        }
+    }
+}

@@ -1,0 +1,55 @@
+//! How a session behaves, beyond what `EnvConfig` says about the envs.
+
+use envhub_shm::WaitPolicy;
+use std::time::Duration;
+
+/// Options of a session (timeouts, restarts, waiting, shared memory).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionOptions {
+    /// A worker that takes longer than this for one request is treated as hung and killed.
+    pub step_timeout: Duration,
+    /// Time allowed for a worker to create its envs and report ready.
+    pub start_timeout: Duration,
+    /// Restart a worker that died; its envs come back truncated, with `worker_restarted`
+    /// in their info.
+    pub restart_on_crash: bool,
+    /// Spin at least this long on a response before blocking (0: always block at once).
+    pub spin: Duration,
+    /// Spin at most this long: the spin adapts to the usual wait up to this bound, so a
+    /// step of a millisecond is caught without a wake-up (tens of µs on a VM).
+    pub max_spin: Duration,
+    /// iceoryx2 namespace (file prefix) of the session's channels and batch slots.
+    pub namespace: String,
+    /// Shared memory the session's batch slots may take in all. Results that arrays still
+    /// view keep their slot; past this cap new results are copied rather than waiting.
+    pub pool_bytes: usize,
+}
+
+impl Default for SessionOptions {
+    fn default() -> Self {
+        SessionOptions {
+            step_timeout: Duration::from_secs(60),
+            start_timeout: Duration::from_secs(60),
+            restart_on_crash: false,
+            spin: Duration::from_micros(50),
+            max_spin: Duration::from_millis(2),
+            namespace: std::env::var(crate::env_vars::ENVHUB_NAMESPACE)
+                .unwrap_or_else(|_| "envhub_".to_string()),
+            pool_bytes: 512 << 20,
+        }
+    }
+}
+
+impl SessionOptions {
+    /// How the client waits for its workers. Spinning yields the core on every round, so it
+    /// costs nothing when another process needs the core, and saves a wake-up (tens of µs on
+    /// a VM) when the answer is close; the 5 ms tick bounds how late a dead worker or a
+    /// Ctrl-C is seen.
+    pub(crate) fn wait_policy(&self) -> WaitPolicy {
+        WaitPolicy {
+            spin: self.spin,
+            max_spin: self.max_spin,
+            tick: Duration::from_millis(5),
+        }
+    }
+}
