@@ -48,6 +48,15 @@ impl WorkerProcess {
         let _ = self.exit_status(Duration::from_secs(2));
     }
 
+    /// Sends SIGKILL without waiting on the daemon for its status (a session being given up);
+    /// our own child is reaped, which takes no time once it is killed.
+    pub fn kill_now(&mut self) {
+        envhub_shm::kill(self.pid());
+        if let WorkerProcess::Local(child) = self {
+            let _ = child.wait();
+        }
+    }
+
     /// How it ended, waiting up to `timeout` for it to end ("died (signal: 9 (SIGKILL))").
     pub fn exit_status(&mut self, timeout: Duration) -> Option<String> {
         let deadline = std::time::Instant::now() + timeout;

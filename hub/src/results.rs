@@ -83,6 +83,9 @@ struct Failure {
     worker: usize,
     envs: Vec<usize>,
     message: String,
+    /// The envs failed one by one while the others went on: they must be reset. (A worker
+    /// that refuses or fails a request as a whole leaves its envs to the simulator.)
+    per_env: bool,
 }
 
 impl VecEnv {
@@ -168,6 +171,7 @@ impl VecEnv {
                         worker: i,
                         envs,
                         message,
+                        per_env: true,
                     });
                 }
                 status::ERROR => {
@@ -175,6 +179,7 @@ impl VecEnv {
                         worker: i,
                         envs: w.sent.clone(),
                         message: response.error().unwrap_or_default(),
+                        per_env: false,
                     });
                     infos.push((i, None));
                 }
@@ -210,7 +215,7 @@ impl VecEnv {
                 }
             }
         }
-        for f in &failures {
+        for f in failures.iter().filter(|f| f.per_env) {
             for &e in &f.envs {
                 self.must_reset[e] = true;
             }

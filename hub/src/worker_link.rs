@@ -239,7 +239,7 @@ impl WorkerLink {
     pub fn abort(&mut self) {
         self.response = None;
         self.pending = false;
-        self.process.kill();
+        self.process.kill_now();
     }
 }
 

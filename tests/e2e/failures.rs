@@ -143,8 +143,19 @@ fn env_errors_reach_the_client_and_the_worker_survives() {
         .unwrap();
     env.reset(None).unwrap();
     env.step(&[0u8; 8]).unwrap();
-    let err = env.step(&[0u8; 8]).unwrap_err().to_string();
-    assert!(err.contains("failed on purpose at step 2"), "{err}");
+    let err = env.step(&[0u8; 8]).unwrap_err();
+    assert!(
+        matches!(&err, HubError::EnvFailed { envs, .. } if envs == &[0]),
+        "{err}"
+    );
+    assert!(
+        err.to_string().contains("failed on purpose at step 2"),
+        "{err}"
+    );
+    // Its state is unknown: it must be reset before it steps again, and then it does.
+    let refused = env.step(&[0u8; 8]).unwrap_err().to_string();
+    assert!(refused.contains("must be reset first"), "{refused}");
+    env.reset(None).unwrap();
     env.step(&[0u8; 8]).unwrap();
 }
 

@@ -169,9 +169,15 @@ fn a_python_exception_names_the_env_and_carries_the_traceback() {
     env.reset(Some(0)).unwrap();
     env.step_i64(&[0, 0]).unwrap();
     let err = env.step_i64(&[0, 1]).unwrap_err();
-    let HubError::EnvFailed { worker: 0, message } = &err else {
+    let HubError::EnvFailed {
+        worker: 0,
+        envs,
+        message,
+    } = &err
+    else {
         panic!("expected EnvFailed from worker 0, got {err}");
     };
+    assert_eq!(envs, &[1], "only the env that raised failed");
     for needle in [
         "`Boom-v0`",
         "raised in `step`",
@@ -181,6 +187,14 @@ fn a_python_exception_names_the_env_and_carries_the_traceback() {
     ] {
         assert!(message.contains(needle), "no {needle:?} in: {message}");
     }
+    // Env 0 stepped: its result is there. Env 1 must be reset before it steps again.
+    let partial = env.last_batch().unwrap();
+    assert_eq!(partial.env_ids, &[0, 1]);
+    assert!(!partial.terminated[0] && !partial.truncated[0]);
+    let refused = env.step_i64(&[0, 0]).unwrap_err().to_string();
+    assert!(refused.contains("must be reset"), "{refused}");
+    env.reset_with(&[None, Some(5)], Some(&[false, true]), &Default::default())
+        .unwrap();
     // The worker outlives the exception; the other session and new ones go on.
     env.step_i64(&[0, 0]).unwrap();
     other.step_i64(&[1, 0]).unwrap();

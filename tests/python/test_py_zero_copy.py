@@ -1,7 +1,9 @@
-"""Observations are numpy arrays viewing the worker's shared-memory sample: checked by
-address (inside a `/dev/shm` mapping of this process, equal to the sample's), read-only, and
-still valid and unchanged after later steps, after close, and after the worker is gone. Past
-the pool of lendable samples, observations are copies; nothing blocks."""
+"""Results are numpy arrays viewing one shared-memory batch slot that every worker of the
+session writes its rows into: checked by address (inside a `/dev/shm` mapping of this process,
+equal to the slot owner's), for any number of workers, with no observation bytes copied.
+Arrays are writeable (as Gymnasium's) and stay valid and unchanged after later steps, after
+close, and after the workers are gone. Past the pool's memory cap, results are copies;
+nothing blocks."""
 
 from __future__ import annotations
 
@@ -38,33 +40,57 @@ def in_shared_memory(a: np.ndarray) -> str | None:
     return next((path for lo, hi, path in shm_mappings() if lo <= at and at + a.nbytes <= hi), None)
 
 
-def sample_of(a: np.ndarray):
+def slot_of(a: np.ndarray):
     """The owner object at the root of an array's bases, if it is envhub's."""
     base = a
     while isinstance(base, np.ndarray) and base.base is not None:
         base = base.base
-    return base if type(base).__name__ == "SharedSample" else None
+    return base if type(base).__name__ == "SharedSlot" else None
 
 
-@pytest.fixture
-def vec():
-    envs = envhub.make_vec("gym-cartpole", 16, num_workers=1)
+@pytest.fixture(params=[1, 2, 3])
+def vec(request):
+    envs = envhub.make_vec("gym-cartpole", 16, num_workers=request.param)
     yield envs
     envs.close()
 
 
-def test_batch_views_the_shared_memory_sample(vec):
+def test_one_contiguous_batch_in_shared_memory_for_any_worker_count(vec):
     obs, _ = vec.reset(seed=0)
-    sample = sample_of(obs)
-    assert sample is not None, "observations are not a view of a shared-memory sample"
-    assert address(obs) == sample.address and obs.nbytes == sample.nbytes == 16 * 4 * 4
+    for _ in range(50):
+        obs, rewards, terminated, truncated, _ = vec.step(vec.action_space.sample())
+    slot = slot_of(obs)
+    assert slot is not None, "observations are not a view of a shared-memory batch slot"
+    assert address(obs) == slot.address and obs.nbytes == slot.nbytes == 16 * 4 * 4
+    assert obs.shape == (16, 4) and obs.flags.c_contiguous and not obs.flags.owndata
     path = in_shared_memory(obs)
-    assert path is not None and os.environ["ENVHUB_NAMESPACE"] in path, path
-    assert not obs.flags.writeable and not obs.flags.owndata
-    with pytest.raises(ValueError, match="read-only"):
-        obs[0, 0] = 1.0
-    with pytest.raises(ValueError):
-        obs.setflags(write=True)
+    assert path is not None and os.environ["ENVHUB_NAMESPACE"] in path and "slots_" in path, path
+    for a in (rewards, terminated, truncated):
+        assert slot_of(a) is slot and in_shared_memory(a) == path
+    assert rewards.dtype == np.float64 and terminated.dtype == np.bool_
+    assert vec._session.obs_bytes_copied == 0
+    # Writeable, as Gymnasium's arrays are; the session never writes into it again.
+    assert obs.flags.writeable
+    obs[0, 0] = 123.0
+    assert obs[0, 0] == 123.0
+
+
+def test_same_values_whatever_the_worker_count():
+    runs = []
+    for workers in (1, 2, 4):
+        envs = envhub.make_vec("gym-cartpole", 8, num_workers=workers)
+        try:
+            obs, _ = envs.reset(seed=5)
+            trace = [obs.copy()]
+            for t in range(40):
+                obs, r, te, tr, _ = envs.step(np.array([(t + i) % 2 for i in range(8)]))
+                trace.extend([obs.copy(), r.copy(), te.copy(), tr.copy()])
+            runs.append(trace)
+        finally:
+            envs.close()
+    for other in runs[1:]:
+        for a, b in zip(runs[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_kept_arrays_stay_valid_and_unchanged(vec):
@@ -77,7 +103,7 @@ def test_kept_arrays_stay_valid_and_unchanged(vec):
         kept.append(obs)
         snapshots.append(obs.copy())
         addresses.add(address(obs))
-    assert len(addresses) == 4, "a kept sample was reused"
+    assert len(addresses) == 4, "a kept slot was reused"
     for _ in range(200):  # many later steps, with resets inside
         vec.step(vec.action_space.sample())
     for a, s in zip(kept, snapshots, strict=True):
@@ -85,52 +111,60 @@ def test_kept_arrays_stay_valid_and_unchanged(vec):
         assert in_shared_memory(a) is not None
 
 
-def test_released_samples_are_reused(vec):
+def test_released_slots_are_reused(vec):
     vec.reset(seed=0)
     seen = set()
     for _ in range(50):
         obs, *_ = vec.step(vec.action_space.sample())
         seen.add(address(obs))
         del obs
-    # Only the session's last array and the one being received are alive at once: a few
-    # samples cycle, memory does not grow.
-    assert len(seen) <= 4, len(seen)
-    assert vec._session.lent <= 2
+    # Only the last results and the ones being made are alive at once: a few slots cycle,
+    # memory does not grow.
+    assert len(seen) <= 3, len(seen)
+    assert vec._session.slots <= 3
 
 
-def test_past_the_pool_observations_are_copies_and_nothing_blocks(vec):
-    obs, _ = vec.reset(seed=0)
-    kept = [obs]
-    for _ in range(3 * envhub.MAX_LENT_SAMPLES):
-        kept.append(vec.step(vec.action_space.sample())[0])
-    views = [a for a in kept if sample_of(a) is not None]
-    copies = [a for a in kept if sample_of(a) is None]
-    assert len(views) == envhub.MAX_LENT_SAMPLES
-    assert copies and all(a.flags.owndata and a.flags.writeable for a in copies)
-    assert vec._session.lent == envhub.MAX_LENT_SAMPLES
-    snapshot = [a.copy() for a in kept]
-    del copies, views
-    kept = kept[-2:]  # drop the rest: their samples go back to the pool
-    gc.collect()
-    obs = vec.step(vec.action_space.sample())[0]
-    assert sample_of(obs) is not None, "samples were not returned to the pool"
-    np.testing.assert_array_equal(kept[-1], snapshot[-1])
+def test_past_the_cap_results_are_copies_and_nothing_blocks():
+    slot_bytes = 16 * (4 * 4 + 8 + 3) + 8  # obs, rewards, 3 flag bytes per env, alignment
+    envs = envhub.make_vec("gym-cartpole", 16, num_workers=2, pool_bytes=4 * slot_bytes)
+    try:
+        obs, _ = envs.reset(seed=0)
+        kept = [obs]
+        for _ in range(12):
+            kept.append(envs.step(envs.action_space.sample())[0])
+        views = [a for a in kept if slot_of(a) is not None]
+        copies = [a for a in kept if slot_of(a) is None]
+        assert len(views) == envs._session.slots == 4
+        assert copies and all(a.flags.owndata and a.flags.writeable for a in copies)
+        snapshot = [a.copy() for a in kept]
+        del copies, views
+        kept = kept[-2:]  # drop the rest: their slots go back to the pool
+        gc.collect()
+        obs = envs.step(envs.action_space.sample())[0]
+        assert slot_of(obs) is not None, "slots were not returned to the pool"
+        np.testing.assert_array_equal(kept[-1], snapshot[-1])
+    finally:
+        envs.close()
 
 
-def test_arrays_outlive_close_and_the_worker():
-    envs = envhub.make_vec("gym-cartpole", 8, num_workers=1)
+def test_arrays_outlive_close_and_the_workers():
+    envs = envhub.make_vec("gym-cartpole", 8, num_workers=2)
     obs, _ = envs.reset(seed=3)
     snap = obs.copy()
-    pid = envs.worker_pids[0]
+    pids = envs.worker_pids
+    namespace = os.environ["ENVHUB_NAMESPACE"]
     envs.close()
-    try:
-        os.kill(pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
     del envs
     gc.collect()
     np.testing.assert_array_equal(obs, snap)
-    del obs  # releasing the sample after its session is gone must be harmless
+    # Closing removed the slot's name; the mapping lives on with the array.
+    assert not [f for f in os.listdir("/dev/shm") if namespace in f and "slots_" in f]
+    del obs  # releasing the slot after its session is gone must be harmless
     gc.collect()
 
 
@@ -138,7 +172,7 @@ def test_single_env_observation_is_a_view():
     env = envhub.make("gym-cartpole")
     try:
         obs, _ = env.reset(seed=0)
-        assert obs.shape == (4,) and sample_of(obs) is not None and in_shared_memory(obs)
+        assert obs.shape == (4,) and slot_of(obs) is not None and in_shared_memory(obs)
         first = obs.copy()
         nxt, *_ = env.step(0)
         assert address(nxt) != address(obs)
@@ -147,24 +181,8 @@ def test_single_env_observation_is_a_view():
         env.close()
 
 
-def test_several_workers_give_one_fresh_array():
-    envs = envhub.make_vec("gym-cartpole", 6, num_workers=2)
-    try:
-        obs, _ = envs.reset(seed=0)
-        assert obs.shape == (6, 4) and obs.flags.c_contiguous
-        # Gathered from two samples into one array: a copy the caller owns.
-        assert sample_of(obs) is None and obs.flags.writeable
-        ref = envhub.make_vec("gym-cartpole", 6, num_workers=1)
-        try:
-            np.testing.assert_array_equal(ref.reset(seed=0)[0], obs)
-        finally:
-            ref.close()
-    finally:
-        envs.close()
-
-
 def test_arrays_dropped_in_other_threads():
-    envs = envhub.make_vec("gym-cartpole", 4, num_workers=1)
+    envs = envhub.make_vec("gym-cartpole", 4, num_workers=2)
     try:
         envs.reset(seed=0)
         batches = [envs.step(envs.action_space.sample())[0] for _ in range(5)]
@@ -178,7 +196,20 @@ def test_arrays_dropped_in_other_threads():
         t.join()
         for _ in range(20):
             obs = envs.step(envs.action_space.sample())[0]
-        assert sample_of(obs) is not None
-        assert envs._session.lent <= 2
+        assert slot_of(obs) is not None
+        assert envs._session.slots <= 6
+    finally:
+        envs.close()
+
+
+def test_render_works_whatever_the_user_holds():
+    """Rendering takes no shared-memory sample a user's arrays could have used up."""
+    envs = envhub.make_vec("mujoco-reacher", 2, num_workers=1, render_mode="rgb_array", width=64, height=64)
+    try:
+        kept = [envs.reset(seed=0)[0]]
+        kept += [envs.step(envs.action_space.sample())[0] for _ in range(40)]
+        assert all(slot_of(a) is not None for a in kept)
+        frames = envs.render()
+        assert len(frames) == 2 and frames[0].shape == (64, 64, 3)
     finally:
         envs.close()

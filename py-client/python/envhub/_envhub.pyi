@@ -39,6 +39,7 @@ def make_session(
     registry: Registry | None = None,
     step_timeout: float | None = None,
     restart_on_crash: bool = False,
+    pool_bytes: int | None = None,
 ) -> Session: ...
 
 class Registry:

@@ -84,10 +84,13 @@ def make_vec(
     registry: RegistryArg = None,
     step_timeout: float | None = None,
     restart_on_crash: bool = False,
+    pool_bytes: int | None = None,
     **extra: Any,
 ) -> VectorEnv:
     """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
-    `gymnasium.vector.VectorEnv`; default: one worker per core, at most one per env)."""
+    `gymnasium.vector.VectorEnv`; default: one worker per core, at most one per env).
+    `pool_bytes` caps the shared memory that results kept alive by arrays may hold (512 MiB
+    by default); past it, results are copies."""
     return VectorEnv(
         id,
         num_envs,
@@ -100,6 +103,7 @@ def make_vec(
         registry=registry,
         step_timeout=step_timeout,
         restart_on_crash=restart_on_crash,
+        pool_bytes=pool_bytes,
         **extra,
     )
 

@@ -31,6 +31,7 @@ def start(
     registry: RegistryArg,
     step_timeout: float | None,
     restart_on_crash: bool,
+    pool_bytes: int | None = None,
 ) -> Any:
     """Starts the workers of `config.num_envs` envs of entry `registry_id`."""
     if not isinstance(registry_id, str):
@@ -45,6 +46,7 @@ def start(
         registry=registry_of(registry),
         step_timeout=step_timeout,
         restart_on_crash=restart_on_crash,
+        pool_bytes=pool_bytes,
     )
 
 

@@ -94,6 +94,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         registry: RegistryArg = None,
         step_timeout: float | None = None,
         restart_on_crash: bool = False,
+        pool_bytes: int | None = None,
         **extra: Any,
     ) -> None:
         mode = _autoreset_mode(autoreset_mode)
@@ -107,7 +108,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             workers=num_workers,
             autoreset_mode=_RUST_MODES[mode],
         )
-        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash)
+        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes)
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)
