@@ -74,3 +74,114 @@ fn async_misuse_is_an_error() {
     let err = env.send(&[0u8; 8], &[0, 1]).unwrap_err().to_string();
     assert!(err.contains("for 2 envs"), "{err}");
 }
+
+fn null(t: &TestHub, num_envs: usize, workers: usize, sleep_ms: u64) -> envhub::VecEnv {
+    let mut config = EnvConfig {
+        num_envs,
+        ..config(workers)
+    };
+    config
+        .extra
+        .insert("sleep_ms".into(), serde_json::json!(sleep_ms));
+    t.hub.make_vec_direct("null", "Null-v0", &config).unwrap()
+}
+
+#[test]
+fn recv_holds_exactly_the_envs_that_were_stepped() {
+    let t = TestHub::new("async_exact");
+    // One worker hosting envs 0 and 1: a send to env 0 alone must not bring env 1 back.
+    let mut env = null(&t, 2, 1, 0);
+    env.reset(Some(0)).unwrap();
+    env.step(&[0u8; 16]).unwrap();
+    env.send(&[0u8; 8], &[0]).unwrap();
+    let b = env.recv().unwrap();
+    assert_eq!(b.env_ids, &[0]);
+    assert_eq!(b.obs.len(), 16, "one observation");
+    assert_eq!(b.rewards.len(), 1);
+    assert_eq!(b.obs_f32()[0], 2.0, "env 0 stepped twice");
+    // Env 1 did not step: the next full step shows it one step behind.
+    let b = env.step(&[0u8; 16]).unwrap();
+    assert_eq!((b.obs_f32()[0], b.obs_f32()[4]), (3.0, 2.0));
+}
+
+#[test]
+fn recv_returns_the_first_worker_to_finish() {
+    let t = TestHub::new("async_first");
+    // One env per worker, each step takes 150 ms.
+    let mut env = null(&t, 2, 2, 150);
+    env.reset(Some(0)).unwrap();
+    let start = std::time::Instant::now();
+    // Worker 1 starts first and finishes first (at 150 ms), although worker 0 comes first in
+    // env order (it finishes at 230 ms).
+    env.send(&[0u8; 8], &[1]).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(80));
+    env.send(&[0u8; 8], &[0]).unwrap();
+    let b = env.recv().unwrap();
+    let first = start.elapsed();
+    assert_eq!(b.env_ids, &[1]);
+    assert!(b.in_place());
+    let b = env.recv().unwrap();
+    assert_eq!(b.env_ids, &[0]);
+    assert!(
+        first < std::time::Duration::from_millis(215),
+        "the first worker's results came after {first:?}"
+    );
+}
+
+#[test]
+fn envs_of_idle_workers_can_be_sent_while_others_step() {
+    let t = TestHub::new("async_pipeline");
+    let mut env = null(&t, 4, 2, 20);
+    env.reset(Some(0)).unwrap();
+    env.send(&[0u8; 16], &[0, 1]).unwrap();
+    env.send(&[0u8; 16], &[2, 3]).unwrap();
+    let err = env.send(&[0u8; 8], &[1]).unwrap_err().to_string();
+    assert!(err.contains("env 1 is still stepping"), "{err}");
+    // EnvPool's loop: whatever comes back is sent again at once.
+    let mut steps = [0u32; 4];
+    for _ in 0..20 {
+        let ids: Vec<usize> = {
+            let b = env.recv().unwrap();
+            assert!(b.in_place(), "one worker's rows are one block");
+            b.env_ids.to_vec()
+        };
+        for &i in &ids {
+            steps[i] += 1;
+        }
+        env.send(&vec![0u8; 8 * ids.len()], &ids).unwrap();
+    }
+    assert!(steps.iter().all(|&s| s >= 5), "{steps:?}");
+    assert_eq!(env.obs_bytes_copied(), 0);
+}
+
+#[test]
+fn several_workers_fill_one_block_viewed_in_place() {
+    let t = TestHub::new("async_block");
+    let mut env = null(&t, 6, 3, 0);
+    let b = env.reset(Some(0)).unwrap();
+    assert!(b.in_place() && b.lease().is_some());
+    for k in 1..=20 {
+        let b = env.step(&[0u8; 48]).unwrap();
+        assert!(b.in_place());
+        assert!(b.obs_f32().chunks(4).all(|o| o[0] == k as f32));
+    }
+    // All three workers sent together and done together: one block, in place.
+    env.send(&[0u8; 48], &[0, 1, 2, 3, 4, 5]).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    let b = env.recv().unwrap();
+    assert_eq!(b.env_ids, &[0, 1, 2, 3, 4, 5]);
+    assert!(b.in_place());
+    // Envs picked out of a worker's are gathered: the one case that copies.
+    env.send(&[0u8; 16], &[0, 5]).unwrap();
+    let mut seen = Vec::new();
+    while seen.len() < 2 {
+        seen.extend_from_slice(env.recv().unwrap().env_ids);
+    }
+    seen.sort();
+    assert_eq!(seen, [0, 5]);
+    assert_eq!(
+        env.obs_bytes_copied(),
+        0,
+        "each worker's one env is a block of one"
+    );
+}

@@ -8,7 +8,7 @@
 
 use crate::DataPlaneError;
 use crate::transport::Ipc;
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ZeroCopySend;
 use iceoryx2::sample::Sample;
@@ -107,13 +107,18 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
         let timeout = next_check
             .saturating_duration_since(Instant::now())
             .max(Duration::from_micros(1));
-        listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| DataPlaneError::Ipc {
-                what: "wait",
-                detail: format!("{e:?}"),
-            })?;
-        if Instant::now() >= next_check {
+        let interrupted = match listener.timed_wait(|_| {}, timeout) {
+            Ok(_) => false,
+            // A signal (Ctrl-C) cut the wait short: let the caller's check see it now.
+            Err(ListenerWaitError::InterruptSignal) => true,
+            Err(e) => {
+                return Err(DataPlaneError::Ipc {
+                    what: "wait",
+                    detail: format!("{e:?}"),
+                });
+            }
+        };
+        if interrupted || Instant::now() >= next_check {
             alive()?;
             next_check = Instant::now() + tick;
         }
