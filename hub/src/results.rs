@@ -133,6 +133,7 @@ impl VecEnv {
     /// Makes the received responses of `workers` (in env order, their envs one contiguous
     /// run of one slot unless results are to be gathered) the session's results.
     pub(crate) fn take_results(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        self.steps_taken += 1;
         let mut failures = Vec::new();
         let mut infos: Vec<(usize, Option<serde_json::Value>)> = Vec::new();
         let mut any_info = false;

@@ -42,6 +42,8 @@ pub struct VecEnv {
     pub(crate) interrupt: Arc<InterruptCheck>,
     /// Observation bytes copied on the client so far (0 unless results had to be gathered).
     pub(crate) obs_bytes_copied: u64,
+    /// Resets and steps (lock-step or `recv`) completed.
+    pub(crate) steps_taken: u64,
 }
 
 fn session_name() -> String {
@@ -159,6 +161,7 @@ impl VecEnv {
             must_reset: vec![false; num_envs],
             interrupt: Arc::new(|| false),
             obs_bytes_copied: 0,
+            steps_taken: 0,
         })
     }
 
@@ -218,6 +221,11 @@ impl VecEnv {
     /// contiguously in one slot.
     pub fn obs_bytes_copied(&self) -> u64 {
         self.obs_bytes_copied
+    }
+
+    /// Resets, steps and `recv`s completed so far (the denominator of per-step figures).
+    pub fn steps_taken(&self) -> u64 {
+        self.steps_taken
     }
 
     /// Batch slots created so far (each one whole batch of results in shared memory).

@@ -15,6 +15,7 @@ mod batch;
 mod channel;
 mod job;
 mod layout;
+mod pingpong;
 mod process;
 mod serve;
 mod slots;
@@ -28,6 +29,7 @@ pub use layout::{
     BLOCK_ALIGN, BatchLayout, Layout, RequestHeader, ResponseBlocks, ResponseBlocksMut,
     ResponseHeader, command, env_flag, status,
 };
+pub use pingpong::{ping, pong};
 pub use process::{ProcessWatch, die_with_parent, kill};
 pub use serve::{ServedBatch, serve_batch};
 pub use slots::{MAX_SLOTS, Slot, SlotLease, SlotMap, SlotPool, SlotsName, remove_stale_slots};

@@ -27,6 +27,19 @@ enum Command {
         #[arg(long)]
         job: String,
     },
+    /// Answer raw iceoryx2 pings (the benchmark's floor under a data-plane round trip) until
+    /// none comes for a second.
+    Pong {
+        /// iceoryx2 namespace prefix.
+        #[arg(long)]
+        prefix: String,
+        /// Base service name.
+        #[arg(long)]
+        service: String,
+        /// Spin this long (µs) before blocking, as the client does.
+        #[arg(long, default_value_t = 2000)]
+        spin_us: u64,
+    },
     /// Step a job's envs in this process, without IPC, on several threads; print steps/s.
     Inproc {
         /// The job, as JSON (`channel` is ignored).
@@ -47,6 +60,17 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Describe => describe(),
         Command::Serve { job } => serve::run(&job),
+        Command::Pong {
+            prefix,
+            service,
+            spin_us,
+        } => envhub_shm::pong(
+            &prefix,
+            &service,
+            std::time::Duration::from_micros(spin_us),
+            std::time::Duration::from_secs(1),
+        )
+        .map_err(anyhow::Error::from),
         Command::Inproc {
             job,
             threads,

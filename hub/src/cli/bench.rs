@@ -99,6 +99,30 @@ fn inproc_throughput(
     Ok(v["steps_per_sec"].as_f64().unwrap_or(0.0))
 }
 
+/// p50 and p99 in µs.
+fn percentiles(mut times: Vec<Duration>) -> (f64, f64) {
+    times.sort();
+    let n = times.len();
+    let us = |d: Duration| d.as_secs_f64() * 1e6;
+    (us(times[n / 2]), us(times[(n * 99 / 100).min(n - 1)]))
+}
+
+/// A raw iceoryx2 round trip between this process and a worker process answering pings,
+/// waiting the way envhub's channels wait: the floor under envhub's own round trip.
+fn raw_round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
+    let prefix = hub.options().namespace.clone();
+    let service = format!("envhub/pingpong/{}", std::process::id());
+    let spin = hub.options().max_spin;
+    let mut pong = std::process::Command::new(envhub::worker_binary())
+        .args(["pong", "--prefix", &prefix, "--service", &service])
+        .args(["--spin-us", &spin.as_micros().to_string()])
+        .spawn()?;
+    let times = envhub_shm::ping(&prefix, &service, n, spin, Duration::from_secs(5));
+    let _ = pong.kill();
+    let _ = pong.wait();
+    Ok(percentiles(times?))
+}
+
 fn round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
     let config = EnvConfig {
         num_envs: 1,
@@ -118,9 +142,7 @@ fn round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
         times.push(t.elapsed());
     }
     env.close();
-    times.sort();
-    let us = |d: Duration| d.as_secs_f64() * 1e6;
-    Ok((us(times[n / 2]), us(times[(n * 99 / 100).min(n - 1)])))
+    Ok(percentiles(times))
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
@@ -133,9 +155,11 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
     env.reset(Some(0))?;
     let start_ms = started.elapsed().as_secs_f64() * 1e3;
     let hub_rate = hub_throughput(&mut env, args.seconds)?;
+    let copied_per_step = env.obs_bytes_copied() as f64 / env.steps_taken().max(1) as f64;
     let inproc_rate = inproc_throughput(&env, args.workers, args.seconds, hub_rate)?;
     env.close();
     let (p50, p99) = round_trip(hub, args.round_trips.max(100))?;
+    let (raw50, raw99) = raw_round_trip(hub, args.round_trips.max(100))?;
     if args.json {
         println!(
             "{}",
@@ -145,8 +169,11 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
                 "workers": args.workers,
                 "hub_steps_per_sec": hub_rate,
                 "inproc_steps_per_sec": inproc_rate,
+                "obs_bytes_copied_per_step": copied_per_step,
                 "roundtrip_p50_us": p50,
                 "roundtrip_p99_us": p99,
+                "raw_iceoryx2_p50_us": raw50,
+                "raw_iceoryx2_p99_us": raw99,
                 "start_ms": start_ms,
             })
         );
@@ -161,7 +188,12 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
             args.workers
         );
         println!("  hub / in-process  {:>12.2}", hub_rate / inproc_rate);
+        println!("  obs bytes copied  {copied_per_step:>12.0} per step");
         println!("  round trip        p50 {p50:.1} µs, p99 {p99:.1} µs  (no-op env)");
+        println!(
+            "  raw iceoryx2      p50 {raw50:.1} µs, p99 {raw99:.1} µs  (ping-pong, same wait; envhub p50 is {:.2}×)",
+            p50 / raw50
+        );
         println!("  start             {start_ms:.0} ms  (make + first reset)");
     }
     Ok(Outcome::Done)
