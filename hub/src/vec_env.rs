@@ -474,11 +474,12 @@ impl VecEnv {
         Ok(())
     }
 
-    /// Checks `env_ids.len()` actions back to back against the action space; an error names
-    /// the env (by its id) and the valid range or shape.
+    /// Checks `env_ids.len()` actions back to back against the action space, holding float
+    /// boxes to their bounds only with `strict_actions`; an error names the env (by its id)
+    /// and the valid range or shape.
     fn validate_actions(&self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
         self.action_space
-            .validate_batch(actions, env_ids.len())
+            .validate_batch(actions, env_ids.len(), self.route.config.action_bounds())
             .map_err(|(k, e)| match e {
                 envhub_core::SpaceError::Length { .. } => HubError::InvalidAction {
                     reason: format!(
@@ -490,8 +491,12 @@ impl VecEnv {
                     ),
                     hint: format!("pass an array of shape {}", self.batch_shape(env_ids.len())),
                 },
+                e @ envhub_core::SpaceError::NotFinite { .. } => HubError::InvalidAction {
+                    reason: format!("`{}` env {}: {e}", self.id, env_ids[k]),
+                    hint: "actions must be finite numbers, with or without `strict_actions`".into(),
+                },
                 e => HubError::InvalidAction {
-                    reason: format!("env {}: {e}", env_ids[k]),
+                    reason: format!("`{}` env {}: {e}", self.id, env_ids[k]),
                     hint: format!("actions must lie in {}", self.action_space),
                 },
             })

@@ -93,6 +93,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         registry: RegistryArg = None,
         step_timeout: float | None = None,
         restart_on_crash: bool = False,
+        strict_actions: bool = False,
         **extra: Any,
     ) -> None:
         mode = _autoreset_mode(autoreset_mode)
@@ -105,6 +106,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             extra=extra,
             workers=num_workers,
             autoreset_mode=_RUST_MODES[mode],
+            strict_actions=strict_actions,
         )
         self._session = start(registry_id, config, registry, step_timeout, restart_on_crash)
         s = self._session
