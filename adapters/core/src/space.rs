@@ -327,9 +327,12 @@ impl Space {
         }
         for (path, offset, leaf) in self.leaves() {
             let dtype = leaf.dtype().expect("leaves have a dtype");
-            leaf.validate_leaf(dtype, &bytes[offset..offset + leaf.byte_len()], check, || {
-                path.clone()
-            })?;
+            leaf.validate_leaf(
+                dtype,
+                &bytes[offset..offset + leaf.byte_len()],
+                check,
+                || path.clone(),
+            )?;
         }
         Ok(())
     }
@@ -719,10 +722,20 @@ mod tests {
         let b = Space::box_f32_bounds(vec![-1.0, 0.0], vec![1.0, 5.0]);
         let beyond = f32_bytes(&[3.0, -15.0, -1e30, 6.0]);
         assert!(b.validate_batch(&beyond, 2, finite).is_ok());
-        let err = b.validate_batch(&beyond, 2, BoundsCheck::Strict).unwrap_err();
+        let err = b
+            .validate_batch(&beyond, 2, BoundsCheck::Strict)
+            .unwrap_err();
         assert!(matches!(
             err,
-            (0, SpaceError::OutOfRange { index: 0, low: -1.0, high: 1.0, .. })
+            (
+                0,
+                SpaceError::OutOfRange {
+                    index: 0,
+                    low: -1.0,
+                    high: 1.0,
+                    ..
+                }
+            )
         ));
         assert!(
             err.1
@@ -745,7 +758,10 @@ mod tests {
             low: vec![-2.0],
             high: vec![2.0],
         };
-        let values: Vec<u8> = [7.0f64, f64::NAN].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let values: Vec<u8> = [7.0f64, f64::NAN]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
         assert!(f64_box.validate_with(&values[..8], finite).is_ok());
         assert!(!f64_box.contains(&values[..8]));
         assert!(matches!(
@@ -767,7 +783,9 @@ mod tests {
         let err = d.validate_batch(&bad, 2, finite).unwrap_err();
         assert!(matches!(err, (1, SpaceError::OutOfRange { .. })));
         assert!(
-            err.1.to_string().contains("outside Discrete(3) (valid range [0, 2])"),
+            err.1
+                .to_string()
+                .contains("outside Discrete(3) (valid range [0, 2])"),
             "{}",
             err.1
         );
