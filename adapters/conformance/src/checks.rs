@@ -159,10 +159,10 @@ fn rollout_scaled(
     assert_in_space(env, &obs, &format!("{env_id}: reset with seed {seed}"));
     let mut out = vec![Step::reset(&obs)];
     for i in 0..steps {
-        let at = match scale {
-            1.0 => format!("{env_id}: seed {seed}, step {i}"),
-            _ => format!("{env_id}: seed {seed}, step {i}, actions × {scale}"),
-        };
+        let mut at = format!("{env_id}: seed {seed}, step {i}");
+        if scale != 1.0 {
+            at += &format!(", actions × {scale}");
+        }
         let mut action = env.action_space().sample(&mut rng);
         assert!(env.action_space().contains(&action), "{at}: sampled action");
         if scale != 1.0 {
