@@ -181,7 +181,8 @@ pub enum SpaceError {
         /// Largest valid value of the element.
         high: f64,
     },
-    /// A float element is NaN or infinite where the space is bounded.
+    /// A float element is NaN or infinite (whatever the bounds, and whatever the
+    /// [`BoundsCheck`]).
     #[error("element {index}{path} is {value}, which no policy should send")]
     NotFinite {
         /// Flat index of the element in its leaf.
@@ -357,13 +358,13 @@ impl Space {
             if !bounded {
                 continue;
             }
-            let (lo, hi) = self.bounds(i);
+            let (low, high) = self.bounds(i);
             // Bounds are checked at the dtype's precision: a float32 box of [-2, 2] must
             // accept the float32 nearest to 2.0.
             let (lo, hi) = if dtype == DType::Float32 {
-                (lo as f32 as f64, hi as f32 as f64)
+                (low as f32 as f64, high as f32 as f64)
             } else {
-                (lo, hi)
+                (low, high)
             };
             if v < lo || v > hi {
                 return Err(SpaceError::OutOfRange {
@@ -371,8 +372,8 @@ impl Space {
                     path: path(),
                     value: v,
                     space: self.to_string(),
-                    low: lo,
-                    high: hi,
+                    low,
+                    high,
                 });
             }
         }
@@ -773,6 +774,18 @@ mod tests {
         value[..4].copy_from_slice(&4.0f32.to_le_bytes());
         assert!(goal.validate_with(&value, finite).is_ok());
         assert!(goal.validate(&value).is_err());
+    }
+
+    #[test]
+    fn out_of_range_names_the_bounds_as_declared() {
+        let humanoid = Space::box_f32(&[2], -0.4, 0.4);
+        let err = humanoid.validate(&f32_bytes(&[0.0, 0.5])).unwrap_err();
+        assert!(
+            err.to_string().ends_with(
+                "element 1 = 0.5 is outside Box(-0.4, 0.4, [2], float32) (valid range [-0.4, 0.4])"
+            ),
+            "{err}"
+        );
     }
 
     #[test]
