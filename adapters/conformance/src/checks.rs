@@ -35,8 +35,9 @@ impl Step {
 /// - The same seed gives the same trajectory, both from a fresh env and from the same env
 ///   reseeded; another seed gives another.
 /// - Continuous actions three times the sampled ones, most beyond the `Box` bounds (envhub
-///   passes them to the env as Gymnasium does), step like any other: the env clips them as it
-///   was written to, and observations stay in the space and rewards finite.
+///   passes them to the env as Gymnasium does), step like any other: no error, observations in
+///   the space, rewards finite. (Whether the env clips them as its original does is for a
+///   parity test to show.)
 /// - `TimeLimit` truncates at exactly the episode limit (the config's `max_episode_steps`, else
 ///   the env's default; one of them must be set) and at a short limit of 5 steps, unless the
 ///   episode terminates first.
