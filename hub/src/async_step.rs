@@ -38,7 +38,7 @@ impl VecEnv {
                 });
             }
         }
-        self.validate_actions(actions, env_ids.len())?;
+        self.validate_actions(actions, env_ids)?;
         self.check_not_failed(env_ids)?;
         for w in &self.workers {
             let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;

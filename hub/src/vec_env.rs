@@ -347,7 +347,7 @@ impl VecEnv {
         self.check_steppable()?;
         let all: Vec<usize> = (0..self.num_envs).collect();
         self.check_not_failed(&all)?;
-        self.validate_actions(actions, self.num_envs)?;
+        self.validate_actions(actions, &all)?;
         let ab = self.action_space.byte_len();
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
@@ -388,11 +388,17 @@ impl VecEnv {
         )))
     }
 
-    /// Checks `n` actions back to back against the action space; an error names the env
-    /// (its index among the `n`) and the valid range or shape.
-    pub(crate) fn validate_actions(&self, actions: &[u8], n: usize) -> Result<(), HubError> {
+    /// Checks `env_ids.len()` actions back to back against the action space, holding float
+    /// boxes to their bounds only with `strict_actions`; an error names the env (by its id)
+    /// and the valid range or shape.
+    pub(crate) fn validate_actions(
+        &self,
+        actions: &[u8],
+        env_ids: &[usize],
+    ) -> Result<(), HubError> {
+        let n = env_ids.len();
         self.action_space
-            .validate_batch(actions, n)
+            .validate_batch(actions, n, self.route.config.action_bounds())
             .map_err(|(k, e)| match e {
                 envhub_core::SpaceError::Length { .. } => HubError::InvalidAction {
                     reason: format!(
@@ -404,8 +410,12 @@ impl VecEnv {
                     ),
                     hint: format!("pass an array of shape {}", self.batch_shape(n)),
                 },
+                e @ envhub_core::SpaceError::NotFinite { .. } => HubError::InvalidAction {
+                    reason: format!("`{}` env {}: {e}", self.id, env_ids[k]),
+                    hint: "actions must be finite numbers, with or without `strict_actions`".into(),
+                },
                 e => HubError::InvalidAction {
-                    reason: format!("env {k}: {e}"),
+                    reason: format!("`{}` env {}: {e}", self.id, env_ids[k]),
                     hint: format!("actions must lie in {}", self.action_space),
                 },
             })

@@ -131,6 +131,7 @@ fn several_clients_share_one_daemon() {
     }
     env.reset(Some(0)).unwrap();
     env.step_f32(&[0.5, -0.5]).unwrap();
+    env.step_f32(&[5.0, -5.0]).unwrap(); // beyond the bounds: the env clips, as in Gymnasium
     assert_eq!(hub.daemon().unwrap().worker_count().unwrap(), 2);
     env.close();
     let deadline = Instant::now() + Duration::from_secs(5);
@@ -138,6 +139,22 @@ fn several_clients_share_one_daemon() {
         assert!(Instant::now() < deadline, "closed workers are forgotten");
         std::thread::sleep(Duration::from_millis(20));
     }
+
+    // `strict_actions` travels through the daemon's routing.
+    let mut strict = hub
+        .make_vec(
+            "gym-pendulum",
+            1,
+            &EnvConfig {
+                strict_actions: true,
+                ..EnvConfig::default()
+            },
+        )
+        .unwrap();
+    strict.reset(Some(0)).unwrap();
+    let err = strict.step_f32(&[5.0]).unwrap_err().to_string();
+    assert!(err.contains("valid range [-2, 2]"), "{err}");
+    strict.close();
 
     // Errors travel back with their hints.
     let err = hub

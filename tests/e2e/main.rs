@@ -1,5 +1,6 @@
 //! End-to-end tests: real worker processes, real iceoryx2 shared memory.
 
+mod actions;
 mod async_step;
 mod bad_input;
 mod classic_rollouts;

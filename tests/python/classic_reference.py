@@ -6,7 +6,9 @@ internal state (`env.unwrapped.state`), and after it the action, observation, re
 `terminated`. On termination, or after the run's episode length limit (as `TimeLimit` would
 truncate), it resets again without a seed (the env's generator continues, as in a real episode
 loop) and records the new initial state under `reset_state`. Each run also records the env's
-`metadata["render_fps"]`. It prints one JSON document on stdout.
+`metadata["render_fps"]`. Runs with an action scale multiply every box action by it, so most
+actions lie beyond the bounds (Gymnasium passes them to the env, which clips them; envhub
+must do the same). It prints one JSON document on stdout.
 
 Run by `adapters/classic/tests/gymnasium_parity.rs`; by hand:
     python tests/python/classic_reference.py [--steps N] > reference.json
@@ -40,24 +42,46 @@ RUNS = [
     ("Acrobot-v1", {}, {"low": -2.5, "high": 2.5}, [4], 500, 50),
 ]
 
+# (env id, kwargs, reset options, seeds, steps, episode length limit, action scale): actions
+# three times the box, two thirds of them beyond its bounds.
+OUT_OF_RANGE_RUNS = [
+    ("Pendulum-v1", {}, None, [5, 6], 300, 200, 3.0),
+    ("MountainCarContinuous-v0", {}, None, [5], 300, 999, 3.0),
+    ("MountainCarContinuous-v0", {}, {"low": 0.4, "high": 0.6}, [6], 300, 10, 3.0),
+]
+
 
 def state_of(env: gym.Env) -> tuple[list[float], str]:
     state = np.asarray(env.unwrapped.state)
     return state.astype(np.float64).tolist(), state.dtype.name
 
 
-def action_of(env: gym.Env, rng: np.random.Generator, i: int):
-    """A random action; every seventh one of a box is a bound, so clipping edges are exercised."""
+def action_of(env: gym.Env, rng: np.random.Generator, i: int, scale: float):
+    """A random action; every seventh one of a box is a bound, so clipping edges are exercised.
+    With a scale other than 1, box actions are multiplied by it, and every eleventh is the
+    float32 just beyond a bound."""
     space = env.action_space
     if isinstance(space, gym.spaces.Discrete):
         return int(space.sample())
+    if scale != 1.0 and i % 11 == 5:
+        low, high = space.low[0], space.high[0]
+        edge = np.nextafter(low, -np.inf) if rng.random() < 0.5 else np.nextafter(high, np.inf)
+        return np.array([edge], dtype=np.float32)
     if i % 7 == 3:
-        return np.array([space.low[0] if rng.random() < 0.5 else space.high[0]], dtype=np.float32)
-    return space.sample()
+        action = np.array([space.low[0] if rng.random() < 0.5 else space.high[0]], dtype=np.float32)
+    else:
+        action = space.sample()
+    return action * np.float32(scale) if scale != 1.0 else action
 
 
 def record(
-    env_id: str, kwargs: dict, options: dict | None, seed: int, steps: int, limit: int
+    env_id: str,
+    kwargs: dict,
+    options: dict | None,
+    seed: int,
+    steps: int,
+    limit: int,
+    scale: float = 1.0,
 ) -> dict:
     env = gym.make(env_id, **kwargs).unwrapped  # no TimeLimit: runs go past the limit
     env.action_space.seed(seed)
@@ -69,7 +93,7 @@ def record(
     episode_steps = 0
     for i in range(steps):
         state, dtype = state_of(env)
-        action = action_of(env, rng, i)
+        action = action_of(env, rng, i, scale)
         obs, reward, terminated, _, _ = env.step(action)
         step = {
             "state": state,
@@ -92,6 +116,7 @@ def record(
         "render_fps": env.metadata["render_fps"],
         "options": options or {},
         "seed": seed,
+        "action_scale": scale,
         "reset_state": reset_state,
         "reset_state_dtype": reset_dtype,
         "reset_obs": reset_obs,
@@ -107,6 +132,9 @@ def main() -> None:
     for env_id, kwargs, options, seeds, steps, limit in RUNS:
         for seed in seeds:
             runs.append(record(env_id, kwargs, options, seed, args.steps or steps, limit))
+    for env_id, kwargs, options, seeds, steps, limit, scale in OUT_OF_RANGE_RUNS:
+        for seed in seeds:
+            runs.append(record(env_id, kwargs, options, seed, args.steps or steps, limit, scale))
     json.dump({"gymnasium": gym.__version__, "numpy": np.__version__, "runs": runs}, sys.stdout)
 
 

@@ -8,6 +8,10 @@ episode ends it resets without a seed (the generator continues, as in a real epi
 records the new initial observation and state. Each run also records the env's
 `metadata["render_fps"]`.
 
+A run with an action scale multiplies every action by it, so that most lie beyond the bounds
+(Gymnasium sets `data.ctrl` to them, MuJoCo clamps `ctrl` to `ctrlrange`, and the control cost
+uses the action as given); it records each step's info too.
+
 A run with `"set_state": true` instead starts from a state it sets itself after the seeded reset
 (the seeded one, perturbed), through `MujocoEnv.set_state`: the Rust side passes that state as
 the `qpos`/`qvel` reset options.
@@ -66,6 +70,15 @@ RUNS = (
 )
 
 
+# (env id, kwargs, seed, steps, action scale): actions three times the box, two thirds of them
+# beyond its bounds.
+OUT_OF_RANGE_RUNS = [
+    ("Ant-v5", {}, 11, 300, 3.0),
+    ("HalfCheetah-v5", {}, 12, 300, 3.0),
+    ("Hopper-v5", {}, 13, 300, 3.0),
+]
+
+
 def python_kwargs(kwargs: dict) -> dict:
     """JSON kwargs as Gymnasium takes them: lists become tuples, "inf" becomes a float."""
     out = {}
@@ -80,7 +93,9 @@ def floats(a) -> list[float]:
     return np.asarray(a, dtype=np.float64).ravel().tolist()
 
 
-def record(env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool) -> dict:
+def record(
+    env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool, scale: float = 1.0
+) -> dict:
     env = gym.make(env_id, **python_kwargs(kwargs))
     raw = env.unwrapped
     env.action_space.seed(seed)
@@ -88,7 +103,7 @@ def record(env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool) ->
     obs, _ = env.reset(seed=seed)
     run = {"env_id": env_id, "kwargs": kwargs, "seed": seed,
            "max_episode_steps": env.spec.max_episode_steps,
-           "render_fps": env.metadata["render_fps"]}
+           "render_fps": env.metadata["render_fps"], "action_scale": scale}
     if set_state:
         qpos = raw.data.qpos.copy() + 0.01 * rng.standard_normal(raw.model.nq)
         qvel = raw.data.qvel.copy() + 0.1 * rng.standard_normal(raw.model.nv)
@@ -102,7 +117,9 @@ def record(env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool) ->
     out_steps = []
     for _ in range(steps):
         action = rng.uniform(low, high).astype(np.float32)
-        obs, reward, terminated, truncated, _ = env.step(action)
+        if scale != 1.0:
+            action = action * np.float32(scale)
+        obs, reward, terminated, truncated, info = env.step(action)
         step = {
             "action": [float(a) for a in action],
             "obs": floats(obs),
@@ -110,6 +127,8 @@ def record(env_id: str, kwargs: dict, seed: int, steps: int, set_state: bool) ->
             "terminated": bool(terminated),
             "truncated": bool(truncated),
         }
+        if scale != 1.0:
+            step["info"] = {k: float(v) for k, v in info.items()}
         if terminated or truncated:
             obs, _ = env.reset()
             step["reset_obs"] = floats(obs)
@@ -128,6 +147,9 @@ def main() -> None:
     runs = [
         record(env_id, kwargs, seed, args.steps or steps, set_state)
         for env_id, kwargs, seed, steps, set_state in RUNS
+    ] + [
+        record(env_id, kwargs, seed, args.steps or steps, False, scale)
+        for env_id, kwargs, seed, steps, scale in OUT_OF_RANGE_RUNS
     ]
     json.dump({"gymnasium": gym.__version__, "runs": runs}, sys.stdout)
 

@@ -26,10 +26,38 @@ pub(crate) const ENTRY: EnvEntry = EnvEntry {
 
 const GOAL_POSITION: f64 = 0.45;
 const POWER: f64 = 0.0015;
+const MIN_ACTION: f32 = -1.0;
+const MAX_ACTION: f32 = 1.0;
+
+/// The force of one step, `min(max(action[0], min_action), max_action)` in Gymnasium. Python's
+/// `max` and `min` return the bound itself, a Python float, for an action beyond it, so NumPy
+/// then computes the push in float64; an action within the bounds stays a float32 scalar.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Force {
+    /// The action itself, within the bounds.
+    Float32(f32),
+    /// A bound, for an action beyond it.
+    Bound(f64),
+}
+
+impl Force {
+    fn of(action: f32) -> Force {
+        if action < MIN_ACTION {
+            Force::Bound(MIN_ACTION as f64)
+        } else if action > MAX_ACTION {
+            Force::Bound(MAX_ACTION as f64)
+        } else {
+            Force::Float32(action)
+        }
+    }
+}
 
 /// `MountainCarContinuous-v0` as in Gymnasium 1.4: a `Box(-1, 1, (1,), float32)` force,
 /// reward `-0.1·action²` per step plus 100 on reaching `position >= 0.45` with
 /// `velocity >= goal_velocity`, which terminates.
+///
+/// An action beyond the bounds pushes with the bound's force, while the penalty uses the action as
+/// given, as in Gymnasium.
 ///
 /// Gymnasium stores this env's state as a float32 array after every step, so NumPy computes the
 /// next step in float32 (the first step after a reset, from the float64 reset state, in
@@ -57,7 +85,7 @@ impl MountainCarContinuous {
         Ok(MountainCarContinuous {
             goal_velocity: keys.f64("goal_velocity", 0.0)?,
             observation_space: observation_space(),
-            action_space: Space::box_f32(&[1], -1.0, 1.0),
+            action_space: Space::box_f32(&[1], MIN_ACTION as f64, MAX_ACTION as f64),
             rng: None,
             state: None,
             float32: false,
@@ -76,12 +104,15 @@ impl MountainCarContinuous {
         self.float32
     }
 
-    /// One step from a float64 state, as NumPy runs it: the force term in float32, the rest in
-    /// float64. Returns the new position, velocity and whether the goal is reached.
-    fn step_float64(&self, position: f64, velocity: f64, force: f32) -> (f64, f64, bool) {
-        let push = force * as_f32(POWER);
+    /// One step from a float64 state, as NumPy runs it: a float32 force term in float32, the
+    /// rest in float64. Returns the new position, velocity and whether the goal is reached.
+    fn step_float64(&self, position: f64, velocity: f64, force: Force) -> (f64, f64, bool) {
         let gravity = 0.0025 * (3.0 * position).cos();
-        let velocity = velocity + (push - as_f32(gravity)) as f64;
+        let velocity = velocity
+            + match force {
+                Force::Float32(force) => (force * as_f32(POWER) - as_f32(gravity)) as f64,
+                Force::Bound(force) => force * POWER - gravity,
+            };
         let mut velocity = velocity.clamp(-MAX_SPEED, MAX_SPEED);
         let position = (position + velocity).clamp(MIN_POSITION, MAX_POSITION);
         if position == MIN_POSITION && velocity < 0.0 {
@@ -94,11 +125,15 @@ impl MountainCarContinuous {
     /// One step from a float32 state: every operation in float32 with the Python constants
     /// cast to float32, except where Gymnasium assigns a clipped velocity or the wall's 0 as
     /// a Python number, which it then compares with `goal_velocity` in float64.
-    fn step_float32(&self, position: f32, velocity: f32, force: f32) -> (f64, f64, bool) {
+    fn step_float32(&self, position: f32, velocity: f32, force: Force) -> (f64, f64, bool) {
         let max_speed = as_f32(MAX_SPEED);
-        let push = force * as_f32(POWER);
         let gravity = 0.0025 * ((3.0 * position) as f64).cos();
-        let mut velocity = velocity + (push - as_f32(gravity));
+        let mut velocity = velocity
+            + match force {
+                Force::Float32(force) => force * as_f32(POWER) - as_f32(gravity),
+                // A Python float meets the float32 velocity.
+                Force::Bound(force) => as_f32(force * POWER - gravity),
+            };
         // Set when `velocity` has become a Python number (clipped, or stopped by the wall).
         let mut python_velocity = None;
         if velocity > max_speed {
@@ -158,7 +193,7 @@ impl Env for MountainCarContinuous {
     ) -> Result<Transition, EnvError> {
         let [position, velocity] = self.state.ok_or_else(|| not_reset(ID))?;
         let action = read_f32(action);
-        let force = action.clamp(-1.0, 1.0);
+        let force = Force::of(action);
         let (position, velocity, terminated) = if self.float32 {
             self.step_float32(position as f32, velocity as f32, force)
         } else {
@@ -273,5 +308,19 @@ mod tests {
             step(&mut b, 0.3);
         }
         assert_eq!(a.state(), b.state());
+    }
+
+    #[test]
+    fn an_action_beyond_the_bounds_pushes_with_the_bound_and_pays_in_full() {
+        assert_eq!(Force::of(3.0), Force::Bound(1.0));
+        assert_eq!(Force::of(-1.5), Force::Bound(-1.0));
+        assert_eq!(Force::of(1.0), Force::Float32(1.0));
+        assert_eq!(Force::of(-1.0), Force::Float32(-1.0));
+        let mut env = make();
+        env.set_state(&[-0.5, 0.0]).unwrap();
+        let t = step(&mut env, 3.0);
+        assert_eq!(t.reward, -(3.0f64.powi(2) * 0.1));
+        let [_, velocity] = env.state().try_into().unwrap();
+        assert_eq!(velocity, (0.0015 - 0.0025 * (-1.5f64).cos()) as f32 as f64);
     }
 }

@@ -1,6 +1,6 @@
 //! The `Env` contract, checked through random rollouts of one env.
 
-use envhub_core::{Env, EnvAdapter, EnvConfig, Info, ResetOptions, TimeLimit};
+use envhub_core::{DType, Env, EnvAdapter, EnvConfig, Info, ResetOptions, Space, TimeLimit};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -34,6 +34,10 @@ impl Step {
 ///   `max_episode_steps` in `config`).
 /// - The same seed gives the same trajectory, both from a fresh env and from the same env
 ///   reseeded; another seed gives another.
+/// - Continuous actions three times the sampled ones, most beyond the `Box` bounds (envhub
+///   passes them to the env as Gymnasium does), step like any other: no error, observations in
+///   the space, rewards finite. (Whether the env clips them as its original does is for a
+///   parity test to show.)
 /// - `TimeLimit` truncates at exactly the episode limit (the config's `max_episode_steps`, else
 ///   the env's default; one of them must be set) and at a short limit of 5 steps, unless the
 ///   episode terminates first.
@@ -66,6 +70,16 @@ pub fn check_env(adapter: &dyn EnvAdapter, env_id: &str, config: &EnvConfig, ste
         a.iter().any(|s| s.terminated || s.truncated),
         "{env_id}: no episode ended in {steps} steps"
     );
+
+    // Continuous actions beyond the bounds are the env's to clip.
+    if env
+        .action_space()
+        .leaves()
+        .iter()
+        .any(|(_, _, leaf)| is_float(leaf))
+    {
+        rollout_scaled(env_id, &mut make(limit), 9, steps, 3.0);
+    }
 
     // Same seed, same trajectory (a fresh env, and the same env reseeded).
     let fresh = rollout(env_id, &mut make(limit), 7, steps);
@@ -103,6 +117,40 @@ pub fn check_env(adapter: &dyn EnvAdapter, env_id: &str, config: &EnvConfig, ste
 /// and end flag. Panics if an action, observation or reward breaks the contract.
 #[track_caller]
 fn rollout(env_id: &str, env: &mut dyn Env, seed: u64, steps: usize) -> Vec<Step> {
+    rollout_scaled(env_id, env, seed, steps, 1.0)
+}
+
+fn is_float(leaf: &Space) -> bool {
+    matches!(leaf.dtype(), Some(DType::Float32 | DType::Float64))
+}
+
+/// Multiplies every float element of `action` by `scale`.
+fn scale_floats(space: &Space, action: &mut [u8], scale: f64) {
+    for (_, offset, leaf) in space.leaves() {
+        let data = &mut action[offset..offset + leaf.byte_len()];
+        match leaf.dtype() {
+            Some(DType::Float32) => data.chunks_exact_mut(4).for_each(|c| {
+                let v = f32::from_le_bytes(c.try_into().unwrap()) * scale as f32;
+                c.copy_from_slice(&v.to_le_bytes());
+            }),
+            Some(DType::Float64) => data.chunks_exact_mut(8).for_each(|c| {
+                let v = f64::from_le_bytes(c.try_into().unwrap()) * scale;
+                c.copy_from_slice(&v.to_le_bytes());
+            }),
+            _ => {}
+        }
+    }
+}
+
+/// [`rollout`] with every float element of the sampled actions multiplied by `scale`.
+#[track_caller]
+fn rollout_scaled(
+    env_id: &str,
+    env: &mut dyn Env,
+    seed: u64,
+    steps: usize,
+    scale: f64,
+) -> Vec<Step> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut obs = vec![0u8; env.observation_space().byte_len()];
     let mut info = Info::default();
@@ -112,9 +160,15 @@ fn rollout(env_id: &str, env: &mut dyn Env, seed: u64, steps: usize) -> Vec<Step
     assert_in_space(env, &obs, &format!("{env_id}: reset with seed {seed}"));
     let mut out = vec![Step::reset(&obs)];
     for i in 0..steps {
-        let at = format!("{env_id}: seed {seed}, step {i}");
-        let action = env.action_space().sample(&mut rng);
+        let mut at = format!("{env_id}: seed {seed}, step {i}");
+        if scale != 1.0 {
+            at += &format!(", actions × {scale}");
+        }
+        let mut action = env.action_space().sample(&mut rng);
         assert!(env.action_space().contains(&action), "{at}: sampled action");
+        if scale != 1.0 {
+            scale_floats(env.action_space(), &mut action, scale);
+        }
         let t = env
             .step(&action, &mut obs, &mut info)
             .unwrap_or_else(|e| panic!("{at}: {e}"));

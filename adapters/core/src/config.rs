@@ -1,6 +1,6 @@
 //! `EnvConfig`: how to create an env, and the hub options that shape a session.
 
-use crate::EnvError;
+use crate::{BoundsCheck, EnvError};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -53,6 +53,12 @@ pub struct EnvConfig {
     pub workers: Option<usize>,
     /// Autoreset behaviour of vector envs.
     pub autoreset_mode: AutoresetMode,
+    /// Refuse continuous actions outside the action space's `Box` bounds. Off by default:
+    /// they reach the env unchanged, as Gymnasium passes them, and the env clips them as it
+    /// was written to (Pendulum clips the torque, MuJoCo clamps `ctrl` to `ctrlrange` while
+    /// the control cost sees the action as given). NaN and infinite actions, discrete actions
+    /// out of range, and actions of the wrong shape or dtype are an error either way.
+    pub strict_actions: bool,
 }
 
 impl Default for EnvConfig {
@@ -66,11 +72,21 @@ impl Default for EnvConfig {
             extra: BTreeMap::new(),
             workers: None,
             autoreset_mode: AutoresetMode::NextStep,
+            strict_actions: false,
         }
     }
 }
 
 impl EnvConfig {
+    /// How actions are held to the action space's bounds (see [`EnvConfig::strict_actions`]).
+    pub fn action_bounds(&self) -> BoundsCheck {
+        if self.strict_actions {
+            BoundsCheck::Strict
+        } else {
+            BoundsCheck::FiniteFloats
+        }
+    }
+
     /// The episode limit to apply: the caller's if set and non-zero, else the env's default.
     pub fn episode_limit(&self, env_default: Option<u32>) -> Option<u32> {
         match self.max_episode_steps {
@@ -235,5 +251,16 @@ mod tests {
     fn rejects_unknown_config_fields() {
         let err = serde_json::from_str::<EnvConfig>(r#"{"num_env": 3}"#).unwrap_err();
         assert!(err.to_string().contains("unknown field `num_env`"), "{err}");
+    }
+
+    #[test]
+    fn strict_actions_is_off_unless_asked_for() {
+        let cfg: EnvConfig = serde_json::from_str("{}").unwrap();
+        assert!(!cfg.strict_actions);
+        assert_eq!(cfg.action_bounds(), BoundsCheck::FiniteFloats);
+        let cfg: EnvConfig = serde_json::from_str(r#"{"strict_actions": true}"#).unwrap();
+        assert_eq!(cfg.action_bounds(), BoundsCheck::Strict);
+        let err = serde_json::from_str::<EnvConfig>(r#"{"strict_action": true}"#).unwrap_err();
+        assert!(err.to_string().contains("strict_actions"), "{err}");
     }
 }

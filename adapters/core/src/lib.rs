@@ -26,6 +26,6 @@ pub use env::{Env, Info, InfoValue, ResetOptions, Transition};
 pub use error::{EnvError, did_you_mean};
 pub use framework::{FRAMEWORKS, Framework, canonical_framework};
 pub use numpy_rng::NumpyRng;
-pub use space::{DType, Space, SpaceError};
+pub use space::{BoundsCheck, DType, Space, SpaceError};
 pub use suggest::closest;
 pub use time_limit::TimeLimit;

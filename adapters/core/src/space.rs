@@ -138,6 +138,20 @@ pub enum Space {
     },
 }
 
+/// How far a check holds values to a space's bounds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum BoundsCheck {
+    /// Every element lies within its bounds, as `gymnasium.Space.contains` requires.
+    #[default]
+    Strict,
+    /// Elements of a float `Box` need only be finite: a value beyond the bounds passes, as
+    /// Gymnasium passes it to the env, which clips it as it was written to (Pendulum clips the
+    /// torque, MuJoCo clamps `ctrl` to `ctrlrange`). NaN and infinities are still errors, and
+    /// so are integer values out of range (`Discrete`, `MultiDiscrete`, `MultiBinary`, an
+    /// integer `Box`): Gymnasium's envs fail on those too.
+    FiniteFloats,
+}
+
 /// Why a value does not belong to a space.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SpaceError {
@@ -152,7 +166,7 @@ pub enum SpaceError {
         got: usize,
     },
     /// An element is outside the space.
-    #[error("element {index}{path} = {value} is outside {space}")]
+    #[error("element {index}{path} = {value} is outside {space} (valid range [{low}, {high}])")]
     OutOfRange {
         /// Flat index of the element in its leaf.
         index: usize,
@@ -162,8 +176,13 @@ pub enum SpaceError {
         value: f64,
         /// The space, described.
         space: String,
+        /// Smallest valid value of the element.
+        low: f64,
+        /// Largest valid value of the element.
+        high: f64,
     },
-    /// A float element is NaN or infinite where the space is bounded.
+    /// A float element is NaN or infinite (whatever the bounds, and whatever the
+    /// [`BoundsCheck`]).
     #[error("element {index}{path} is {value}, which no policy should send")]
     NotFinite {
         /// Flat index of the element in its leaf.
@@ -288,6 +307,13 @@ impl Space {
     /// and no NaN or infinity in a float box (whatever its bounds: a policy that emits NaN is
     /// broken, and stepping a simulator with it only hides the bug).
     pub fn validate(&self, bytes: &[u8]) -> Result<(), SpaceError> {
+        self.validate_with(bytes, BoundsCheck::Strict)
+    }
+
+    /// [`Space::validate`], holding float `Box` elements to their bounds only if `check` is
+    /// [`BoundsCheck::Strict`]; the length, NaN, infinities and integer ranges are always
+    /// checked.
+    pub fn validate_with(&self, bytes: &[u8], check: BoundsCheck) -> Result<(), SpaceError> {
         let expected = self.byte_len();
         if bytes.len() != expected {
             return Err(SpaceError::Length {
@@ -298,13 +324,16 @@ impl Space {
         }
         if let Some(dtype) = self.dtype() {
             // A leaf: the common case on the hot path, checked without allocating.
-            return self.validate_leaf(dtype, bytes, String::new);
+            return self.validate_leaf(dtype, bytes, check, String::new);
         }
         for (path, offset, leaf) in self.leaves() {
             let dtype = leaf.dtype().expect("leaves have a dtype");
-            leaf.validate_leaf(dtype, &bytes[offset..offset + leaf.byte_len()], || {
-                path.clone()
-            })?;
+            leaf.validate_leaf(
+                dtype,
+                &bytes[offset..offset + leaf.byte_len()],
+                check,
+                || path.clone(),
+            )?;
         }
         Ok(())
     }
@@ -313,8 +342,10 @@ impl Space {
         &self,
         dtype: DType,
         data: &[u8],
+        check: BoundsCheck,
         path: impl Fn() -> String,
     ) -> Result<(), SpaceError> {
+        let bounded = !(dtype.is_float() && check == BoundsCheck::FiniteFloats);
         for i in 0..self.num_elements() {
             let v = dtype.read(data, i);
             if dtype.is_float() && !v.is_finite() {
@@ -324,13 +355,16 @@ impl Space {
                     value: v,
                 });
             }
-            let (lo, hi) = self.bounds(i);
+            if !bounded {
+                continue;
+            }
+            let (low, high) = self.bounds(i);
             // Bounds are checked at the dtype's precision: a float32 box of [-2, 2] must
             // accept the float32 nearest to 2.0.
             let (lo, hi) = if dtype == DType::Float32 {
-                (lo as f32 as f64, hi as f32 as f64)
+                (low as f32 as f64, high as f32 as f64)
             } else {
-                (lo, hi)
+                (low, high)
             };
             if v < lo || v > hi {
                 return Err(SpaceError::OutOfRange {
@@ -338,6 +372,8 @@ impl Space {
                     path: path(),
                     value: v,
                     space: self.to_string(),
+                    low,
+                    high,
                 });
             }
         }
@@ -345,9 +381,16 @@ impl Space {
     }
 
     /// Validates `bytes` as `count` values of this space back to back, as a batch of actions
-    /// arrives. Returns the index of the first bad value with the reason. Discrete spaces and
-    /// `float32` boxes, the common action spaces, are checked in one tight loop.
-    pub fn validate_batch(&self, bytes: &[u8], count: usize) -> Result<(), (usize, SpaceError)> {
+    /// arrives, holding float `Box` elements to their bounds as `check` says
+    /// ([`Space::validate_with`]). Returns the index of the first bad value with the reason.
+    /// Discrete spaces and `float32` boxes, the common action spaces, are checked in one tight
+    /// loop.
+    pub fn validate_batch(
+        &self,
+        bytes: &[u8],
+        count: usize,
+        check: BoundsCheck,
+    ) -> Result<(), (usize, SpaceError)> {
         let each = self.byte_len();
         if bytes.len() != each * count {
             return Err((
@@ -367,6 +410,17 @@ impl Space {
             Space::Box {
                 dtype: DType::Float32,
                 low,
+                ..
+            } if check == BoundsCheck::FiniteFloats => {
+                let k = low.len().max(1);
+                bytes
+                    .chunks_exact(4)
+                    .position(|b| !f32::from_le_bytes(b.try_into().expect("4 bytes")).is_finite())
+                    .map(|elem| elem / k)
+            }
+            Space::Box {
+                dtype: DType::Float32,
+                low,
                 high,
                 ..
             } => {
@@ -382,13 +436,16 @@ impl Space {
                     })
                     .map(|elem| elem / k)
             }
-            _ => (0..count).find(|&i| !self.contains(&bytes[i * each..(i + 1) * each])),
+            _ => (0..count).find(|&i| {
+                self.validate_with(&bytes[i * each..(i + 1) * each], check)
+                    .is_err()
+            }),
         };
         match first_bad {
             None => Ok(()),
             Some(i) => Err((
                 i,
-                self.validate(&bytes[i * each..(i + 1) * each])
+                self.validate_with(&bytes[i * each..(i + 1) * each], check)
                     .expect_err("the fast check and the full check agree"),
             )),
         }
@@ -630,10 +687,10 @@ mod tests {
     fn batch_validation_finds_the_bad_value() {
         let d = Space::discrete(3);
         let ok: Vec<u8> = [0i64, 2, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
-        assert!(d.validate_batch(&ok, 3).is_ok());
+        assert!(d.validate_batch(&ok, 3, BoundsCheck::Strict).is_ok());
         let bad: Vec<u8> = [0i64, 3, 1].iter().flat_map(|v| v.to_le_bytes()).collect();
         assert!(matches!(
-            d.validate_batch(&bad, 3),
+            d.validate_batch(&bad, 3, BoundsCheck::Strict),
             Err((1, SpaceError::OutOfRange { .. }))
         ));
         let b = Space::box_f32_bounds(vec![-1.0, 0.0], vec![1.0, 5.0]);
@@ -641,17 +698,128 @@ mod tests {
             .iter()
             .flat_map(|v| v.to_le_bytes())
             .collect();
-        assert!(b.validate_batch(&ok, 2).is_ok());
+        assert!(b.validate_batch(&ok, 2, BoundsCheck::Strict).is_ok());
         let bad: Vec<u8> = [0.5f32, 5.0, -1.0, f32::NAN]
             .iter()
             .flat_map(|v| v.to_le_bytes())
             .collect();
         assert!(matches!(
-            b.validate_batch(&bad, 2),
+            b.validate_batch(&bad, 2, BoundsCheck::Strict),
             Err((1, SpaceError::NotFinite { .. }))
         ));
         assert!(matches!(
-            b.validate_batch(&ok[..12], 2),
+            b.validate_batch(&ok[..12], 2, BoundsCheck::Strict),
+            Err((0, SpaceError::Length { .. }))
+        ));
+    }
+
+    fn f32_bytes(values: &[f32]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    #[test]
+    fn finite_floats_pass_float_boxes_beyond_their_bounds() {
+        let finite = BoundsCheck::FiniteFloats;
+        let b = Space::box_f32_bounds(vec![-1.0, 0.0], vec![1.0, 5.0]);
+        let beyond = f32_bytes(&[3.0, -15.0, -1e30, 6.0]);
+        assert!(b.validate_batch(&beyond, 2, finite).is_ok());
+        let err = b
+            .validate_batch(&beyond, 2, BoundsCheck::Strict)
+            .unwrap_err();
+        assert!(matches!(
+            err,
+            (
+                0,
+                SpaceError::OutOfRange {
+                    index: 0,
+                    low: -1.0,
+                    high: 1.0,
+                    ..
+                }
+            )
+        ));
+        assert!(
+            err.1
+                .to_string()
+                .contains("element 0 = 3 is outside Box([2], float32) (valid range [-1, 1])"),
+            "{}",
+            err.1
+        );
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let values = f32_bytes(&[0.0, 1.0, 9.0, bad]);
+            assert!(matches!(
+                b.validate_batch(&values, 2, finite),
+                Err((1, SpaceError::NotFinite { index: 1, .. }))
+            ));
+        }
+        // The general path (float64, composite) agrees with the float32 fast path.
+        let f64_box = Space::Box {
+            dtype: DType::Float64,
+            shape: vec![1],
+            low: vec![-2.0],
+            high: vec![2.0],
+        };
+        let values: Vec<u8> = [7.0f64, f64::NAN]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert!(f64_box.validate_with(&values[..8], finite).is_ok());
+        assert!(!f64_box.contains(&values[..8]));
+        assert!(matches!(
+            f64_box.validate_batch(&values, 2, finite),
+            Err((1, SpaceError::NotFinite { .. }))
+        ));
+        let goal = goal_dict();
+        let mut value = vec![0u8; goal.byte_len()];
+        value[..4].copy_from_slice(&4.0f32.to_le_bytes());
+        assert!(goal.validate_with(&value, finite).is_ok());
+        assert!(goal.validate(&value).is_err());
+    }
+
+    #[test]
+    fn out_of_range_names_the_bounds_as_declared() {
+        let humanoid = Space::box_f32(&[2], -0.4, 0.4);
+        let err = humanoid.validate(&f32_bytes(&[0.0, 0.5])).unwrap_err();
+        assert!(
+            err.to_string().ends_with(
+                "element 1 = 0.5 is outside Box(-0.4, 0.4, [2], float32) (valid range [-0.4, 0.4])"
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn finite_floats_still_check_integer_spaces() {
+        let finite = BoundsCheck::FiniteFloats;
+        let d = Space::discrete(3);
+        let bad: Vec<u8> = [0i64, 3].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let err = d.validate_batch(&bad, 2, finite).unwrap_err();
+        assert!(matches!(err, (1, SpaceError::OutOfRange { .. })));
+        assert!(
+            err.1
+                .to_string()
+                .contains("outside Discrete(3) (valid range [0, 2])"),
+            "{}",
+            err.1
+        );
+        let md = Space::MultiDiscrete {
+            nvec: vec![2, 3],
+            start: vec![0, 0],
+        };
+        let bad: Vec<u8> = [1i64, 3].iter().flat_map(|v| v.to_le_bytes()).collect();
+        assert!(md.validate_with(&bad, finite).is_err());
+        let mb = Space::MultiBinary { shape: vec![2] };
+        assert!(mb.validate_with(&[1, 2], finite).is_err());
+        let int_box = Space::Box {
+            dtype: DType::Uint8,
+            shape: vec![1],
+            low: vec![0.0],
+            high: vec![10.0],
+        };
+        assert!(int_box.validate_with(&[11], finite).is_err());
+        // Wrong length stays an error.
+        assert!(matches!(
+            Space::box_f32(&[1], -2.0, 2.0).validate_batch(&[0; 6], 2, finite),
             Err((0, SpaceError::Length { .. }))
         ));
     }

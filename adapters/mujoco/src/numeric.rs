@@ -66,9 +66,15 @@ pub(crate) fn sum(a: &[f64]) -> f64 {
     pairwise_sum(0.0f64, 0, a.len(), &|i| a[i])
 }
 
-/// `np.linalg.norm(v)` of a short float64 vector.
+/// `np.linalg.norm(v)` of a short float64 vector (fewer than 16 elements): `sqrt(v.dot(v))`,
+/// where OpenBLAS's `ddot` (as NumPy's wheels ship it, on any x86-64 CPU with FMA) accumulates
+/// a short vector with one fused multiply-add per element.
 pub(crate) fn norm(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |acc, x| acc + x * x).sqrt()
+    debug_assert!(
+        v.len() < 16,
+        "OpenBLAS sums longer vectors in another order"
+    );
+    v.iter().fold(0.0, |acc, x| x.mul_add(*x, acc)).sqrt()
 }
 
 /// Python's `x ** 2` on a float64 (NumPy scalar): the C library's `pow`, which is not always

@@ -10,6 +10,10 @@
 //! options. Each run's `metadata["render_fps"]` (`int(np.round(1 / dt))`, so it follows
 //! `frame_skip`) must be the env's `render_fps`.
 //!
+//! Some runs (Ant, HalfCheetah, Hopper) scale the actions three times beyond the action space:
+//! Gymnasium sets `data.ctrl` to them, MuJoCo clamps `ctrl` to `ctrlrange`, and the control
+//! cost uses the action as given. Their steps must match bit for bit, info included.
+//!
 //! Both sides step the same libmujoco build, so the simulator state is expected to stay
 //! bit-identical; what can differ in the last bits is NumPy's own arithmetic (its SIMD `sin`,
 //! `einsum`, BLAS norms) in observations and rewards. The summary printed with `--nocapture`
@@ -19,7 +23,7 @@
 //! cannot import gymnasium the test fails, unless `ENVHUB_SKIP_PYTHON_TESTS=1`.
 
 use envhub_conformance::{close, floats, gymnasium_version, python_reference, scaled_diff};
-use envhub_core::{Env, EnvConfig, Info, ResetOptions};
+use envhub_core::{Env, EnvConfig, Info, InfoValue, ResetOptions};
 use envhub_mujoco::Mujoco;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -36,6 +40,38 @@ struct Tally {
     /// Steps whose observation or reward is not bit-identical to Gymnasium's.
     inexact: usize,
     max_diff: f64,
+    /// Steps with an action beyond the action space's bounds.
+    beyond_bounds: usize,
+}
+
+/// Checks a step's info against Gymnasium's, bit for bit: the same keys, the same numbers.
+fn check_info(info: &Info, want: &Value, what: &str) {
+    let want = want.as_object().expect("info is an object");
+    let got: BTreeMap<&str, f64> = info
+        .iter()
+        .map(|(k, v)| match v {
+            InfoValue::Float(x) => (k, *x),
+            InfoValue::Int(n) => (k, *n as f64),
+            InfoValue::Bool(b) => (k, f64::from(u8::from(*b))),
+            other => panic!("{what}: info[{k:?}] = {other:?} is not a number"),
+        })
+        .collect();
+    let mut want_keys: Vec<&str> = want.keys().map(String::as_str).collect();
+    want_keys.sort_unstable();
+    assert_eq!(
+        got.keys().copied().collect::<Vec<_>>(),
+        want_keys,
+        "{what}: info keys"
+    );
+    for (k, w) in want {
+        let w = w.as_f64().expect("a number");
+        assert_eq!(
+            got[k.as_str()].to_bits(),
+            w.to_bits(),
+            "{what}: info[{k:?}] = {} != {w}",
+            got[k.as_str()]
+        );
+    }
 }
 
 fn obs_f64(obs: &[u8]) -> Vec<f64> {
@@ -84,6 +120,7 @@ fn matches_gymnasium() {
             None => ResetOptions::new(),
         };
         let limit = run["max_episode_steps"].as_u64().map(|n| n as u32);
+        let scaled = run["action_scale"].as_f64().is_some_and(|s| s != 1.0);
         let tally = tallies.entry(env_id.to_string()).or_default();
 
         // Truncation as `TimeLimit` applies it (counted here, to keep the state accessors).
@@ -111,6 +148,9 @@ fn matches_gymnasium() {
                 .iter()
                 .flat_map(|a| (*a as f32).to_le_bytes())
                 .collect();
+            let beyond = !env.action_space().contains(&action);
+            tally.beyond_bounds += usize::from(beyond);
+            info.clear();
             let mut t = env.step(&action, &mut obs, &mut info).unwrap();
             elapsed += 1;
             t.truncated |= limit.is_some_and(|l| elapsed >= l);
@@ -124,6 +164,10 @@ fn matches_gymnasium() {
             let diff = diff.max(scaled_diff(t.reward, reward));
             tally.inexact += usize::from(diff > 0.0);
             tally.max_diff = tally.max_diff.max(diff);
+            if scaled {
+                assert_eq!(diff, 0.0, "{at}: scaled actions, not bit-identical");
+                check_info(&info, &step["info"], &at);
+            }
             assert_eq!(
                 t.terminated,
                 step["terminated"].as_bool().unwrap(),
@@ -153,9 +197,9 @@ fn matches_gymnasium() {
     println!("gymnasium {version} parity:");
     for (env_id, t) in &tallies {
         println!(
-            "  {env_id}: {} steps ({} not bit-identical, max diff {:e}), {} terminations, \
-             {} truncations",
-            t.steps, t.inexact, t.max_diff, t.terminations, t.truncations
+            "  {env_id}: {} steps ({} not bit-identical, max diff {:e}; {} with actions beyond \
+             the bounds), {} terminations, {} truncations",
+            t.steps, t.inexact, t.max_diff, t.beyond_bounds, t.terminations, t.truncations
         );
     }
     assert_eq!(tallies.len(), 11, "every v5 env has reference runs");
@@ -165,5 +209,12 @@ fn matches_gymnasium() {
             t.terminations + t.truncations > 0,
             "{env_id}: no episode ended"
         );
+        if ["Ant-v5", "HalfCheetah-v5", "Hopper-v5"].contains(&env_id.as_str()) {
+            assert!(
+                t.beyond_bounds >= 200,
+                "{env_id}: {} steps with actions beyond the bounds",
+                t.beyond_bounds
+            );
+        }
     }
 }

@@ -38,12 +38,15 @@ def make(
     registry: RegistryArg = None,
     step_timeout: float | None = None,
     restart_on_crash: bool = False,
+    strict_actions: bool = False,
     **extra: Any,
 ) -> Env:
     """One env of registry entry `id` in its own worker process (a `gymnasium.Env`).
 
     `extra` holds the env's own options (merged over the entry's `kwargs`); `registry` a
-    registry (or YAML path) to use instead of the one found the usual way.
+    registry (or YAML path) to use instead of the one found the usual way. Continuous actions
+    outside the action space's bounds reach the env as in Gymnasium; `strict_actions=True`
+    refuses them (NaN and infinite actions are refused either way).
     """
     env = Env(
         id,
@@ -54,6 +57,7 @@ def make(
         registry=registry,
         step_timeout=step_timeout,
         restart_on_crash=restart_on_crash,
+        strict_actions=strict_actions,
         **extra,
     )
     if registry is None:
@@ -67,6 +71,8 @@ def make(
         kwargs = {k: v for k, v in given.items() if v is not None}
         if restart_on_crash:
             kwargs["restart_on_crash"] = True
+        if strict_actions:
+            kwargs["strict_actions"] = True
         _with_spec(env, id, {**kwargs, **extra})
     return env
 
@@ -85,12 +91,14 @@ def make_vec(
     step_timeout: float | None = None,
     restart_on_crash: bool = False,
     pool_bytes: int | None = None,
+    strict_actions: bool = False,
     **extra: Any,
 ) -> VectorEnv:
     """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
     `gymnasium.vector.VectorEnv`; default: one worker per core, at most one per env).
     `pool_bytes` caps the shared memory that results kept alive by arrays may hold (512 MiB
-    by default); past it, results are copies."""
+    by default); past it, results are copies. `strict_actions=True` refuses continuous
+    actions outside the action space's bounds."""
     return VectorEnv(
         id,
         num_envs,
@@ -104,6 +112,7 @@ def make_vec(
         step_timeout=step_timeout,
         restart_on_crash=restart_on_crash,
         pool_bytes=pool_bytes,
+        strict_actions=strict_actions,
         **extra,
     )
 

@@ -30,7 +30,9 @@ class EnvConfig:
     """How to create an env.
 
     `extra` holds framework-specific options (merged over the registry entry's `kwargs`);
-    `workers` and `autoreset_mode` shape a vector env's session.
+    `workers` and `autoreset_mode` shape a vector env's session. `strict_actions` refuses
+    continuous actions outside the action space's bounds, which otherwise reach the env as
+    Gymnasium passes them (NaN and infinite actions are refused either way).
     """
 
     render_mode: str | None = None
@@ -41,6 +43,7 @@ class EnvConfig:
     extra: dict[str, Any] = field(default_factory=dict)
     workers: int | None = None
     autoreset_mode: str = "next_step"
+    strict_actions: bool = False
 
     def to_json(self) -> str:
         """The config as the Rust `EnvConfig` reads it."""
@@ -54,5 +57,6 @@ class EnvConfig:
                 "extra": self.extra,
                 "workers": self.workers,
                 "autoreset_mode": self.autoreset_mode,
+                "strict_actions": self.strict_actions,
             }
         )

@@ -39,6 +39,7 @@ class Env(gymnasium.Env[Any, Any]):
         registry: RegistryArg = None,
         step_timeout: float | None = None,
         restart_on_crash: bool = False,
+        strict_actions: bool = False,
         **extra: Any,
     ) -> None:
         config = EnvConfig(
@@ -50,6 +51,7 @@ class Env(gymnasium.Env[Any, Any]):
             extra=extra,
             workers=1,
             autoreset_mode="disabled",
+            strict_actions=strict_actions,
         )
         self._session = start(registry_id, config, registry, step_timeout, restart_on_crash)
         s = self._session
@@ -85,7 +87,10 @@ class Env(gymnasium.Env[Any, Any]):
         return self._codec.obs(obs), info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        """Advances one step; raises `InvalidActionError` for an action outside the space."""
+        """Advances one step. A continuous action outside the action space's bounds reaches
+        the env, which clips it as Gymnasium's does (an `InvalidActionError` with
+        `strict_actions`); NaN, infinity, a discrete action out of range or the wrong shape
+        raise `InvalidActionError`."""
         obs, reward, terminated, truncated, info = self._session.step_single(self._codec.actions(action))
         return self._codec.obs(obs), reward, terminated, truncated, info
 

@@ -70,7 +70,8 @@ class MakeError(EnvHubError, ValueError):
 
 
 class InvalidActionError(EnvHubError, ValueError):
-    """Actions of the wrong shape or dtype, out of range, NaN or infinite."""
+    """Actions of the wrong shape or dtype, discrete values out of range, NaN or infinite
+    values; continuous values beyond the bounds only with `strict_actions=True`."""
 
 
 class InvalidStateError(EnvHubError, RuntimeError):

@@ -95,6 +95,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         step_timeout: float | None = None,
         restart_on_crash: bool = False,
         pool_bytes: int | None = None,
+        strict_actions: bool = False,
         **extra: Any,
     ) -> None:
         mode = _autoreset_mode(autoreset_mode)
@@ -107,6 +108,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             extra=extra,
             workers=num_workers,
             autoreset_mode=_RUST_MODES[mode],
+            strict_actions=strict_actions,
         )
         self._session = start(registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes)
         s = self._session

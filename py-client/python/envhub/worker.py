@@ -352,6 +352,7 @@ def make_batch(
         extra=dict(c.get("extra") or {}),
         workers=c.get("workers"),
         autoreset_mode=c.get("autoreset_mode", "next_step"),
+        strict_actions=bool(c.get("strict_actions", False)),
     )
     vector = adapter.make_vec(env_id, config)
     if vector is not None:
