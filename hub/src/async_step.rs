@@ -138,7 +138,7 @@ impl VecEnv {
                 return Ok(());
             }
         }
-        let tick = self.options.wait_policy().tick;
+        let tick = self.options.wait_policy(self.workers.len()).tick;
         loop {
             {
                 let pending: Vec<&envhub_shm::ClientChannel> = self

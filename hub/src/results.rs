@@ -112,7 +112,7 @@ impl VecEnv {
             return Err(self.give_up(err));
         }
         tracing::warn!(worker = i, error = %err, "restarting worker");
-        let policy = self.options.wait_policy();
+        let policy = self.options.wait_policy(self.workers.len());
         let (slot, sent) = (self.workers[i].slot, self.workers[i].sent.clone());
         self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
         let n = self.workers[i].job.num_envs;

@@ -3,6 +3,9 @@
 use envhub_shm::WaitPolicy;
 use std::time::Duration;
 
+/// A wait this long (on average) pays for a wake-up (tens of µs on a VM) many times over.
+pub(crate) const BLOCK_BEYOND: Duration = Duration::from_micros(200);
+
 /// Options of a session (timeouts, restarts, waiting, shared memory).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionOptions {
@@ -45,11 +48,21 @@ impl SessionOptions {
     /// costs nothing when another process needs the core, and saves a wake-up (tens of µs on
     /// a VM) when the answer is close; the 5 ms tick bounds how late a dead worker or a
     /// Ctrl-C is seen.
-    pub(crate) fn wait_policy(&self) -> WaitPolicy {
+    ///
+    /// With at least as many workers as cores, waits that usually last longer than
+    /// [`BLOCK_BEYOND`] block at once: the workers need every core, and such a wait can afford
+    /// a wake-up.
+    pub(crate) fn wait_policy(&self, workers: usize) -> WaitPolicy {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         WaitPolicy {
             spin: self.spin,
             max_spin: self.max_spin,
             tick: Duration::from_millis(5),
+            block_beyond: if workers >= cores {
+                BLOCK_BEYOND
+            } else {
+                Duration::ZERO
+            },
         }
     }
 }

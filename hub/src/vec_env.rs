@@ -89,7 +89,7 @@ impl VecEnv {
             prefix: options.namespace.clone(),
             session: session.clone(),
         };
-        let policy = options.wait_policy();
+        let policy = options.wait_policy(workers);
         let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
             .into_iter()
             .map(|(env_offset, count)| {

@@ -120,6 +120,7 @@ pub fn serve_batch(
         spin: Duration::from_micros(job.spin_us),
         max_spin: Duration::from_micros(job.max_spin_us),
         tick: Duration::from_millis(50),
+        block_beyond: Duration::ZERO,
     };
     let node_name = format!("worker-{}", std::process::id());
     let mut channel = match WorkerChannel::open(
@@ -311,6 +312,7 @@ mod tests {
             spin: Duration::ZERO,
             max_spin: Duration::ZERO,
             tick: Duration::from_millis(10),
+            block_beyond: Duration::ZERO,
         };
         let job = job(&prefix, n);
         let mut client = ClientChannel::create(&job.channel, "client", policy).unwrap();

@@ -28,6 +28,10 @@ pub struct WaitPolicy {
     pub max_spin: Duration,
     /// Check liveness at least this often while blocked.
     pub tick: Duration,
+    /// When recent waits average longer than this, block at once instead of spinning (zero:
+    /// never). A client with as many workers as cores sets it: spinning, even yielding, would
+    /// take CPU time from the workers it waits for, and a wait that long pays for a wake-up.
+    pub block_beyond: Duration,
 }
 
 impl Default for WaitPolicy {
@@ -36,6 +40,7 @@ impl Default for WaitPolicy {
             spin: Duration::from_micros(50),
             max_spin: Duration::from_millis(2),
             tick: Duration::from_millis(20),
+            block_beyond: Duration::ZERO,
         }
     }
 }
@@ -50,6 +55,10 @@ impl AdaptiveSpin {
     /// The spin budget for the next wait under `policy`.
     pub fn budget(&self, policy: &WaitPolicy) -> Duration {
         if policy.spin.is_zero() {
+            return Duration::ZERO;
+        }
+        if !policy.block_beyond.is_zero() && self.average_ns > policy.block_beyond.as_nanos() as f64
+        {
             return Duration::ZERO;
         }
         let wanted = Duration::from_nanos((self.average_ns * 1.5) as u64);
