@@ -1,0 +1,4 @@
+//! The tasks, one file each, and the arm they share.
+
+mod arm;
+pub(crate) mod reach;

@@ -1,0 +1,5 @@
+//! The crate's one integration-test binary.
+
+mod common;
+mod conformance;
+mod solvability;
