@@ -20,4 +20,3 @@ mod task;
 mod tasks;
 
 pub use adapter::Rapier;
-pub use tasks::reach::SUCCESS_DISTANCE as REACH_SUCCESS_DISTANCE;

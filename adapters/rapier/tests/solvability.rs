@@ -5,7 +5,7 @@
 use crate::common::{random_policy, success_rate};
 use envhub_core::EnvConfig;
 
-const SEEDS: std::ops::Range<u64> = 0..20;
+const SEEDS: std::ops::Range<u64> = 0..30;
 
 fn check(env_id: &str, scripted: fn() -> Box<dyn FnMut(&[f32], &mut [f32])>) {
     let config = EnvConfig::default();
@@ -46,4 +46,96 @@ fn reach_pd() -> Box<dyn FnMut(&[f32], &mut [f32])> {
 #[test]
 fn arm_reach() {
     check("ArmReach-v0", reach_pd);
+}
+
+/// Jacobian-transpose task-space PD: the torques (as actions) that pull a two-link arm's
+/// fingertip at `tip` towards `want`.
+fn tip_pd(q: [f32; 2], qd: [f32; 2], tip: [f32; 2], want: [f32; 2], lengths: [f32; 2], gains: (f32, f32, [f32; 2])) -> [f32; 2] {
+    let (kp, kd, max_torque) = gains;
+    let (s1, c1) = q[0].sin_cos();
+    let (s12, c12) = (q[0] + q[1]).sin_cos();
+    let j = [
+        [-lengths[0] * s1 - lengths[1] * s12, -lengths[1] * s12],
+        [lengths[0] * c1 + lengths[1] * c12, lengths[1] * c12],
+    ];
+    let v = [j[0][0] * qd[0] + j[0][1] * qd[1], j[1][0] * qd[0] + j[1][1] * qd[1]];
+    let f = [kp * (want[0] - tip[0]) - kd * v[0], kp * (want[1] - tip[1]) - kd * v[1]];
+    [
+        (j[0][0] * f[0] + j[1][0] * f[1]) / max_torque[0],
+        (j[0][1] * f[0] + j[1][1] * f[1]) / max_torque[1],
+    ]
+}
+
+/// Push: bring the fingertip behind the puck (going around it), push it along the line to the
+/// goal while correcting for drift, then hold back.
+fn push_scripted() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+    const R: f32 = 0.05 + 0.03;
+    Box::new(|obs, action| {
+        let q = [obs[2].atan2(obs[0]), obs[3].atan2(obs[1])];
+        let qd = [obs[4], obs[5]];
+        let tip = [obs[6], obs[7]];
+        let puck = [obs[8], obs[9]];
+        let goal = [obs[12], obs[13]];
+        let d = [goal[0] - puck[0], goal[1] - puck[1]];
+        let dist = d[0].hypot(d[1]);
+        let u = [d[0] / dist.max(1e-6), d[1] / dist.max(1e-6)];
+        let rel = [tip[0] - puck[0], tip[1] - puck[1]];
+        let along = rel[0] * u[0] + rel[1] * u[1];
+        let across = -rel[0] * u[1] + rel[1] * u[0];
+        let behind = [puck[0] - u[0] * (R + 0.01), puck[1] - u[1] * (R + 0.01)];
+        let want = if dist < 0.015 {
+            // Done: back off along the line so as not to nudge it.
+            [puck[0] - u[0] * (R + 0.06), puck[1] - u[1] * (R + 0.06)]
+        } else if along < -R * 0.7 && across.abs() < 0.02 {
+            // Aligned behind: push towards the goal, steering the contact point.
+            let push = dist.min(0.12);
+            let n = [-u[1], u[0]];
+            [
+                puck[0] + u[0] * (push - R) - n[0] * across,
+                puck[1] + u[1] * (push - R) - n[1] * across,
+            ]
+        } else if along < -R * 0.7 {
+            // Behind it but off the line: slide sideways onto the line.
+            behind
+        } else {
+            // In front of or beside it: go round on the side it is on, to a point beside and
+            // a little behind it.
+            let side = if across >= 0.0 { 1.0 } else { -1.0 };
+            let n = [-u[1], u[0]];
+            [
+                puck[0] + n[0] * side * (R + 0.05) - u[0] * (R + 0.03),
+                puck[1] + n[1] * side * (R + 0.05) - u[1] * (R + 0.03),
+            ]
+        };
+        let a = tip_pd(q, qd, tip, want, [0.4, 0.4], (40.0, 4.0, [4.0, 3.0]));
+        action.copy_from_slice(&a);
+    })
+}
+
+#[test]
+fn arm_push() {
+    check("ArmPush-v0", push_scripted);
+}
+
+#[test]
+#[ignore]
+fn debug_push() {
+    let mut env = crate::common::make("ArmPush-v0", &EnvConfig::default());
+    let mut inner = push_scripted();
+    let mut n = 0;
+    let mut p = |obs: &[f32], a: &mut [f32]| {
+        inner(obs, a);
+        if n % 5 == 0 {
+            eprintln!("{n:3} tip {:.3?} puck {:.3?} goal {:.3?} a {:.2?}", &obs[6..8], &obs[8..10], &obs[12..14], a);
+        }
+        n += 1;
+    };
+    let seed: u64 = std::env::var("SEED").map(|s| s.parse().unwrap()).unwrap_or(0);
+    let e = crate::common::episode(&mut env, seed, &mut p, false);
+    eprintln!("{e:?}");
+    for seed in 0..20 {
+        let e = crate::common::episode(&mut env, seed, &mut *push_scripted(), true);
+        let o = crate::common::floats(e.obs.last().unwrap());
+        eprintln!("seed {seed}: {} {:.3}", e.success, (o[8] - o[12]).hypot(o[9] - o[13]));
+    }
 }

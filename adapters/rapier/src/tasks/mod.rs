@@ -2,3 +2,4 @@
 
 mod arm;
 pub(crate) mod reach;
+pub(crate) mod push;

@@ -23,7 +23,7 @@ pub(crate) const OPTIONS: &[&str] = &["reward_dist_weight", "reward_control_weig
 pub(crate) const MAX_EPISODE_STEPS: u32 = 50;
 
 /// Fingertip distance (m) under which the target counts as reached.
-pub const SUCCESS_DISTANCE: f32 = 0.02;
+pub(crate) const SUCCESS_DISTANCE: f32 = 0.02;
 
 const PHYSICS_DT: f32 = 0.01;
 const FRAME_SKIP: usize = 2;
