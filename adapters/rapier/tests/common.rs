@@ -17,6 +17,8 @@ pub struct Episode {
     pub steps: usize,
     /// Every observation, as raw bytes (reset first).
     pub obs: Vec<Vec<u8>>,
+    /// The info of the last step.
+    pub info: Info,
 }
 
 pub fn make(env_id: &str, config: &EnvConfig) -> TimeLimit<Box<dyn Env>> {
@@ -68,6 +70,7 @@ pub fn episode(env: &mut TimeLimit<Box<dyn Env>>, seed: u64, policy: Policy<'_>,
                 ret,
                 steps,
                 obs: all,
+                info,
             };
         }
     }

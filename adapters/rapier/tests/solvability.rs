@@ -139,3 +139,44 @@ fn debug_push() {
         eprintln!("seed {seed}: {} {:.3}", e.success, (o[8] - o[12]).hypot(o[9] - o[13]));
     }
 }
+
+/// Ant: an open-loop trot (diagonal legs in phase) tracked by joint PD. Hips swing the foot
+/// forward while the ankle lifts it, then sweep it back on the ground.
+fn ant_trot() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+    // Per leg (FL, FR, BL, BR): the hip sign that moves the foot forward, and the phase.
+    const FORWARD: [f32; 4] = [-1.0, 1.0, -1.0, 1.0];
+    const PHASE: [f32; 4] = [0.0, std::f32::consts::PI, std::f32::consts::PI, 0.0];
+    let mut t = 0.0f32;
+    let [ANT_PERIOD, ANT_HIP, ANT_LIFT, ANT_PRESS, ANT_KP, ANT_KD, SIGN] = ANT();
+    let kyaw = p("KYAW", 0.0);
+    Box::new(move |obs, action| {
+        let (w, x, y, z) = (obs[1], obs[2], obs[3], obs[4]);
+        let yaw = (-2.0 * (x * z - w * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+        let omega = std::f32::consts::TAU / ANT_PERIOD;
+        for leg in 0..4 {
+            let phi = omega * t + PHASE[leg];
+            let hip_target = SIGN * FORWARD[leg] * ANT_HIP * -phi.cos() + kyaw * yaw;
+            let ankle_target = if phi.sin() > 0.0 { ANT_LIFT * phi.sin() } else { ANT_PRESS };
+            let (hip, ankle) = (obs[5 + 2 * leg], obs[6 + 2 * leg]);
+            let (hip_v, ankle_v) = (obs[19 + 2 * leg], obs[20 + 2 * leg]);
+            action[2 * leg] = (ANT_KP * (hip_target - hip) - ANT_KD * hip_v) / 20.0;
+            action[2 * leg + 1] = (ANT_KP * (ankle_target - ankle) - ANT_KD * ankle_v) / 20.0;
+        }
+        t += 0.05;
+    })
+}
+fn p(name: &str, d: f32) -> f32 { std::env::var(name).map(|s| s.parse().unwrap()).unwrap_or(d) }
+#[allow(non_snake_case)] fn ANT() -> [f32; 7] { [p("PERIOD", 0.5), p("HIP", 0.4), p("LIFT", 0.35), p("PRESS", -0.35), p("KP", 40.0), p("KD", 1.0), p("SIGN", 1.0)] }
+
+#[test]
+#[ignore]
+fn debug_ant() {
+    let mut env = crate::common::make("AntRun-v0", &EnvConfig { max_episode_steps: Some(200), ..EnvConfig::default() });
+    for seed in 0..3 {
+        let e = crate::common::episode(&mut env, seed, &mut *ant_trot(), true);
+        let o = crate::common::floats(e.obs.last().unwrap());
+        eprintln!("seed {seed}: {} steps {} ret {:.1} y {:.2} up? {:.2?} {:?}", e.success, e.steps, e.ret, o[0], &o[1..5], e.info.get("distance_from_origin"));
+        let e = crate::common::episode(&mut env, seed, &mut crate::common::random_policy(seed), true);
+        eprintln!("   random: {} steps {} ret {:.1} {:?}", e.success, e.steps, e.ret, e.info.get("distance_from_origin"));
+    }
+}

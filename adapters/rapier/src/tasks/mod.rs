@@ -3,3 +3,4 @@
 mod arm;
 pub(crate) mod reach;
 pub(crate) mod push;
+pub(crate) mod ant;
