@@ -2,7 +2,7 @@
 
 use crate::render::{self, RenderOptions};
 use crate::task::TaskEnv;
-use crate::tasks::{ant, push, reach};
+use crate::tasks::{ant, push, reach, rover};
 use envhub_core::{Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec};
 
 /// One task of the adapter: its id, episode limit, options and constructor.
@@ -42,6 +42,7 @@ macro_rules! entry {
 /// Every task of the adapter. Adding one is a file in `tasks/` and a line here.
 const ENVS: &[EnvEntry] = &[entry!(reach, Reach), entry!(push, Push),
     entry!(ant, Ant),
+    entry!(rover, Rover),
 ];
 
 /// Robot tasks on rapier3d, implemented natively. Always available: rapier is pure Rust and

@@ -1,7 +1,7 @@
 //! `render_mode="rgb_array"`: a small software ray caster over the rapier world itself.
 //!
-//! Every pixel casts one ray through rapier's own scene query (its bounding-volume hierarchy
-//! and exact ray tests for every shape: boxes, balls, capsules, cylinders, heightfields), so
+//! Every pixel casts one ray against every collider with parry's exact ray tests (boxes,
+//! balls, capsules, cylinders, heightfields), so
 //! whatever collides is drawn exactly as it collides, and nothing beyond `rapier3d` is needed:
 //! no GPU, no windowing, no C library. Shading is Lambert with one directional light plus
 //! ambient; a collider's colour is its `user_data` (see `physics::color`), floors and terrain
@@ -94,16 +94,26 @@ impl Renderer {
         let half_h = (camera.fov_deg.to_radians() * 0.5).tan();
         let half_w = half_h * width as f32 / height as f32;
         let light = LIGHT.normalize();
-        let query = world.query_pipeline();
+        // Every collider is tested directly (tasks have a dozen): no dependence on the broad
+        // phase, which is only built by the first physics step.
+        let colliders: Vec<&Collider> = world.colliders.iter().map(|(_, c)| c).collect();
         for row in 0..height {
             let v = (1.0 - 2.0 * (row as f32 + 0.5) / height as f32) * half_h;
             for col in 0..width {
                 let u = (2.0 * (col as f32 + 0.5) / width as f32 - 1.0) * half_w;
                 let dir = (forward + right * u + up * v).normalize();
                 let ray = Ray::new(camera.eye, dir);
-                let rgb = match query.cast_ray_and_get_normal(&ray, 100.0, true) {
-                    Some((handle, hit)) => {
-                        let data = world.colliders[handle].user_data;
+                let nearest = colliders
+                    .iter()
+                    .filter_map(|c| {
+                        c.shape()
+                            .cast_ray_and_get_normal(c.position(), &ray, 100.0, true)
+                            .map(|hit| (c, hit))
+                    })
+                    .min_by(|a, b| a.1.time_of_impact.total_cmp(&b.1.time_of_impact));
+                let rgb = match nearest {
+                    Some((collider, hit)) => {
+                        let data = collider.user_data;
                         let mut base = [
                             ((data >> 16) & 0xff) as f32,
                             ((data >> 8) & 0xff) as f32,

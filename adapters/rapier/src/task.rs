@@ -136,10 +136,13 @@ impl<T: Task> Env for TaskEnv<T> {
         let result = self.task.step(&self.action, info);
         info.insert("is_success", InfoValue::Bool(self.task.is_success()));
         self.write_obs(obs);
-        if !self.obs.iter().all(|x| x.is_finite()) {
+        let quarantined = self.task.world().quarantine().bodies().len();
+        if quarantined > 0 || !self.obs.iter().all(|x| x.is_finite()) {
             return Err(EnvError::Simulator {
                 env_id: self.env_id.to_string(),
-                reason: "the simulation diverged (non-finite state)".into(),
+                reason: format!(
+                    "the simulation diverged (non-finite state; rapier disabled {quarantined} bodies)"
+                ),
             });
         }
         Ok(Transition {

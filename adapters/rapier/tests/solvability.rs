@@ -180,3 +180,51 @@ fn debug_ant() {
         eprintln!("   random: {} steps {} ret {:.1} {:?}", e.success, e.steps, e.ret, e.info.get("distance_from_origin"));
     }
 }
+
+/// Rover: steer towards the goal (heading error from the goal vector in the base frame),
+/// slowing down for sharp turns and when close.
+fn rover_steer() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+    Box::new(|obs, action| {
+        let (forward, right) = (obs[0], obs[2]);
+        let heading_error = right.atan2(forward);
+        let distance = forward.hypot(right);
+        let speed = (heading_error.cos().max(0.0) * (distance / 1.5).min(1.0)).max(0.2);
+        // Yaw rate (about +y, i.e. turning left) damps the turn.
+        let turn = (0.8 * heading_error + 0.15 * obs[7]).clamp(-0.6, 0.6);
+        action[0] = (speed + turn).clamp(-1.0, 1.0);
+        action[1] = (speed - turn).clamp(-1.0, 1.0);
+    })
+}
+
+#[test]
+#[ignore]
+fn debug_rover() {
+    let mut env = crate::common::make("RoverTerrain-v0", &EnvConfig::default());
+    for seed in 0..10 {
+        let e = crate::common::episode(&mut env, seed, &mut *rover_steer(), true);
+        eprintln!("seed {seed}: {} steps {} ret {:.1} {:?} {:?}", e.success, e.steps, e.ret, e.info.get("distance"), e.info.get("flipped"));
+        let e = crate::common::episode(&mut env, seed, &mut crate::common::random_policy(seed), true);
+        eprintln!("   random: {} steps {} ret {:.1} {:?}", e.success, e.steps, e.ret, e.info.get("distance"));
+    }
+}
+
+#[test]
+#[ignore]
+fn debug_rover2() {
+    let mut env = crate::common::make("RoverTerrain-v0", &EnvConfig::default());
+    let mut inner = rover_steer();
+    let mut n = 0;
+    let mut p = |obs: &[f32], a: &mut [f32]| {
+        inner(obs, a);
+        if std::env::var("TURN").is_ok() { a[0] = 0.5; a[1] = -0.5; }
+        if n % 20 == 0 || n < 30 { eprintln!("{n} {:.2?} h {:.2} a {:.2?}", &obs[..12], obs[24], a); }
+        n += 1;
+    };
+    let seed: u64 = std::env::var("SEED").map(|s| s.parse().unwrap()).unwrap_or(0);
+    crate::common::episode(&mut env, seed, &mut p, false);
+}
+
+#[test]
+fn rover_terrain() {
+    check("RoverTerrain-v0", rover_steer);
+}

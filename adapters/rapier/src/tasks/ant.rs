@@ -194,7 +194,6 @@ impl Task for Ant {
                 Some([-ANKLE_RANGE, ANKLE_RANGE]),
             ));
         }
-        world.detect_collisions(&(), &());
         self.start_x = world.bodies[torso].translation().x;
         self.world = world;
         self.torso = torso;

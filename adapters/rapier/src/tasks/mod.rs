@@ -4,3 +4,5 @@ mod arm;
 pub(crate) mod reach;
 pub(crate) mod push;
 pub(crate) mod ant;
+pub(crate) mod rover;
+mod terrain;

@@ -160,7 +160,6 @@ impl Task for Push {
             Some(puck_body),
         );
         self.arm = Some(Arm::build(&mut world, SPEC, q, [0.0; 2]));
-        world.detect_collisions(&(), &());
         self.world = world;
         self.puck = puck_body;
         self.goal = goal;

@@ -108,7 +108,6 @@ impl Task for Reach {
             Some(floor),
         );
         self.arm = Some(Arm::build(&mut world, SPEC, q, qd));
-        world.detect_collisions(&(), &());
         self.world = world;
         self.target = target;
     }
