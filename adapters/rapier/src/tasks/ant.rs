@@ -266,3 +266,4 @@ impl Task for Ant {
         }
     }
 }
+
