@@ -17,7 +17,13 @@ const IDS: [(&str, &str); 4] = [
 
 /// Everything a rollout returned, step by step: observations, rewards, flags and the final
 /// observations of same-step autoresets.
-type Trace = Vec<(Vec<u8>, Vec<f64>, Vec<bool>, Vec<bool>, Vec<Option<Vec<u8>>>)>;
+type Trace = Vec<(
+    Vec<u8>,
+    Vec<f64>,
+    Vec<bool>,
+    Vec<bool>,
+    Vec<Option<Vec<u8>>>,
+)>;
 
 fn rollout(t: &TestHub, id: &str, n: usize, workers: usize, mode: AutoresetMode) -> Trace {
     let config = EnvConfig {
@@ -74,7 +80,10 @@ fn one_and_two_workers_give_bit_identical_rollouts_in_every_autoreset_mode() {
             let two = rollout(&t, id, n, 2, mode);
             assert_eq!(one.len(), two.len(), "{id} {mode:?}");
             for (step, (a, b)) in one.iter().zip(&two).enumerate() {
-                assert!(a == b, "{id} {mode:?}: 1 and 2 workers differ at entry {step}");
+                assert!(
+                    a == b,
+                    "{id} {mode:?}: 1 and 2 workers differ at entry {step}"
+                );
             }
             let resets = one
                 .iter()
@@ -94,7 +103,12 @@ fn one_and_two_workers_give_bit_identical_rollouts_in_every_autoreset_mode() {
             let mut local = Rapier.make(env_id, &EnvConfig::default()).unwrap();
             let mut obs = vec![0u8; ob];
             local
-                .reset(Some(100 + i as u64), &ResetOptions::new(), &mut obs, &mut Info::default())
+                .reset(
+                    Some(100 + i as u64),
+                    &ResetOptions::new(),
+                    &mut obs,
+                    &mut Info::default(),
+                )
                 .unwrap();
             assert_eq!(&first[i * ob..(i + 1) * ob], &obs[..], "{id}: env {i}");
         }

@@ -40,7 +40,9 @@ macro_rules! entry {
 }
 
 /// Every task of the adapter. Adding one is a file in `tasks/` and a line here.
-const ENVS: &[EnvEntry] = &[entry!(reach, Reach), entry!(push, Push),
+const ENVS: &[EnvEntry] = &[
+    entry!(reach, Reach),
+    entry!(push, Push),
     entry!(ant, Ant),
     entry!(rover, Rover),
 ];

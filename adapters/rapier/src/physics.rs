@@ -48,12 +48,11 @@ pub(crate) fn hinge(
     if let Some(limits) = limits {
         builder = builder.limits(limits);
     }
-    let joint = world.insert_impulse_joint(parent, child, builder);
+    world.insert_impulse_joint(parent, child, builder);
     Hinge {
         parent,
         child,
         axis,
-        joint,
     }
 }
 
@@ -66,8 +65,6 @@ pub(crate) struct Hinge {
     pub(crate) child: RigidBodyHandle,
     /// The axis in the parent's frame.
     pub(crate) axis: Vector,
-    /// The rapier joint.
-    pub(crate) joint: ImpulseJointHandle,
 }
 
 impl Hinge {

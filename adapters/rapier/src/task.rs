@@ -162,7 +162,9 @@ impl<T: Task> Env for TaskEnv<T> {
                 reason: "`render` called before `reset`\nhint: call `reset` first".into(),
             });
         }
-        Ok(Some(renderer.render(self.task.world(), &self.task.camera())))
+        Ok(Some(
+            renderer.render(self.task.world(), &self.task.camera()),
+        ))
     }
 
     fn render_fps(&self) -> Option<f64> {

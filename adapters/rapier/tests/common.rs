@@ -38,7 +38,12 @@ pub fn floats(bytes: &[u8]) -> Vec<f32> {
 }
 
 /// Runs one episode of `env` from `seed` with `policy`.
-pub fn episode(env: &mut TimeLimit<Box<dyn Env>>, seed: u64, policy: Policy<'_>, keep_obs: bool) -> Episode {
+pub fn episode(
+    env: &mut TimeLimit<Box<dyn Env>>,
+    seed: u64,
+    policy: Policy<'_>,
+    keep_obs: bool,
+) -> Episode {
     let mut obs = vec![0u8; env.observation_space().byte_len()];
     let mut info = Info::default();
     env.reset(Some(seed), &ResetOptions::new(), &mut obs, &mut info)
@@ -78,7 +83,9 @@ pub fn episode(env: &mut TimeLimit<Box<dyn Env>>, seed: u64, policy: Policy<'_>,
 
 /// A uniform random policy from a small deterministic generator.
 pub fn random_policy(seed: u64) -> impl FnMut(&[f32], &mut [f32]) {
-    let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut state = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     move |_obs, action| {
         for a in action.iter_mut() {
             state = state

@@ -20,8 +20,14 @@ fn same_seed_gives_bit_identical_episodes() {
         let again = episode(&mut a, 7, &mut random_policy(3), true);
         let fresh = episode(&mut b, 7, &mut random_policy(3), true);
         assert_eq!(first, again, "{env_id}: reseeding changed the episode");
-        assert_eq!(first, fresh, "{env_id}: a fresh instance gave another episode");
+        assert_eq!(
+            first, fresh,
+            "{env_id}: a fresh instance gave another episode"
+        );
         let other = episode(&mut b, 9, &mut random_policy(3), true);
-        assert_ne!(first.obs[0], other.obs[0], "{env_id}: seeds 7 and 9 start alike");
+        assert_ne!(
+            first.obs[0], other.obs[0],
+            "{env_id}: seeds 7 and 9 start alike"
+        );
     }
 }

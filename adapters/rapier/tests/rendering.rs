@@ -14,7 +14,10 @@ fn frames_have_the_asked_size_and_follow_the_robot() {
     config.extra.insert("height".into(), json!(64));
     for env_id in Rapier.list_envs() {
         let mut env = Rapier.make(&env_id, &config).unwrap();
-        assert_eq!(env.render_fps(), Some(if env_id == "ArmReach-v0" { 50.0 } else { 20.0 }));
+        assert_eq!(
+            env.render_fps(),
+            Some(if env_id == "ArmReach-v0" { 50.0 } else { 20.0 })
+        );
         let mut obs = vec![0u8; env.observation_space().byte_len()];
         let mut info = Info::default();
         env.reset(Some(1), &ResetOptions::new(), &mut obs, &mut info)
@@ -50,8 +53,15 @@ fn no_render_mode_renders_nothing_and_other_modes_are_refused() {
         render_mode: Some("human".into()),
         ..EnvConfig::default()
     };
-    let err = Rapier.make("RoverTerrain-v0", &config).err().unwrap().to_string();
-    assert!(err.contains("render mode `human` is not supported"), "{err}");
+    let err = Rapier
+        .make("RoverTerrain-v0", &config)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("render mode `human` is not supported"),
+        "{err}"
+    );
     assert!(err.contains("rgb_array"), "{err}");
 }
 

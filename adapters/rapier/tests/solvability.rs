@@ -19,8 +19,14 @@ fn check_with(
     let good = success_rate(env_id, config, SEEDS, |_| scripted());
     let random = success_rate(env_id, config, SEEDS, |seed| Box::new(random_policy(seed)));
     eprintln!("{env_id}: scripted {good:.2}, random {random:.2}");
-    assert!(good >= 0.9, "{env_id}: scripted controller succeeded in {good}");
-    assert!(random <= 0.1, "{env_id}: random actions succeeded in {random}");
+    assert!(
+        good >= 0.9,
+        "{env_id}: scripted controller succeeded in {good}"
+    );
+    assert!(
+        random <= 0.1,
+        "{env_id}: random actions succeeded in {random}"
+    );
 }
 
 /// Two-link inverse kinematics for the fingertip at `(x, z)`, on the elbow side of `q2`.
@@ -57,7 +63,14 @@ fn arm_reach() {
 
 /// Jacobian-transpose task-space PD: the torques (as actions) that pull a two-link arm's
 /// fingertip at `tip` towards `want`.
-fn tip_pd(q: [f32; 2], qd: [f32; 2], tip: [f32; 2], want: [f32; 2], lengths: [f32; 2], gains: (f32, f32, [f32; 2])) -> [f32; 2] {
+fn tip_pd(
+    q: [f32; 2],
+    qd: [f32; 2],
+    tip: [f32; 2],
+    want: [f32; 2],
+    lengths: [f32; 2],
+    gains: (f32, f32, [f32; 2]),
+) -> [f32; 2] {
     let (kp, kd, max_torque) = gains;
     let (s1, c1) = q[0].sin_cos();
     let (s12, c12) = (q[0] + q[1]).sin_cos();
@@ -65,8 +78,14 @@ fn tip_pd(q: [f32; 2], qd: [f32; 2], tip: [f32; 2], want: [f32; 2], lengths: [f3
         [-lengths[0] * s1 - lengths[1] * s12, -lengths[1] * s12],
         [lengths[0] * c1 + lengths[1] * c12, lengths[1] * c12],
     ];
-    let v = [j[0][0] * qd[0] + j[0][1] * qd[1], j[1][0] * qd[0] + j[1][1] * qd[1]];
-    let f = [kp * (want[0] - tip[0]) - kd * v[0], kp * (want[1] - tip[1]) - kd * v[1]];
+    let v = [
+        j[0][0] * qd[0] + j[0][1] * qd[1],
+        j[1][0] * qd[0] + j[1][1] * qd[1],
+    ];
+    let f = [
+        kp * (want[0] - tip[0]) - kd * v[0],
+        kp * (want[1] - tip[1]) - kd * v[1],
+    ];
     [
         (j[0][0] * f[0] + j[1][0] * f[1]) / max_torque[0],
         (j[0][1] * f[0] + j[1][1] * f[1]) / max_torque[1],
@@ -151,7 +170,11 @@ fn ant_trot() -> Box<dyn FnMut(&[f32], &mut [f32])> {
             let side = if leg % 2 == 0 { 1.0 } else { -1.0 };
             let stride = (HIP * (1.0 + side * KYAW * yaw)).clamp(0.0, 0.5);
             let hip_target = FORWARD[leg] * stride * -phi.cos();
-            let ankle_target = if phi.sin() > 0.0 { LIFT * phi.sin() } else { PRESS };
+            let ankle_target = if phi.sin() > 0.0 {
+                LIFT * phi.sin()
+            } else {
+                PRESS
+            };
             let (hip, ankle) = (obs[5 + 2 * leg], obs[6 + 2 * leg]);
             let (hip_v, ankle_v) = (obs[19 + 2 * leg], obs[20 + 2 * leg]);
             action[2 * leg] = (KP * (hip_target - hip) - KD * hip_v) / MAX_TORQUE;

@@ -266,4 +266,3 @@ impl Task for Ant {
         }
     }
 }
-

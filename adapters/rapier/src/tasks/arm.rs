@@ -47,7 +47,8 @@ impl Arm {
     /// Builds the arm at joint angles `q` with joint velocities `qd`.
     pub(crate) fn build(world: &mut PhysicsWorld, spec: ArmSpec, q: [f32; 2], qd: [f32; 2]) -> Arm {
         let h = spec.height;
-        let base = world.insert_body(RigidBodyBuilder::fixed().translation(Vector::new(0.0, h, 0.0)));
+        let base =
+            world.insert_body(RigidBodyBuilder::fixed().translation(Vector::new(0.0, h, 0.0)));
         world.insert_collider(
             ColliderBuilder::cylinder(h * 0.5 + 0.01, spec.radius * 1.6)
                 .translation(Vector::new(0.0, -h * 0.5, 0.0))
@@ -65,7 +66,10 @@ impl Arm {
             let (dx, dz) = planar(angle, spec.lengths[i]);
             let body = world.insert_body(
                 RigidBodyBuilder::dynamic()
-                    .pose(Pose::from_parts(start, Rotation::from_axis_angle(AXIS, angle)))
+                    .pose(Pose::from_parts(
+                        start,
+                        Rotation::from_axis_angle(AXIS, angle),
+                    ))
                     .angvel(AXIS * (qd[..=i].iter().sum::<f32>())),
             );
             // In the link's own frame the link lies along +x from its joint.
@@ -128,10 +132,5 @@ impl Arm {
             let damping = -self.spec.damping * joint.velocity(world);
             joint.apply_torque(world, action[i] * self.spec.max_torque[i] + damping);
         }
-    }
-
-    /// The links, base first.
-    pub(crate) fn links(&self) -> [RigidBodyHandle; 2] {
-        self.links
     }
 }

@@ -2,7 +2,7 @@
 //! Gymnasium's Reacher-v5 (same link lengths, target disc, episode length, `dt` and
 //! observation layout; rapier dynamics, torque actuators of its own).
 //!
-//! - Action `Box(-1, 1, (2,))`: joint torques, `0.05 N m` at 1.
+//! - Action `Box(-1, 1, (2,))`: joint torques, `0.05` and `0.03 N m` at 1.
 //! - Observation (10): `cos q` (2), `sin q` (2), target `(x, z)` (2), `q̇` (2),
 //!   fingertip − target `(x, z)` (2).
 //! - Reward: `-reward_dist_weight * |fingertip − target| - reward_control_weight * |a|²`.
@@ -12,7 +12,7 @@ use super::arm::{Arm, ArmSpec};
 use crate::physics::{self, color};
 use crate::render::Camera;
 use crate::task::{StepResult, Task};
-use envhub_core::{EnvConfig, EnvError, Info, NumpyRng};
+use envhub_core::{EnvConfig, EnvError, ExtraKeys, Info, NumpyRng};
 use rapier3d::prelude::*;
 
 /// The env id.
@@ -50,8 +50,7 @@ pub(crate) struct Reach {
 
 impl Reach {
     /// Reads the options.
-    pub(crate) fn new(config: &EnvConfig, keys: &envhub_core::ExtraKeys<'_>) -> Result<Self, EnvError> {
-        let _ = config;
+    pub(crate) fn new(_config: &EnvConfig, keys: &ExtraKeys<'_>) -> Result<Self, EnvError> {
         Ok(Reach {
             dist_weight: keys.f64("reward_dist_weight", 1.0)?,
             ctrl_weight: keys.f64("reward_control_weight", 0.1)?,
@@ -62,7 +61,9 @@ impl Reach {
     }
 
     fn distance(&self) -> f32 {
-        let Some(arm) = &self.arm else { return f32::INFINITY };
+        let Some(arm) = &self.arm else {
+            return f32::INFINITY;
+        };
         let tip = arm.tip(&self.world);
         ((tip[0] - self.target[0]).powi(2) + (tip[1] - self.target[1]).powi(2)).sqrt()
     }
@@ -91,7 +92,10 @@ impl Task for Reach {
                 break t.map(|x| x as f32);
             }
         };
-        let qd = [rng.uniform(-0.005, 0.005) as f32, rng.uniform(-0.005, 0.005) as f32];
+        let qd = [
+            rng.uniform(-0.005, 0.005) as f32,
+            rng.uniform(-0.005, 0.005) as f32,
+        ];
         let mut world = physics::new_world(PHYSICS_DT);
         let floor = world.insert_body(RigidBodyBuilder::fixed());
         world.insert_collider(

@@ -90,9 +90,7 @@ impl Rover {
         if !(1.0 <= goal_range.0 && goal_range.0 <= goal_range.1 && goal_range.1 <= 10.0) {
             return Err(keys.error(
                 "goal_distance_range",
-                format!(
-                    "expected `[low, high]` with 1 <= low <= high <= 10 m, got {goal_range:?}"
-                ),
+                format!("expected `[low, high]` with 1 <= low <= high <= 10 m, got {goal_range:?}"),
             ));
         }
         Ok(Rover {
@@ -184,9 +182,8 @@ impl Task for Rover {
 
         let spawn = Vector::new(0.0, terrain.height(0.0, 0.0) + 0.25, 0.0);
         let rotation = Rotation::from_rotation_y(heading);
-        let chassis = world.insert_body(
-            RigidBodyBuilder::dynamic().pose(Pose::from_parts(spawn, rotation)),
-        );
+        let chassis =
+            world.insert_body(RigidBodyBuilder::dynamic().pose(Pose::from_parts(spawn, rotation)));
         world.insert_collider(
             ColliderBuilder::cuboid(0.35, 0.08, 0.22)
                 .mass(6.0)
@@ -245,9 +242,7 @@ impl Task for Rover {
         for (i, &handle) in self.wheels.iter().enumerate() {
             let speed = action[i] * MAX_WHEEL_SPEED;
             if let Some(joint) = self.world.impulse_joints.get_mut(handle, true) {
-                joint
-                    .data
-                    .set_motor_velocity(JointAxis::AngX, speed, 50.0);
+                joint.data.set_motor_velocity(JointAxis::AngX, speed, 50.0);
             }
         }
         for _ in 0..FRAME_SKIP {
@@ -289,7 +284,9 @@ impl Task for Rover {
         let v = pose.inverse_transform_vector(body.linvel());
         let w = pose.inverse_transform_vector(body.angvel());
         let g = pose.inverse_transform_vector(Vector::NEG_Y);
-        obs[..12].copy_from_slice(&[goal.x, goal.y, goal.z, v.x, v.y, v.z, w.x, w.y, w.z, g.x, g.y, g.z]);
+        obs[..12].copy_from_slice(&[
+            goal.x, goal.y, goal.z, v.x, v.y, v.z, w.x, w.y, w.z, g.x, g.y, g.z,
+        ]);
         // The heading (forward axis projected on the ground) orients the patch.
         let forward = pose.rotation * Vector::X;
         let f = Vector::new(forward.x, 0.0, forward.z).normalize_or(Vector::X);
@@ -315,11 +312,7 @@ impl Task for Rover {
 
     fn camera(&self) -> Camera {
         let p = self.world.bodies[self.chassis].translation();
-        let target = Vector::new(
-            (p.x + self.goal[0]) * 0.5,
-            p.y,
-            (p.z + self.goal[1]) * 0.5,
-        );
+        let target = Vector::new((p.x + self.goal[0]) * 0.5, p.y, (p.z + self.goal[1]) * 0.5);
         let span = ((p.x - self.goal[0]).hypot(p.z - self.goal[1])).max(2.0);
         Camera {
             eye: target + Vector::new(0.0, 1.1 * span + 2.0, 0.9 * span + 1.5),
@@ -328,4 +321,3 @@ impl Task for Rover {
         }
     }
 }
-

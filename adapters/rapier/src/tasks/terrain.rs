@@ -27,7 +27,12 @@ impl Terrain {
                 let heading = rng.uniform(0.0, std::f64::consts::TAU) as f32;
                 let phase = rng.uniform(0.0, std::f64::consts::TAU) as f32;
                 let amplitude = rng.uniform(0.5, 1.0) as f32;
-                [std::f32::consts::TAU / wavelength, heading, phase, amplitude]
+                [
+                    std::f32::consts::TAU / wavelength,
+                    heading,
+                    phase,
+                    amplitude,
+                ]
             })
             .collect();
         let total: f32 = waves.iter().map(|w| w[3]).sum();
