@@ -3,6 +3,9 @@
 use envhub_core::{Env, EnvAdapter, EnvConfig, Info, InfoValue, ResetOptions, TimeLimit};
 use envhub_rapier::Rapier;
 
+/// A boxed policy made per episode (a controller may keep state, such as a gait clock).
+pub type Controller = Box<dyn FnMut(&[f32], &mut [f32])>;
+
 /// A policy: observation in, action out (both `float32`).
 pub type Policy<'a> = &'a mut dyn FnMut(&[f32], &mut [f32]);
 
@@ -101,7 +104,7 @@ pub fn success_rate(
     env_id: &str,
     config: &EnvConfig,
     seeds: std::ops::Range<u64>,
-    mut make_policy: impl FnMut(u64) -> Box<dyn FnMut(&[f32], &mut [f32])>,
+    mut make_policy: impl FnMut(u64) -> Controller,
 ) -> f64 {
     let mut env = make(env_id, config);
     let n = seeds.end - seeds.start;

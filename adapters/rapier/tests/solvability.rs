@@ -2,20 +2,16 @@
 //! of seeded episodes, uniform random actions in at most 10 % (success as `docs/rapier.md`
 //! defines it, reported by `info["is_success"]` at the episode's last step).
 
-use crate::common::{random_policy, success_rate};
+use crate::common::{Controller, random_policy, success_rate};
 use envhub_core::EnvConfig;
 
 const SEEDS: std::ops::Range<u64> = 0..30;
 
-fn check(env_id: &str, scripted: fn() -> Box<dyn FnMut(&[f32], &mut [f32])>) {
+fn check(env_id: &str, scripted: fn() -> Controller) {
     check_with(env_id, &EnvConfig::default(), scripted);
 }
 
-fn check_with(
-    env_id: &str,
-    config: &EnvConfig,
-    scripted: fn() -> Box<dyn FnMut(&[f32], &mut [f32])>,
-) {
+fn check_with(env_id: &str, config: &EnvConfig, scripted: fn() -> Controller) {
     let good = success_rate(env_id, config, SEEDS, |_| scripted());
     let random = success_rate(env_id, config, SEEDS, |seed| Box::new(random_policy(seed)));
     eprintln!("{env_id}: scripted {good:.2}, random {random:.2}");
@@ -44,7 +40,7 @@ fn wrap(a: f32) -> f32 {
 }
 
 /// Reach: inverse kinematics to the target, then joint-space PD.
-fn reach_pd() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+fn reach_pd() -> Controller {
     Box::new(|obs, action| {
         let q = [obs[2].atan2(obs[0]), obs[3].atan2(obs[1])];
         let qd = [obs[6], obs[7]];
@@ -94,7 +90,7 @@ fn tip_pd(
 
 /// Push: bring the fingertip behind the puck (going around it), push it along the line to the
 /// goal while correcting for drift, then hold back.
-fn push_scripted() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+fn push_scripted() -> Controller {
     const R: f32 = 0.05 + 0.03;
     Box::new(|obs, action| {
         let q = [obs[2].atan2(obs[0]), obs[3].atan2(obs[1])];
@@ -148,7 +144,7 @@ fn arm_push() {
 /// ankle lifts it, then sweep it back on the ground. The PD gains are low on purpose: the
 /// controller acts every 0.05 s, and a higher derivative gain on the light shins is unstable
 /// at that rate.
-fn ant_trot() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+fn ant_trot() -> Controller {
     use std::f32::consts::{PI, TAU};
     // Per leg (FL, FR, BL, BR): the hip angle's sign for a forward swing, and the phase.
     const FORWARD: [f32; 4] = [1.0, -1.0, 1.0, -1.0];
@@ -197,7 +193,7 @@ fn ant_run() {
 
 /// Rover: steer towards the goal (heading error from the goal vector in the base frame),
 /// slowing down for sharp turns and when close.
-fn rover_steer() -> Box<dyn FnMut(&[f32], &mut [f32])> {
+fn rover_steer() -> Controller {
     Box::new(|obs, action| {
         let (forward, right) = (obs[0], obs[2]);
         let heading_error = right.atan2(forward);
