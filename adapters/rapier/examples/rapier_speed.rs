@@ -1,5 +1,5 @@
 //! In one thread, with no IPC: env steps per second of each rapier task with random actions
-//! (episodes reset when they end). Run with
+//! (episodes reset when they end), and the time to render one 240 × 240 frame. Run with
 //! `cargo run --release -p envhub-rapier --example rapier_speed -- [env_id] [steps]`.
 
 use envhub_core::{Env, EnvAdapter, EnvConfig, Info, ResetOptions, TimeLimit};
@@ -44,6 +44,23 @@ fn main() {
             }
         }
         let rate = steps as f64 / start.elapsed().as_secs_f64();
-        println!("{env_id:16} {rate:8.0} steps/s (one thread, random actions)");
+        // One 240 x 240 frame of the state reached.
+        let config = EnvConfig {
+            render_mode: Some("rgb_array".into()),
+            ..EnvConfig::default()
+        };
+        let mut renderer = Rapier.make(&env_id, &config).unwrap();
+        renderer
+            .reset(Some(0), &ResetOptions::new(), &mut obs, &mut info)
+            .unwrap();
+        let start = Instant::now();
+        let frames = 5;
+        for _ in 0..frames {
+            renderer.render().unwrap().unwrap();
+        }
+        let frame_ms = start.elapsed().as_secs_f64() * 1e3 / f64::from(frames);
+        println!(
+            "{env_id:16} {rate:8.0} steps/s (one thread, random actions), {frame_ms:5.1} ms a 240x240 frame"
+        );
     }
 }
