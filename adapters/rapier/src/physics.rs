@@ -121,3 +121,22 @@ pub(crate) fn color(r: u8, g: u8, b: u8) -> u128 {
 
 /// `user_data` flag: draw this collider with a checker pattern (floors, terrain).
 pub(crate) const CHECKER: u128 = 1 << 24;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hinge_reads_the_angle_it_was_turned_by() {
+        let mut world = new_world(0.01);
+        let a = world.insert_body(RigidBodyBuilder::fixed());
+        let b = world.insert_body(RigidBodyBuilder::dynamic());
+        let hinge = hinge(&mut world, a, b, Vector::ZERO, Vector::Y, None);
+        for angle in [-3.0f32, -1.0, 0.0, 0.5, 3.1] {
+            world.bodies[b].set_rotation(Rotation::from_rotation_y(angle), false);
+            assert!((hinge.angle(&world) - angle).abs() < 1e-5, "{angle}");
+        }
+        assert!((wrap_angle(3.0 * std::f32::consts::PI) - std::f32::consts::PI).abs() < 1e-5);
+        assert!((wrap_angle(-0.5) + 0.5).abs() < 1e-6);
+    }
+}

@@ -266,3 +266,32 @@ impl Task for Ant {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn leaving_the_healthy_range_terminates() {
+        let config = EnvConfig::default();
+        let keys = config.extra_keys(ID, OPTIONS).unwrap();
+        let mut ant = Ant::new(&config, &keys).unwrap();
+        ant.reset(&mut NumpyRng::seeded(0));
+        let mut info = Info::default();
+        let result = ant.step(&[0.0; 8], &mut info);
+        assert!(!result.terminated, "a fresh ant is healthy");
+        // Lift the whole ant 2 m: above `healthy_z_range`.
+        for (_, body) in ant.world.bodies.iter_mut() {
+            if body.is_dynamic() {
+                let p = body.translation() + Vector::new(0.0, 2.0, 0.0);
+                body.set_translation(p, true);
+            }
+        }
+        let result = ant.step(&[0.0; 8], &mut info);
+        assert!(result.terminated);
+        assert_eq!(
+            info.get("reward_survive"),
+            Some(&envhub_core::InfoValue::Float(0.0))
+        );
+    }
+}

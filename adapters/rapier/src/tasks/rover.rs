@@ -321,3 +321,65 @@ impl Task for Rover {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rover(seed: u64) -> Rover {
+        let config = EnvConfig::default();
+        let keys = config.extra_keys(ID, OPTIONS).unwrap();
+        let mut rover = Rover::new(&config, &keys).unwrap();
+        rover.reset(&mut NumpyRng::seeded(seed));
+        rover
+    }
+
+    #[test]
+    fn flipping_over_terminates_with_the_penalty() {
+        let mut rover = rover(0);
+        let mut info = Info::default();
+        let upside_down = Rotation::from_rotation_x(std::f32::consts::PI);
+        let p = rover.world.bodies[rover.chassis].translation() + Vector::new(0.0, 0.5, 0.0);
+        for (_, body) in rover.world.bodies.iter_mut() {
+            if body.is_dynamic() {
+                let local = body.translation() - p;
+                body.set_position(Pose::from_parts(p + upside_down * local, upside_down), true);
+            }
+        }
+        let result = rover.step(&[0.0, 0.0], &mut info);
+        assert!(result.terminated);
+        assert!(result.reward < -5.0, "{}", result.reward);
+        assert_eq!(info.get("flipped"), Some(&InfoValue::Bool(true)));
+        assert!(!rover.is_success());
+    }
+
+    #[test]
+    fn reaching_the_goal_terminates_with_the_bonus() {
+        let mut rover = rover(1);
+        let mut info = Info::default();
+        // Put the goal under the base.
+        let p = rover.world.bodies[rover.chassis].translation();
+        rover.goal = [p.x + 0.1, p.z];
+        let result = rover.step(&[0.0, 0.0], &mut info);
+        assert!(result.terminated && rover.is_success());
+        assert!(result.reward > 5.0, "{}", result.reward);
+    }
+
+    #[test]
+    fn terrain_changes_with_the_seed_and_the_patch_sees_it() {
+        let (a, b) = (rover(0), rover(1));
+        let (ta, tb) = (a.terrain.as_ref().unwrap(), b.terrain.as_ref().unwrap());
+        assert_ne!(ta.heights, tb.heights);
+        // Flat at the start, rough away from it.
+        assert_eq!(ta.height(0.0, 0.0), 0.0);
+        let spread = ta.heights.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+        assert!(spread > 0.05, "{spread}");
+        let mut obs = vec![0.0; a.obs_dim()];
+        a.observe(&mut obs);
+        let g = &obs[9..12];
+        assert!(
+            (g[1] + 1.0).abs() < 1e-3,
+            "gravity points down in the base frame: {g:?}"
+        );
+    }
+}
