@@ -11,8 +11,9 @@
 //! - Reward: progress towards the goal (`progress_weight` × metres gained this step)
 //!   − `ctrl_cost_weight` × `|a|²`; `+goal_reward` on reaching the goal, `−flip_penalty` on
 //!   flipping over.
-//! - Terminated at the goal (the base's centre within 0.5 m of it horizontally: success) or
-//!   when the base turns over (its up axis more than ~80° from vertical).
+//! - Terminated at the goal (the base's centre within 0.5 m of it horizontally: success), when
+//!   the base turns over (its up axis more than ~80° from vertical) or when it drives off the
+//!   24 m square of terrain (penalised as a flip).
 
 use super::terrain::Terrain;
 use crate::physics::{self, color, groups};
@@ -117,6 +118,13 @@ impl Rover {
     fn is_flipped(&self) -> bool {
         let up = *self.world.bodies[self.chassis].rotation() * Vector::Y;
         up.y < FLIPPED_UP_Y
+    }
+
+    /// Whether the base has driven off the edge of the terrain.
+    fn off_terrain(&self) -> bool {
+        let p = self.world.bodies[self.chassis].translation();
+        let edge = TERRAIN_SIZE * 0.5 - 0.5;
+        p.x.abs() > edge || p.z.abs() > edge
     }
 
     fn reached(&self) -> bool {
@@ -254,19 +262,21 @@ impl Task for Rover {
         let ctrl: f64 = action.iter().map(|a| f64::from(a * a)).sum();
         let reached = self.reached();
         let flipped = self.is_flipped();
+        let off_terrain = self.off_terrain();
         let mut reward = self.progress_weight * progress - self.ctrl_weight * ctrl;
         if reached {
             reward += self.goal_reward;
-        } else if flipped {
+        } else if flipped || off_terrain {
             reward -= self.flip_penalty;
         }
         info.set_f64("reward_progress", self.progress_weight * progress);
         info.set_f64("reward_ctrl", -self.ctrl_weight * ctrl);
         info.set_f64("distance", f64::from(distance));
         info.insert("flipped", InfoValue::Bool(flipped));
+        info.insert("off_terrain", InfoValue::Bool(off_terrain));
         StepResult {
             reward,
-            terminated: reached || flipped,
+            terminated: reached || flipped || off_terrain,
         }
     }
 
@@ -363,6 +373,20 @@ mod tests {
         let result = rover.step(&[0.0, 0.0], &mut info);
         assert!(result.terminated && rover.is_success());
         assert!(result.reward > 5.0, "{}", result.reward);
+    }
+
+    #[test]
+    fn driving_off_the_terrain_terminates() {
+        let mut rover = rover(2);
+        let mut info = Info::default();
+        let shift = Vector::new(TERRAIN_SIZE * 0.5, 0.0, 0.0);
+        for (_, body) in rover.world.bodies.iter_mut() {
+            if body.is_dynamic() {
+                body.set_translation(body.translation() + shift, true);
+            }
+        }
+        assert!(rover.step(&[0.0, 0.0], &mut info).terminated);
+        assert_eq!(info.get("off_terrain"), Some(&InfoValue::Bool(true)));
     }
 
     #[test]
