@@ -5,8 +5,9 @@
 //! whatever collides is drawn exactly as it collides, and nothing beyond `rapier3d` is needed:
 //! no GPU, no windowing, no C library. Shading is Lambert with one directional light plus
 //! ambient; a collider's colour is its `user_data` (see `physics::color`), floors and terrain
-//! get a checker pattern so motion over them is visible. Colliders in no collision group (arm
-//! links) are drawn too: the query filter accepts every collider.
+//! get a checker pattern so motion over them is visible, lighter where they are higher.
+//! Colliders in no collision group (arm links, targets) are drawn too: every collider is
+//! tested.
 //!
 //! The cost is one ray per pixel and collider: 16–40 ms for the default 240 × 240 frame on a
 //! 2-core VM (`examples/rapier_speed.rs` measures it).
@@ -126,6 +127,9 @@ impl Renderer {
                             if cell.rem_euclid(2) == 0 {
                                 base = base.map(|c| c * 0.8);
                             }
+                            // Terrain: higher is lighter, so relief reads from above.
+                            let lift = (1.0 + 1.5 * p.y).clamp(0.5, 1.6);
+                            base = base.map(|c| c * lift);
                         }
                         let n = hit.normal;
                         let shade = 0.35 + 0.65 * n.dot(light).max(0.0);
