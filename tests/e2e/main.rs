@@ -9,4 +9,5 @@ mod concurrency;
 mod daemon;
 mod failures;
 mod python_worker;
+mod rapier_rollouts;
 mod rendering;

@@ -33,7 +33,7 @@ REQUIRED_FIELDS = {"id", "name", "framework", "env_id", "robot_type", "env_type"
 OPTIONAL_FIELDS = {"robot_model", "task_tags", "obs_type", "action_type", "description", "source"}
 EXTENSION_FIELDS = {"kwargs", "max_episode_steps", "asset_path", "adapter"}
 ALLOWED = {
-    "framework": {"gymnasium", "maniskill", "libero", "isaac_lab", "custom_mjcf"},
+    "framework": {"gymnasium", "maniskill", "libero", "isaac_lab", "custom_mjcf", "rapier"},
     "robot_type": {"arm", "quadruped", "biped", "dexterous_hand", "mobile_base", "custom"},
     "env_type": {"tabletop", "floor", "terrain", "aerial", "aquatic"},
     "obs_type": {"state", "image", "state+image"},

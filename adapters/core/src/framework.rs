@@ -20,6 +20,10 @@ pub const FRAMEWORKS: &[Framework] = &[
         aliases: &["mjcf", "urdf", "custom"],
     },
     Framework {
+        name: "rapier",
+        aliases: &["rapier3d"],
+    },
+    Framework {
         name: "maniskill",
         aliases: &["mani_skill", "sapien"],
     },
@@ -53,6 +57,7 @@ mod tests {
         assert_eq!(canonical_framework("isaac_gym"), Some("isaac_lab"));
         assert_eq!(canonical_framework("sapien"), Some("maniskill"));
         assert_eq!(canonical_framework("libero"), Some("libero"));
+        assert_eq!(canonical_framework("rapier3d"), Some("rapier"));
         assert_eq!(canonical_framework("bullet"), None);
     }
 }

@@ -8,6 +8,7 @@ pub fn all() -> Vec<Box<dyn EnvAdapter>> {
         Box::new(envhub_classic::ClassicControl),
         Box::new(envhub_mujoco::Mujoco::default()),
         Box::new(envhub_mujoco::CustomMjcf::default()),
+        Box::new(envhub_rapier::Rapier),
         Box::new(crate::null_env::NullAdapter),
     ]
 }
