@@ -142,12 +142,14 @@ impl Results {
     }
 }
 
-/// Runs `op` on the session and takes its results out. An env failure comes back with the
-/// results of the envs that did not fail.
+/// A failed call: the error, and for an env failure the results of the envs that did not fail.
+type Failed = Box<(HubError, Option<Results>)>;
+
+/// Runs `op` on the session and takes its results out.
 fn run(
     vec: &mut VecEnv,
     op: impl for<'a> FnOnce(&'a mut VecEnv) -> Result<Batch<'a>, HubError>,
-) -> Result<Results, (HubError, Option<Results>)> {
+) -> Result<Results, Failed> {
     let same_step = vec.autoreset_mode() == AutoresetMode::SameStep;
     match op(vec) {
         Ok(batch) => Ok(Results::of(&batch, batch.lease(), same_step)),
@@ -155,11 +157,14 @@ fn run(
             let partial = vec
                 .last_batch()
                 .map(|b| Results::of(&b, b.lease(), same_step));
-            Err((e, partial))
+            Err(Box::new((e, partial)))
         }
-        Err(e) => Err((e, None)),
+        Err(e) => Err(Box::new((e, None))),
     }
 }
+
+/// One env's results as Python values: `(obs, reward, terminated, truncated, info)`.
+type Single<'py> = (Bound<'py, PyAny>, f64, bool, bool, Bound<'py, PyAny>);
 
 /// A batch of envs in worker processes (the compiled half of `envhub.VectorEnv` and
 /// `envhub.Env`).
@@ -352,7 +357,10 @@ impl Session {
     ) -> PyResult<Results> {
         self.check_pid(py)?;
         py.detach(|| run(&mut self.lock().vec, op))
-            .map_err(|(e, partial)| self.error(py, e, partial))
+            .map_err(|failed| {
+                let (e, partial) = *failed;
+                self.error(py, e, partial)
+            })
     }
 
     /// Actions as bytes, checked against the action space's dtype.
@@ -489,11 +497,7 @@ impl Session {
     }
 
     /// `(obs, reward, terminated, truncated, info)` of one env.
-    fn single<'py>(
-        &self,
-        py: Python<'py>,
-        mut r: Results,
-    ) -> PyResult<(Bound<'py, PyAny>, f64, bool, bool, Bound<'py, PyAny>)> {
+    fn single<'py>(&self, py: Python<'py>, mut r: Results) -> PyResult<Single<'py>> {
         let info = r.infos.take().and_then(|mut i| i.pop());
         let (reward, terminated, truncated) = match &r.place {
             Place::Lent {
