@@ -168,25 +168,55 @@ type Single<'py> = (Bound<'py, PyAny>, f64, bool, bool, Bound<'py, PyAny>);
 
 /// A batch of envs in worker processes (the compiled half of `envhub.VectorEnv` and
 /// `envhub.Env`).
+///
+/// What does not change during a session is plain read-only attributes.
 #[pyclass(name = "Session", module = "envhub._envhub", frozen)]
 pub(crate) struct Session {
     state: Mutex<State>,
+    /// Pid of the process that made the session.
+    #[pyo3(get, name = "owner_pid")]
     pid: u32,
     /// The exception (KeyboardInterrupt) that interrupted the last wait, to re-raise.
     interrupted: Arc<Mutex<Option<PyErr>>>,
     closed: AtomicBool,
+    /// Registry id.
+    #[pyo3(get)]
     id: String,
+    /// Adapter that runs the envs.
+    #[pyo3(get)]
     adapter: String,
+    /// The framework's env id.
+    #[pyo3(get)]
     env_id: String,
+    /// Number of envs.
+    #[pyo3(get)]
     num_envs: usize,
+    /// Number of worker processes.
+    #[pyo3(get)]
     num_workers: usize,
+    /// Worker pids, in env order.
+    #[pyo3(get)]
     worker_pids: Vec<u32>,
+    /// The episode limit applied, if any.
+    #[pyo3(get)]
     max_episode_steps: Option<u32>,
+    /// Frames per second of the envs' rendering (Gymnasium's `metadata["render_fps"]`).
+    #[pyo3(get)]
     render_fps: Option<f64>,
+    /// `next_step`, `same_step` or `disabled`.
+    #[pyo3(get)]
     autoreset_mode: String,
+    /// Observation space of one env, as JSON.
+    #[pyo3(get, name = "observation_space_json")]
     observation_space: String,
+    /// Action space of one env, as JSON.
+    #[pyo3(get, name = "action_space_json")]
     action_space: String,
+    /// Leaves of the observation space with their byte offsets, as JSON.
+    #[pyo3(get, name = "obs_leaves_json")]
     obs_leaves: String,
+    /// Leaves of the action space with their byte offsets, as JSON.
+    #[pyo3(get, name = "action_leaves_json")]
     action_leaves: String,
     obs: ArrayLayout,
     act: ArrayLayout,
@@ -677,90 +707,5 @@ impl Session {
     #[getter]
     fn obs_bytes_copied(&self, py: Python<'_>) -> u64 {
         py.detach(|| self.lock().vec.obs_bytes_copied())
-    }
-
-    /// Registry id.
-    #[getter]
-    fn id(&self) -> &str {
-        &self.id
-    }
-
-    /// Adapter that runs the envs.
-    #[getter]
-    fn adapter(&self) -> &str {
-        &self.adapter
-    }
-
-    /// The framework's env id.
-    #[getter]
-    fn env_id(&self) -> &str {
-        &self.env_id
-    }
-
-    /// Number of envs.
-    #[getter]
-    fn num_envs(&self) -> usize {
-        self.num_envs
-    }
-
-    /// Number of worker processes.
-    #[getter]
-    fn num_workers(&self) -> usize {
-        self.num_workers
-    }
-
-    /// Worker pids, in env order.
-    #[getter]
-    fn worker_pids(&self) -> Vec<u32> {
-        self.worker_pids.clone()
-    }
-
-    /// Pid of the process that made the session.
-    #[getter]
-    fn owner_pid(&self) -> u32 {
-        self.pid
-    }
-
-    /// The episode limit applied, if any.
-    #[getter]
-    fn max_episode_steps(&self) -> Option<u32> {
-        self.max_episode_steps
-    }
-
-    /// Frames per second of the envs' rendering (Gymnasium's `metadata["render_fps"]`), if
-    /// the env says.
-    #[getter]
-    fn render_fps(&self) -> Option<f64> {
-        self.render_fps
-    }
-
-    /// `next_step`, `same_step` or `disabled`.
-    #[getter]
-    fn autoreset_mode(&self) -> &str {
-        &self.autoreset_mode
-    }
-
-    /// Observation space of one env, as JSON.
-    #[getter]
-    fn observation_space_json(&self) -> &str {
-        &self.observation_space
-    }
-
-    /// Action space of one env, as JSON.
-    #[getter]
-    fn action_space_json(&self) -> &str {
-        &self.action_space
-    }
-
-    /// Leaves of the observation space with their byte offsets, as JSON.
-    #[getter]
-    fn obs_leaves_json(&self) -> &str {
-        &self.obs_leaves
-    }
-
-    /// Leaves of the action space with their byte offsets, as JSON.
-    #[getter]
-    fn action_leaves_json(&self) -> &str {
-        &self.action_leaves
     }
 }
