@@ -35,3 +35,8 @@ pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
 /// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
 pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
+
+/// `1` lists the test adapters (`null`: `Null-v0`, an env that does no work and fails on
+/// request) in the catalog, so registry entries can route to them; unset, they stay out of
+/// users' sight, and only `envhub bench` and tests that name them directly use them.
+pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";

@@ -6,6 +6,7 @@ use std::process::Command;
 fn envhub(args: &[&str], vars: &[(&str, &str)]) -> (i32, String, String) {
     let out = Command::new(binary("envhub"))
         .args(args)
+        .env_remove("ENVHUB_TEST_ADAPTERS")
         .envs(vars.iter().copied())
         .env(
             "ENVHUB_NAMESPACE",
@@ -68,6 +69,39 @@ fn adapters_lists_availability() {
             .iter()
             .any(|e| e == "CartPole-v1")
     );
+}
+
+/// Names of the adapters in a JSON list of them.
+fn adapter_names(json: &str) -> Vec<String> {
+    let v: serde_json::Value = serde_json::from_str(json).unwrap();
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["name"].as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn the_test_adapter_is_listed_only_when_asked_for() {
+    let (code, out, err) = envhub(&["adapters", "--all", "--json"], &[]);
+    assert_eq!(code, 0, "{err}");
+    let names = adapter_names(&out);
+    assert!(names.iter().any(|n| n == "classic_control"), "{names:?}");
+    assert!(!names.iter().any(|n| n == "null"), "{names:?}");
+    let describe = Command::new(binary("envhub-worker"))
+        .arg("describe")
+        .env_remove("ENVHUB_TEST_ADAPTERS")
+        .output()
+        .unwrap();
+    let names = adapter_names(&String::from_utf8_lossy(&describe.stdout));
+    assert!(!names.iter().any(|n| n == "null"), "{names:?}");
+
+    let (code, out, err) = envhub(
+        &["adapters", "--all", "--json"],
+        &[("ENVHUB_TEST_ADAPTERS", "1")],
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(adapter_names(&out).iter().any(|n| n == "null"));
 }
 
 #[test]

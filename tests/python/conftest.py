@@ -25,7 +25,9 @@ os.environ.pop("ENVHUB_HUB", None)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 # A registry entry for the `null` adapter: an env that does no work and misbehaves on
-# request (`sleep_ms`, `exit_after`, `error_after`), for failure tests.
+# request (`sleep_ms`, `exit_after`, `error_after`), for failure tests. A test adapter: the
+# catalog lists it (so the entry routes) only with ENVHUB_TEST_ADAPTERS=1.
+os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
 NULL_REGISTRY = textwrap.dedent(
     """\
     environments:

@@ -19,7 +19,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print the adapters this binary hosts, with availability, as JSON.
+    /// Print the adapters this binary hosts, with availability, as JSON (the test adapter
+    /// `null` only with ENVHUB_TEST_ADAPTERS=1).
     Describe,
     /// Serve a job (JSON) over shared memory until closed or the owner exits.
     Serve {
@@ -63,7 +64,7 @@ fn main() -> ExitCode {
 }
 
 fn describe() -> anyhow::Result<()> {
-    let list: Vec<serde_json::Value> = adapters::all()
+    let list: Vec<serde_json::Value> = adapters::listed()
         .iter()
         .map(|a| {
             serde_json::json!({
