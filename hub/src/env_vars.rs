@@ -40,3 +40,8 @@ pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
 /// request) in the catalog, so registry entries can route to them; unset, they stay out of
 /// users' sight, and only `envhub bench` and tests that name them directly use them.
 pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";
+
+/// Seconds that asking a worker what it hosts (`envhub-worker describe`,
+/// `python -m envhub.worker describe`) may take before it is killed and reported as hung
+/// (default 30): an adapter module that blocks at import cannot stall the hub.
+pub const ENVHUB_DESCRIBE_TIMEOUT: &str = "ENVHUB_DESCRIBE_TIMEOUT";

@@ -92,6 +92,9 @@ impl Launcher {
     }
 }
 
+/// How long a worker that reported an error may take to exit before it is killed.
+const EXIT_AFTER_ERROR: Duration = Duration::from_secs(5);
+
 /// Spawns `envhub-worker serve` (or `python -m envhub.worker serve` for a Python-hosted
 /// adapter, also hosting `user`'s adapters) for `job` and reads its ready line.
 pub(crate) fn launch_local(
@@ -125,7 +128,15 @@ pub(crate) fn launch_local(
     match read_reply(&mut child, start_timeout) {
         Ok(WorkerReply::Ready(spec)) => Ok((child, spec)),
         Ok(WorkerReply::Error(message)) => {
-            let _ = child.wait();
+            // It exits once it has said why; one that hangs on the way out (a simulator's
+            // teardown, a Python exit handler) is killed rather than waited on.
+            if crate::bounded::wait_within(&mut child, EXIT_AFTER_ERROR).is_none() {
+                tracing::warn!(
+                    pid,
+                    "the worker did not exit within {} of reporting an error; killed it",
+                    crate::bounded::seconds(EXIT_AFTER_ERROR)
+                );
+            }
             Err(HubError::MakeFailed(message))
         }
         Err(why) => {

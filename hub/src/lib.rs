@@ -5,6 +5,7 @@
 //! memory. It is small (tens to hundreds of entries), so search is a linear scan that keeps
 //! file order as the tie-breaker, which makes results predictable for people.
 
+mod bounded;
 mod catalog;
 mod daemon;
 mod daemon_client;
