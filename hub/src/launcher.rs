@@ -7,8 +7,9 @@ use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
 use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
+use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock, mpsc};
 use std::time::Duration;
 
 /// Who starts workers.
@@ -112,18 +113,26 @@ pub(crate) fn launch_local(
             crate::python_host::python_interpreter(),
         ),
     };
-    let mut child = command
+    command
         .arg("serve")
         .arg("--job")
         .arg(serde_json::to_string(job).expect("a job serializes"))
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| HubError::WorkerBinary {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
+        // Its own process group: a Ctrl-C in the terminal goes to the client, which closes
+        // its sessions, and never kills a worker mid-episode.
+        .process_group(0);
+    let parent = std::process::id();
+    // SAFETY: the closure runs in the forked child before exec and only makes the system
+    // calls of `die_with_parent`, which allocates nothing and takes no lock.
+    unsafe {
+        command.pre_exec(move || envhub_shm::die_with_parent(parent));
+    }
+    let mut child = spawn(command).map_err(|e| HubError::WorkerBinary {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
     let pid = child.id();
     match read_reply(&mut child, start_timeout) {
         Ok(WorkerReply::Ready(spec)) => Ok((child, spec)),
@@ -150,6 +159,40 @@ pub(crate) fn launch_local(
             })
         }
     }
+}
+
+/// Spawns `command` on the spawner thread, one thread that lives as long as the process.
+///
+/// Workers die with their parent through the kernel's parent-death signal (see
+/// [`envhub_shm::die_with_parent`]), which fires when the *thread* that forked the child
+/// ends; sessions start their workers from short-lived threads (one per worker, and Python
+/// users make envs in threads that end), so no worker is forked from those.
+fn spawn(command: Command) -> std::io::Result<Child> {
+    type Request = (Command, mpsc::Sender<std::io::Result<Child>>);
+    static SPAWNER: OnceLock<Option<mpsc::Sender<Request>>> = OnceLock::new();
+    let spawner = SPAWNER.get_or_init(|| {
+        let (tx, rx) = mpsc::channel::<Request>();
+        std::thread::Builder::new()
+            .name("envhub-spawner".into())
+            .spawn(move || {
+                for (mut command, reply) in rx {
+                    let _ = reply.send(command.spawn());
+                }
+            })
+            .ok()
+            .map(|_| tx)
+    });
+    let Some(spawner) = spawner else {
+        return Err(std::io::Error::other(
+            "cannot start the thread that spawns workers",
+        ));
+    };
+    let (tx, rx) = mpsc::channel();
+    spawner
+        .send((command, tx))
+        .map_err(|_| std::io::Error::other("the thread that spawns workers is gone"))?;
+    rx.recv()
+        .map_err(|_| std::io::Error::other("the thread that spawns workers is gone"))?
 }
 
 /// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.

@@ -9,3 +9,4 @@ mod daemon;
 mod failures;
 mod python_worker;
 mod rendering;
+mod worker_lifetime;
