@@ -116,9 +116,9 @@ rust-test: setup py-install
 	# End-to-end tests start the real binaries: build them first.
 	$(CARGO) build --workspace --bins $(FEATURES)
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) nextest run --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) test --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) test --workspace $(FEATURES); \
 	fi
 	$(CARGO) test --workspace --doc $(FEATURES)
 
@@ -132,7 +132,7 @@ py-install: build
 	mv -f py-client/python/envhub/bin/envhub-worker.tmp py-client/python/envhub/bin/envhub-worker
 
 py-test: py-install
-	ENVHUB_PY_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 
 test: lint rust-test py-test
 

@@ -32,6 +32,11 @@ pub const ENVHUB_SKIP_PYTHON_TESTS: &str = "ENVHUB_SKIP_PYTHON_TESTS";
 /// fail instead of skipping when it is missing; `make rust-test` and `make py-test` set it.
 pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 
+/// Set (non-empty) to make tests that need the MuJoCo adapter (a worker built with its
+/// `mujoco` feature) fail instead of skipping when it is unavailable; `make rust-test` and
+/// `make py-test` set it.
+pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
+
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
 /// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
 pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
