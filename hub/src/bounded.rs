@@ -7,15 +7,37 @@ use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+/// Why [`output_within`] has no output.
+#[derive(Debug)]
+pub(crate) enum RunError {
+    /// The command could not be started.
+    Start(std::io::Error),
+    /// It was still running at the bound, so it was killed.
+    Hung(Duration),
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Start(e) => write!(f, "{e}"),
+            RunError::Hung(bound) => write!(
+                f,
+                "it did not finish within {}, so it was killed",
+                seconds(*bound)
+            ),
+        }
+    }
+}
+
 /// Runs `command` to the end as [`Command::output`] does, but kills it if it has not finished
-/// within `timeout`. The error says what happened (it could not start, or it hung).
-pub(crate) fn output_within(command: &mut Command, timeout: Duration) -> Result<Output, String> {
+/// within `timeout`.
+pub(crate) fn output_within(command: &mut Command, timeout: Duration) -> Result<Output, RunError> {
     let mut child = command
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .map_err(|e| e.to_string())?;
+        .map_err(RunError::Start)?;
     // Read both pipes on their own threads, so a chatty child never blocks on a full pipe.
     let read = |pipe: Option<Box<dyn Read + Send>>| {
         let (tx, rx) = mpsc::channel();
@@ -32,10 +54,7 @@ pub(crate) fn output_within(command: &mut Command, timeout: Duration) -> Result<
     let stderr = read(child.stderr.take().map(|p| Box::new(p) as _));
     let deadline = Instant::now() + timeout;
     let Some(status) = wait_within(&mut child, timeout) else {
-        return Err(format!(
-            "it did not finish within {}, so it was killed",
-            seconds(timeout)
-        ));
+        return Err(RunError::Hung(timeout));
     };
     // A grandchild may still hold the pipes open: take what came until the deadline.
     let collect = |rx: mpsc::Receiver<Vec<u8>>| {
@@ -90,7 +109,11 @@ mod tests {
             "{:?}",
             start.elapsed()
         );
-        assert!(err.contains("did not finish within 0.2 s"), "{err}");
+        assert!(matches!(err, RunError::Hung(_)), "{err:?}");
+        assert!(
+            err.to_string().contains("did not finish within 0.2 s"),
+            "{err}"
+        );
     }
 
     #[test]

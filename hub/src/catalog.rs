@@ -10,7 +10,7 @@
 //! lock is held while a worker is asked, so callers that need another catalog, or one already
 //! known, never wait behind it.
 
-use crate::bounded::{self, seconds};
+use crate::bounded::{self, RunError, seconds};
 use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
 use crate::error::HubError;
 use crate::python_host::{self, UserAdapters};
@@ -149,14 +149,21 @@ pub(crate) fn adapters_with(user: &UserAdapters) -> Result<Arc<[AdapterInfo]>, H
             .find(|(key, _)| key == user)
             .map(|(_, list)| list.clone())
     };
-    if let Some(list) = known(&WITH_USER.get_or_compute(Vec::new)) {
-        return Ok(list);
-    }
+    let generation = {
+        let state = WITH_USER.lock();
+        if let Some(list) = state.0.as_deref().and_then(known) {
+            return Ok(list);
+        }
+        state.1
+    };
     // Asked without holding the cache's lock, as for `adapters`.
     let mut list = native_adapters()?.to_vec();
     list.extend(python(user));
     let list: Arc<[AdapterInfo]> = list.into();
     let mut state = WITH_USER.lock();
+    if state.1 != generation {
+        return Ok(list); // refreshed meanwhile: not kept, as in `Cache`
+    }
     let sets = state.0.get_or_insert_with(Vec::new);
     if let Some(theirs) = known(sets) {
         return Ok(theirs);
@@ -225,7 +232,7 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
         .map(|v| v.to_string_lossy().split(',').map(String::from).collect())
         .unwrap_or_default();
     let out = bounded::output_within(command.arg("describe"), timeout);
-    let hung = matches!(&out, Err(why) if why.contains("did not finish"));
+    let hung = matches!(out, Err(RunError::Hung(_)));
     let failure = match out {
         Ok(out) if out.status.success() => {
             match serde_json::from_slice::<Vec<AdapterInfo>>(&out.stdout) {
@@ -243,7 +250,7 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
             "{why} (it imports the user adapters {}: one of them may block at import)",
             hosted.join(", ")
         ),
-        Err(why) => why,
+        Err(why) => why.to_string(),
     };
     let hint = if hung {
         format!(
