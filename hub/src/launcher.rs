@@ -9,7 +9,7 @@ use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, OnceLock, mpsc};
+use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
 
 /// Who starts workers.
@@ -169,30 +169,29 @@ pub(crate) fn launch_local(
 /// users make envs in threads that end), so no worker is forked from those.
 fn spawn(command: Command) -> std::io::Result<Child> {
     type Request = (Command, mpsc::Sender<std::io::Result<Child>>);
-    static SPAWNER: OnceLock<Option<mpsc::Sender<Request>>> = OnceLock::new();
-    let spawner = SPAWNER.get_or_init(|| {
-        let (tx, rx) = mpsc::channel::<Request>();
-        std::thread::Builder::new()
-            .name("envhub-spawner".into())
-            .spawn(move || {
-                for (mut command, reply) in rx {
-                    let _ = reply.send(command.spawn());
-                }
-            })
-            .ok()
-            .map(|_| tx)
-    });
-    let Some(spawner) = spawner else {
-        return Err(std::io::Error::other(
-            "cannot start the thread that spawns workers",
-        ));
-    };
+    /// The spawner's channel, with the pid of the process it belongs to: a forked child
+    /// (Python's `multiprocessing`) inherits the channel but not the thread, and starts its own.
+    static SPAWNER: Mutex<Option<(u32, mpsc::Sender<Request>)>> = Mutex::new(None);
+    let gone = || std::io::Error::other("the thread that spawns workers is gone");
     let (tx, rx) = mpsc::channel();
-    spawner
-        .send((command, tx))
-        .map_err(|_| std::io::Error::other("the thread that spawns workers is gone"))?;
-    rx.recv()
-        .map_err(|_| std::io::Error::other("the thread that spawns workers is gone"))?
+    {
+        let mut spawner = SPAWNER.lock().unwrap_or_else(|e| e.into_inner());
+        let pid = std::process::id();
+        if spawner.as_ref().is_none_or(|(owner, _)| *owner != pid) {
+            let (requests, incoming) = mpsc::channel::<Request>();
+            std::thread::Builder::new()
+                .name("envhub-spawner".into())
+                .spawn(move || {
+                    for (mut command, reply) in incoming {
+                        let _ = reply.send(command.spawn());
+                    }
+                })?;
+            *spawner = Some((pid, requests));
+        }
+        let (_, requests) = spawner.as_ref().ok_or_else(gone)?;
+        requests.send((command, tx)).map_err(|_| gone())?;
+    }
+    rx.recv().map_err(|_| gone())?
 }
 
 /// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.
