@@ -11,7 +11,7 @@
 //! known, never wait behind it.
 
 use crate::bounded::{self, RunError, seconds};
-use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
+use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT, ENVHUB_TEST_ADAPTERS};
 use crate::error::HubError;
 use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
@@ -97,7 +97,25 @@ impl<T: Clone> Cache<T> {
 }
 
 static CATALOG: Cache<Cached> = Cache::new();
-static NATIVE: Cache<Cached> = Cache::new();
+static NATIVE: Cache<Result<Native, (String, String)>> = Cache::new();
+
+/// The Rust worker's adapters: those users see, and its test adapters (`null`), which the
+/// catalog lists only with `ENVHUB_TEST_ADAPTERS=1` but which run whenever a job names one
+/// (`envhub bench`), without asking Python whether it hosts them.
+#[derive(Clone)]
+struct Native {
+    shown: Arc<[AdapterInfo]>,
+    testing: Arc<[AdapterInfo]>,
+}
+
+/// One entry of `envhub-worker describe`, which marks test adapters.
+#[derive(Deserialize)]
+struct Described {
+    #[serde(flatten)]
+    info: AdapterInfo,
+    #[serde(default)]
+    testing: bool,
+}
 
 /// Catalogs with a client's user adapters, most recent last. Bounded, so a daemon that
 /// serves many distinct sets asks again rather than growing.
@@ -182,18 +200,30 @@ pub(crate) fn native_adapters() -> Result<Arc<[AdapterInfo]>, HubError> {
 }
 
 fn native_cached() -> Cached {
-    NATIVE.get_or_compute(|| Ok(native()?.into()))
+    let native = NATIVE.get_or_compute(native)?;
+    if std::env::var(ENVHUB_TEST_ADAPTERS).is_ok_and(|v| v == "1") {
+        return Ok(native
+            .shown
+            .iter()
+            .chain(native.testing.iter())
+            .cloned()
+            .collect());
+    }
+    Ok(native.shown)
 }
 
 fn unpack(result: Cached) -> Result<Arc<[AdapterInfo]>, HubError> {
     result.map_err(|(path, reason)| HubError::WorkerBinary { path, reason })
 }
 
-fn native() -> Result<Vec<AdapterInfo>, (String, String)> {
+fn native() -> Result<Native, (String, String)> {
     let path = worker_binary();
     let shown = path.display().to_string();
     let timeout = describe_timeout();
-    let out = bounded::output_within(std::process::Command::new(&path).arg("describe"), timeout)
+    let mut command = std::process::Command::new(&path);
+    // Test adapters too, marked: whether they are shown is this process's choice.
+    command.arg("describe").env(ENVHUB_TEST_ADAPTERS, "1");
+    let out = bounded::output_within(&mut command, timeout)
         .map_err(|why| (shown.clone(), format!("`{shown} describe`: {why}")))?;
     if !out.status.success() {
         // Typically the loader failing on a missing library: say which.
@@ -206,8 +236,15 @@ fn native() -> Result<Vec<AdapterInfo>, (String, String)> {
             ),
         ));
     }
-    serde_json::from_slice(&out.stdout)
-        .map_err(|e| (shown, format!("unreadable `describe` output: {e}")))
+    let described: Vec<Described> = serde_json::from_slice(&out.stdout)
+        .map_err(|e| (shown, format!("unreadable `describe` output: {e}")))?;
+    let (testing, users): (Vec<Described>, Vec<Described>) =
+        described.into_iter().partition(|d| d.testing);
+    let infos = |list: Vec<Described>| list.into_iter().map(|d| d.info).collect();
+    Ok(Native {
+        shown: infos(users),
+        testing: infos(testing),
+    })
 }
 
 fn last_line(bytes: &[u8]) -> String {
@@ -285,9 +322,9 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
 /// unknown).
 pub(crate) fn host_of(name: &str, user: &UserAdapters) -> Host {
     let find = |list: &[AdapterInfo]| list.iter().find(|a| a.name == name).map(|a| a.host);
-    native_adapters()
-        .ok()
-        .and_then(|list| find(&list))
+    let native = NATIVE.get_or_compute(native).ok();
+    native
+        .and_then(|n| find(&n.shown).or_else(|| find(&n.testing)))
         .or_else(|| adapters_with(user).ok().and_then(|list| find(&list)))
         .unwrap_or_default()
 }

@@ -106,6 +106,23 @@ fn the_test_adapter_is_listed_only_when_asked_for() {
 
 #[test]
 fn bench_json_has_every_figure() {
+    // An interpreter that leaves a mark when started as the Python worker: the bench of a
+    // native env (and of the test adapter it times round trips with) must never start one
+    // to ask what it hosts.
+    let dir = std::env::temp_dir().join(format!("e2e-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (python, mark) = (dir.join("python"), dir.join("started"));
+    std::fs::write(
+        &python,
+        format!(
+            "#!/bin/sh\ncase \"$*\" in *envhub.worker*) touch '{}';; esac\nexit 1\n",
+            mark.display()
+        ),
+    )
+    .unwrap();
+    let mut perms = std::fs::metadata(&python).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&python, perms).unwrap();
     let (code, out, err) = envhub(
         &[
             "bench",
@@ -118,9 +135,12 @@ fn bench_json_has_every_figure() {
             "500",
             "--json",
         ],
-        &[],
+        &[("ENVHUB_PYTHON", python.to_str().unwrap())],
     );
+    let started = mark.exists();
+    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(code, 0, "{err}");
+    assert!(!started, "the bench started the Python worker");
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     for key in [
         "hub_steps_per_sec",

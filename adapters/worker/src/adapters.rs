@@ -30,6 +30,12 @@ pub fn listed() -> Vec<Box<dyn EnvAdapter>> {
     list
 }
 
+/// Whether `name` is a test adapter (`describe` marks them, so the hub can keep them out of
+/// its catalog while still launching them).
+pub fn is_testing(name: &str) -> bool {
+    testing().iter().any(|a| a.name() == name)
+}
+
 /// The adapter named `name`, test adapters included.
 pub fn by_name(name: &str) -> Option<Box<dyn EnvAdapter>> {
     all()

@@ -67,14 +67,18 @@ fn describe() -> anyhow::Result<()> {
     let list: Vec<serde_json::Value> = adapters::listed()
         .iter()
         .map(|a| {
-            serde_json::json!({
+            let mut entry = serde_json::json!({
                 "name": a.name(),
                 "frameworks": a.frameworks(),
                 "requires": a.requires(),
                 "description": a.description(),
                 "availability": a.availability(),
                 "envs": a.list_envs(),
-            })
+            });
+            if adapters::is_testing(a.name()) {
+                entry["testing"] = true.into();
+            }
+            entry
         })
         .collect();
     println!("{}", serde_json::to_string(&list)?);
