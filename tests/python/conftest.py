@@ -54,6 +54,17 @@ def import_envhub():
     return envhub
 
 
+def mujoco_or_skip(envhub) -> None:
+    """A skip when envhub's MuJoCo adapter cannot run here (a worker built without it), or a
+    failure under `ENVHUB_MUJOCO_REQUIRED` (as `make py-test` sets, so in CI)."""
+    if "mujoco" in envhub.AdapterRegistry().list_available():
+        return
+    message = "envhub's MuJoCo adapter is not available here"
+    if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
+        pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
+    pytest.skip(message)
+
+
 @pytest.fixture
 def null_registry(tmp_path: Path) -> str:
     """A registry file with `null-env`, plus the built-in catalog."""

@@ -4,27 +4,16 @@ the same double (a demonstration or a replay needs the exact state)."""
 
 from __future__ import annotations
 
-import os
-
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub
+from conftest import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 
 
-def _mujoco_or_skip() -> None:
-    if "mujoco" in envhub.AdapterRegistry().list_available():
-        return
-    message = "envhub's MuJoCo adapter is not available here"
-    if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
-        pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
-    pytest.skip(message)
-
-
 def test_half_cheetah_from_gymnasiums_state_follows_it_bit_for_bit():
-    _mujoco_or_skip()
+    mujoco_or_skip(envhub)
     ref = gymnasium.make("HalfCheetah-v5")
     ours = envhub.make("mujoco-half-cheetah")
     try:
