@@ -123,9 +123,9 @@ fmt:
 # optimised in every profile anyway), and end-to-end tests start the release binaries.
 rust-test: setup py-install
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
 	fi
 	$(CARGO) test $(PROFILE) --workspace --doc $(FEATURES)
 
@@ -145,7 +145,7 @@ py-install: build
 	mv -f py-client/python/envhub/bin/envhub-worker.tmp py-client/python/envhub/bin/envhub-worker
 
 py-test: py-install
-	ENVHUB_PY_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 
 test: lint rust-test py-test
 

@@ -4,13 +4,21 @@
 //! the Python worker (`python -m envhub.worker describe`) once per process and keeps the
 //! answer; [`refresh_adapters`] asks again (after a Python adapter is registered). A hub
 //! daemon also describes each client's own user adapters, once per distinct set.
+//!
+//! A `describe` that hangs (an adapter module that blocks at import) is killed after
+//! `ENVHUB_DESCRIBE_TIMEOUT`, and the catalog says which command hung and for how long. No
+//! lock is held while a worker is asked, so callers that need another catalog, or one already
+//! known, never wait behind it.
 
+use crate::bounded::{self, RunError, seconds};
+use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT, ENVHUB_TEST_ADAPTERS};
 use crate::error::HubError;
 use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
 use envhub_core::Availability;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 /// Which worker process hosts an adapter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -43,84 +51,180 @@ pub struct AdapterInfo {
     pub host: Host,
 }
 
-type Cached = Result<&'static [AdapterInfo], (String, String)>;
+type Cached = Result<Arc<[AdapterInfo]>, (String, String)>;
 
-static CATALOG: Mutex<Option<Cached>> = Mutex::new(None);
-static NATIVE: Mutex<Option<Cached>> = Mutex::new(None);
+/// A value computed at most once per generation, without holding the lock while computing:
+/// asking a worker takes up to [`describe_timeout`], and callers that want an answer already
+/// known (or another catalog) must not wait behind it. Callers that ask at the same time each
+/// compute; the first to finish fills the cache, and the others use what it stored.
+struct Cache<T> {
+    state: Mutex<(Option<T>, u64)>,
+}
+
+impl<T: Clone> Cache<T> {
+    const fn new() -> Cache<T> {
+        Cache {
+            state: Mutex::new((None, 0)),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, (Option<T>, u64)> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn get_or_compute(&self, compute: impl FnOnce() -> T) -> T {
+        let generation = {
+            let state = self.lock();
+            if let Some(value) = &state.0 {
+                return value.clone();
+            }
+            state.1
+        };
+        let value = compute();
+        let mut state = self.lock();
+        if state.1 != generation {
+            // Cleared meanwhile: this answer may predate what cleared it; do not keep it.
+            return value;
+        }
+        state.0.get_or_insert(value).clone()
+    }
+
+    fn clear(&self) {
+        let mut state = self.lock();
+        state.0 = None;
+        state.1 += 1;
+    }
+}
+
+static CATALOG: Cache<Cached> = Cache::new();
+static NATIVE: Cache<Result<Native, (String, String)>> = Cache::new();
+
+/// The Rust worker's adapters: those users see, and its test adapters (`null`), which the
+/// catalog lists only with `ENVHUB_TEST_ADAPTERS=1` but which run whenever a job names one
+/// (`envhub bench`), without asking Python whether it hosts them.
+#[derive(Clone)]
+struct Native {
+    shown: Arc<[AdapterInfo]>,
+    testing: Arc<[AdapterInfo]>,
+}
+
+/// One entry of `envhub-worker describe`, which marks test adapters.
+#[derive(Deserialize)]
+struct Described {
+    #[serde(flatten)]
+    info: AdapterInfo,
+    #[serde(default)]
+    testing: bool,
+}
 
 /// Catalogs with a client's user adapters, most recent last. Bounded, so a daemon that
 /// serves many distinct sets asks again rather than growing.
-static WITH_USER: Mutex<Vec<(UserAdapters, Arc<[AdapterInfo]>)>> = Mutex::new(Vec::new());
+static WITH_USER: Cache<Vec<(UserAdapters, Arc<[AdapterInfo]>)>> = Cache::new();
 const WITH_USER_CAPACITY: usize = 16;
+
+/// How long a `describe` may take before it is killed and reported as hung
+/// (`ENVHUB_DESCRIBE_TIMEOUT`, seconds; default 30).
+fn describe_timeout() -> Duration {
+    const DEFAULT: Duration = Duration::from_secs(30);
+    let Ok(text) = std::env::var(ENVHUB_DESCRIBE_TIMEOUT) else {
+        return DEFAULT;
+    };
+    match text.trim().parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 => Duration::from_secs_f64(s),
+        _ => {
+            tracing::warn!(
+                "ignoring {ENVHUB_DESCRIBE_TIMEOUT}=`{text}`: not a positive number of seconds; using {}",
+                seconds(DEFAULT)
+            );
+            DEFAULT
+        }
+    }
+}
 
 /// Forgets the catalog, so the next [`adapters`] call asks the workers again.
 pub fn refresh_adapters() {
-    *CATALOG.lock().unwrap_or_else(|e| e.into_inner()) = None;
-    WITH_USER.lock().unwrap_or_else(|e| e.into_inner()).clear();
+    CATALOG.clear();
+    WITH_USER.clear();
 }
 
 /// Every adapter, asked of the worker binary and the Python worker once per process.
-pub fn adapters() -> Result<&'static [AdapterInfo], HubError> {
-    let mut cached = CATALOG.lock().unwrap_or_else(|e| e.into_inner());
-    let result = cached.get_or_insert_with(|| {
+pub(crate) fn adapters() -> Result<Arc<[AdapterInfo]>, HubError> {
+    unpack(CATALOG.get_or_compute(|| {
         let mut list = native_cached()?.to_vec();
         list.extend(python(&UserAdapters::default()));
-        // Leaked once per (re)load: the catalog is small and reloaded only on registration.
-        Ok(&*Box::leak(list.into_boxed_slice()))
-    });
-    unpack(result)
+        Ok(list.into())
+    }))
 }
 
 /// Every adapter, with `user`'s adapters hosted beside this process's own (the catalog of
 /// [`adapters`] when `user` is empty).
 pub(crate) fn adapters_with(user: &UserAdapters) -> Result<Arc<[AdapterInfo]>, HubError> {
     if user.is_empty() {
-        return Ok(adapters()?.into());
+        return adapters();
     }
-    let mut cached = WITH_USER.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some((_, list)) = cached.iter().find(|(key, _)| key == user) {
-        return Ok(list.clone());
-    }
+    let known = |sets: &[(UserAdapters, Arc<[AdapterInfo]>)]| {
+        sets.iter()
+            .find(|(key, _)| key == user)
+            .map(|(_, list)| list.clone())
+    };
+    let generation = {
+        let state = WITH_USER.lock();
+        if let Some(list) = state.0.as_deref().and_then(known) {
+            return Ok(list);
+        }
+        state.1
+    };
+    // Asked without holding the cache's lock, as for `adapters`.
     let mut list = native_adapters()?.to_vec();
     list.extend(python(user));
     let list: Arc<[AdapterInfo]> = list.into();
-    if cached.len() == WITH_USER_CAPACITY {
-        cached.remove(0);
+    let mut state = WITH_USER.lock();
+    if state.1 != generation {
+        return Ok(list); // refreshed meanwhile: not kept, as in `Cache`
     }
-    cached.push((user.clone(), list.clone()));
+    let sets = state.0.get_or_insert_with(Vec::new);
+    if let Some(theirs) = known(sets) {
+        return Ok(theirs);
+    }
+    if sets.len() == WITH_USER_CAPACITY {
+        sets.remove(0);
+    }
+    sets.push((user.clone(), list.clone()));
     Ok(list)
 }
 
 /// The adapters of the Rust worker only: a few milliseconds to ask, where starting Python
 /// to ask it takes a few hundred, so sessions of native envs never wait for Python.
-pub fn native_adapters() -> Result<&'static [AdapterInfo], HubError> {
-    unpack(&native_cached())
+pub(crate) fn native_adapters() -> Result<Arc<[AdapterInfo]>, HubError> {
+    unpack(native_cached())
 }
 
 fn native_cached() -> Cached {
-    let mut cached = NATIVE.lock().unwrap_or_else(|e| e.into_inner());
-    cached
-        .get_or_insert_with(|| Ok(&*Box::leak(native()?.into_boxed_slice())))
-        .clone()
-}
-
-fn unpack(result: &Cached) -> Result<&'static [AdapterInfo], HubError> {
-    match result {
-        Ok(list) => Ok(list),
-        Err((path, reason)) => Err(HubError::WorkerBinary {
-            path: path.clone(),
-            reason: reason.clone(),
-        }),
+    let native = NATIVE.get_or_compute(native)?;
+    if std::env::var(ENVHUB_TEST_ADAPTERS).is_ok_and(|v| v == "1") {
+        return Ok(native
+            .shown
+            .iter()
+            .chain(native.testing.iter())
+            .cloned()
+            .collect());
     }
+    Ok(native.shown)
 }
 
-fn native() -> Result<Vec<AdapterInfo>, (String, String)> {
+fn unpack(result: Cached) -> Result<Arc<[AdapterInfo]>, HubError> {
+    result.map_err(|(path, reason)| HubError::WorkerBinary { path, reason })
+}
+
+fn native() -> Result<Native, (String, String)> {
     let path = worker_binary();
     let shown = path.display().to_string();
-    let out = std::process::Command::new(&path)
-        .arg("describe")
-        .output()
-        .map_err(|e| (shown.clone(), e.to_string()))?;
+    let timeout = describe_timeout();
+    let mut command = std::process::Command::new(&path);
+    // Test adapters too, marked: whether they are shown is this process's choice.
+    command.arg("describe").env(ENVHUB_TEST_ADAPTERS, "1");
+    let out = bounded::output_within(&mut command, timeout)
+        .map_err(|why| (shown.clone(), format!("`{shown} describe`: {why}")))?;
     if !out.status.success() {
         // Typically the loader failing on a missing library: say which.
         return Err((
@@ -132,8 +236,15 @@ fn native() -> Result<Vec<AdapterInfo>, (String, String)> {
             ),
         ));
     }
-    serde_json::from_slice(&out.stdout)
-        .map_err(|e| (shown, format!("unreadable `describe` output: {e}")))
+    let described: Vec<Described> = serde_json::from_slice(&out.stdout)
+        .map_err(|e| (shown, format!("unreadable `describe` output: {e}")))?;
+    let (testing, users): (Vec<Described>, Vec<Described>) =
+        described.into_iter().partition(|d| d.testing);
+    let infos = |list: Vec<Described>| list.into_iter().map(|d| d.info).collect();
+    Ok(Native {
+        shown: infos(users),
+        testing: infos(testing),
+    })
 }
 
 fn last_line(bytes: &[u8]) -> String {
@@ -149,7 +260,16 @@ fn last_line(bytes: &[u8]) -> String {
 /// the built-in ones are listed as unavailable with the reason.
 fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
     let python = python_host::python_interpreter();
-    let out = python_host::worker_command(user).arg("describe").output();
+    let timeout = describe_timeout();
+    let mut command = python_host::worker_command(user);
+    let hosted: Vec<String> = command
+        .get_envs()
+        .find(|(k, _)| *k == std::ffi::OsStr::new(ENVHUB_ADAPTERS))
+        .and_then(|(_, v)| v)
+        .map(|v| v.to_string_lossy().split(',').map(String::from).collect())
+        .unwrap_or_default();
+    let out = bounded::output_within(command.arg("describe"), timeout);
+    let hung = matches!(out, Err(RunError::Hung(_)));
     let failure = match out {
         Ok(out) if out.status.success() => {
             match serde_json::from_slice::<Vec<AdapterInfo>>(&out.stdout) {
@@ -163,7 +283,19 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
             }
         }
         Ok(out) => format!("exited with {}: {}", out.status, last_line(&out.stderr)),
-        Err(e) => e.to_string(),
+        Err(why) if hung && !hosted.is_empty() => format!(
+            "{why} (it imports the user adapters {}: one of them may block at import)",
+            hosted.join(", ")
+        ),
+        Err(why) => why.to_string(),
+    };
+    let hint = if hung {
+        format!(
+            "find what blocks with `{} -m envhub.worker describe` (with the same ENVHUB_ADAPTERS and PYTHONPATH); a slow but working import needs a larger {ENVHUB_DESCRIBE_TIMEOUT}",
+            python.display()
+        )
+    } else {
+        "run `make py-install`, or point ENVHUB_PYTHON (or `python:` in envhub.yaml) at an interpreter with the `envhub` package".into()
     };
     tracing::debug!(python = %python.display(), %failure, "no Python-hosted adapters");
     python_host::BUILTIN
@@ -178,7 +310,7 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
                     "`{} -m envhub.worker describe` failed: {failure}",
                     python.display()
                 ),
-                hint: "run `make py-install`, or point ENVHUB_PYTHON (or `python:` in envhub.yaml) at an interpreter with the `envhub` package".into(),
+                hint: hint.clone(),
             },
             envs: vec![],
             host: Host::Python,
@@ -190,9 +322,9 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
 /// unknown).
 pub(crate) fn host_of(name: &str, user: &UserAdapters) -> Host {
     let find = |list: &[AdapterInfo]| list.iter().find(|a| a.name == name).map(|a| a.host);
-    native_adapters()
-        .ok()
-        .and_then(find)
+    let native = NATIVE.get_or_compute(native).ok();
+    native
+        .and_then(|n| find(&n.shown).or_else(|| find(&n.testing)))
         .or_else(|| adapters_with(user).ok().and_then(|list| find(&list)))
         .unwrap_or_default()
 }

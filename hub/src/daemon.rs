@@ -5,6 +5,10 @@
 //! connection owns the workers started through it, and closing it (the client exits or
 //! crashes) stops them. A client that crashes does not disturb the daemon or other clients.
 //!
+//! A request that fails is answered with the error serialized (`error`: its variant and
+//! fields, as [`HubError`] serializes) beside its text (`err`), so a client raises what an
+//! embedded hub would have.
+//!
 //! Workers start from the daemon's environment, so a client's own user adapters (its
 //! `ENVHUB_ADAPTERS`, set by `AdapterRegistry().register`) travel with its `adapters`, `route`
 //! and `launch` requests as `user_adapters` (absent: none); the daemon routes and starts
@@ -94,7 +98,9 @@ impl Connection {
             let reply = match serde_json::from_str::<Value>(&line) {
                 Ok(request) => match self.handle(&request) {
                     Ok(ok) => json!({ "ok": ok }),
-                    Err(e) => json!({ "err": e.to_string() }),
+                    // The text for people (and older clients), the error itself for clients
+                    // to rebuild: the same variant as an embedded hub's.
+                    Err(e) => json!({ "err": e.to_string(), "error": e }),
                 },
                 Err(e) => json!({ "err": format!("unreadable request: {e}") }),
             };

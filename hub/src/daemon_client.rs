@@ -68,7 +68,8 @@ impl DaemonClient {
         request
     }
 
-    /// Sends one request and reads its reply: `{"ok": ...}` or `{"err": "..."}`.
+    /// Sends one request and reads its reply: `{"ok": ...}`, or `{"err": "...", "error":
+    /// {...}}` (the error rebuilt as the daemon had it; text only from an older daemon).
     fn call(&self, request: Value) -> Result<Value, HubError> {
         let mut conn = self
             .conn
@@ -89,6 +90,11 @@ impl DaemonClient {
         }
         let mut reply: Value = serde_json::from_str(&reply)
             .map_err(|e| self.fail(format!("unreadable reply: {e}")))?;
+        if let Some(error) = reply.get_mut("error").map(Value::take)
+            && let Ok(error) = serde_json::from_value::<HubError>(error)
+        {
+            return Err(error);
+        }
         if let Some(err) = reply.get("err") {
             return Err(HubError::Remote(
                 err.as_str().unwrap_or("unknown error").to_string(),

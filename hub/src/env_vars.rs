@@ -32,6 +32,21 @@ pub const ENVHUB_SKIP_PYTHON_TESTS: &str = "ENVHUB_SKIP_PYTHON_TESTS";
 /// fail instead of skipping when it is missing; `make rust-test` and `make py-test` set it.
 pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 
+/// Set (non-empty) to make tests that need the MuJoCo adapter (a worker built with its
+/// `mujoco` feature) fail instead of skipping when it is unavailable; `make rust-test` and
+/// `make py-test` set it.
+pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
+
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
 /// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
 pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
+
+/// `1` lists the test adapters (`null`: `Null-v0`, an env that does no work and fails on
+/// request) in the catalog, so registry entries can route to them; unset, they stay out of
+/// users' sight, and only `envhub bench` and tests that name them directly use them.
+pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";
+
+/// Seconds that asking a worker what it hosts (`envhub-worker describe`,
+/// `python -m envhub.worker describe`) may take before it is killed and reported as hung
+/// (default 30): an adapter module that blocks at import cannot stall the hub.
+pub const ENVHUB_DESCRIBE_TIMEOUT: &str = "ENVHUB_DESCRIBE_TIMEOUT";

@@ -1,11 +1,16 @@
 //! Errors of the hub and its client. Callers can react to each kind: a bad id or input is
 //! the caller's to fix; a dead worker is the session's problem, never the hub's.
+//!
+//! A hub daemon sends its errors to clients serialized, variant and fields (`{"kind": ...,
+//! "fields": ...}`), so a client rebuilds the error it would have got from an embedded hub.
 
 use crate::RegistryError;
 use envhub_shm::DataPlaneError;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// An error from creating or using an env through the hub.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, thiserror::Error, Serialize, Deserialize)]
+#[serde(tag = "kind", content = "fields", rename_all = "snake_case")]
 pub enum HubError {
     /// Registry lookup failed (unknown id, with the closest ones).
     #[error(transparent)]
@@ -36,7 +41,8 @@ pub enum HubError {
     #[error("invalid {what}: {reason}")]
     InvalidConfig {
         /// The option.
-        what: &'static str,
+        #[serde(deserialize_with = "interned")]
+        what: StaticName,
         /// What is wrong and what is valid.
         reason: String,
     },
@@ -97,8 +103,10 @@ pub enum HubError {
     Interrupted,
     /// The shared-memory layer failed.
     #[error(transparent)]
+    #[serde(with = "data_plane")]
     DataPlane(#[from] DataPlaneError),
-    /// The hub daemon reported an error (its message, with the hint).
+    /// The hub daemon reported an error only as text (a daemon that predates structured
+    /// errors): its message, with the hint.
     #[error("{0}")]
     Remote(String),
     /// Talking to the hub daemon failed.
@@ -111,4 +119,129 @@ pub enum HubError {
         /// What went wrong.
         reason: String,
     },
+}
+
+/// `&'static str`, named so that serde does not take a field of this type as borrowed from
+/// the input (it reads one through [`interned`]).
+pub type StaticName = &'static str;
+
+/// A name sent by the daemon where the error holds a `&'static str` (an option's or a
+/// field's name: a handful of distinct values), leaked once per distinct value and capped, so
+/// a misbehaving daemon cannot grow the client without bound.
+pub(crate) fn interned<'de, D: Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
+    const CAPACITY: usize = 64;
+    static SEEN: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
+    let name = String::deserialize(d)?;
+    let mut seen = SEEN.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(known) = seen.iter().find(|known| **known == name) {
+        return Ok(known);
+    }
+    if seen.len() == CAPACITY {
+        return Ok("value");
+    }
+    let leaked: &'static str = Box::leak(name.into_boxed_str());
+    seen.push(leaked);
+    Ok(leaked)
+}
+
+/// An I/O error as its text (rebuilt as an `io::Error` of kind `Other` with that text).
+pub(crate) mod io_text {
+    use super::*;
+
+    pub fn serialize<S: Serializer>(e: &std::io::Error, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&e.to_string())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<std::io::Error, D::Error> {
+        Ok(std::io::Error::other(String::deserialize(d)?))
+    }
+}
+
+/// [`DataPlaneError`] (of `envhub-shm`, which has no serde impls for it) on the wire.
+mod data_plane {
+    use super::*;
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(tag = "kind", content = "fields", rename_all = "snake_case")]
+    enum Wire {
+        Ipc {
+            #[serde(deserialize_with = "interned")]
+            what: StaticName,
+            detail: String,
+        },
+        Protocol(String),
+        PeerGone(String),
+    }
+
+    pub fn serialize<S: Serializer>(e: &DataPlaneError, s: S) -> Result<S::Ok, S::Error> {
+        match e {
+            DataPlaneError::Ipc { what, detail } => Wire::Ipc {
+                what,
+                detail: detail.clone(),
+            },
+            DataPlaneError::Protocol(m) => Wire::Protocol(m.clone()),
+            DataPlaneError::PeerGone(m) => Wire::PeerGone(m.clone()),
+        }
+        .serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<DataPlaneError, D::Error> {
+        Ok(match Wire::deserialize(d)? {
+            Wire::Ipc { what, detail } => DataPlaneError::Ipc { what, detail },
+            Wire::Protocol(m) => DataPlaneError::Protocol(m),
+            Wire::PeerGone(m) => DataPlaneError::PeerGone(m),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use envhub_shm::DataPlaneError;
+
+    /// Every variant survives the daemon's wire: same variant, same message.
+    #[test]
+    fn errors_round_trip_through_json() {
+        let errors = [
+            HubError::Registry(RegistryError::UnknownId {
+                id: "mujoco-antt".into(),
+                closest: vec!["mujoco-ant".into()],
+            }),
+            HubError::Registry(RegistryError::Read {
+                path: "/no/such.yaml".into(),
+                source: std::io::Error::from(std::io::ErrorKind::NotFound),
+            }),
+            HubError::Unavailable {
+                adapter: "maniskill".into(),
+                reason: "`mani_skill` is not installed".into(),
+                hint: "pip install mani_skill".into(),
+            },
+            HubError::InvalidConfig {
+                what: "config",
+                reason: "unknown field `wrokers`".into(),
+            },
+            HubError::WorkerDied {
+                worker: 1,
+                envs: "2..4".into(),
+                pid: 42,
+                why: "died (signal: 9 (SIGKILL))".into(),
+            },
+            HubError::MakeFailed("no".into()),
+            HubError::DataPlane(DataPlaneError::Ipc {
+                what: "node",
+                detail: "x".into(),
+            }),
+            HubError::DataPlane(DataPlaneError::PeerGone("gone".into())),
+        ];
+        for e in errors {
+            let json = serde_json::to_value(&e).unwrap();
+            let back: HubError = serde_json::from_value(json.clone()).unwrap();
+            assert_eq!(back.to_string(), e.to_string(), "{json}");
+            assert_eq!(
+                std::mem::discriminant(&back),
+                std::mem::discriminant(&e),
+                "{json}"
+            );
+        }
+    }
 }

@@ -123,7 +123,7 @@ impl Hub {
     ) -> Result<Route, HubError> {
         let entry = self.registry.get(id)?;
         // Native adapters first: when one runs the entry, Python is never started to ask.
-        if let Ok(found) = route(entry, catalog::native_adapters()?, config) {
+        if let Ok(found) = route(entry, &catalog::native_adapters()?, config) {
             return Ok(found);
         }
         route(entry, &catalog::adapters_with(user)?, config)

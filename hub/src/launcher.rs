@@ -7,8 +7,9 @@ use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
 use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
+use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
 
 /// Who starts workers.
@@ -101,6 +102,9 @@ impl Launcher {
     }
 }
 
+/// How long a worker that reported an error may take to exit before it is killed.
+const EXIT_AFTER_ERROR: Duration = Duration::from_secs(5);
+
 /// Spawns `envhub-worker serve` (or `python -m envhub.worker serve` for a Python-hosted
 /// adapter, also hosting `user`'s adapters) for `job` and reads its ready line.
 pub(crate) fn launch_local(
@@ -118,23 +122,39 @@ pub(crate) fn launch_local(
             crate::python_host::python_interpreter(),
         ),
     };
-    let mut child = command
+    command
         .arg("serve")
         .arg("--job")
         .arg(serde_json::to_string(job).expect("a job serializes"))
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
-        .spawn()
-        .map_err(|e| HubError::WorkerBinary {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?;
+        // Its own process group: a Ctrl-C in the terminal goes to the client, which closes
+        // its sessions, and never kills a worker mid-episode.
+        .process_group(0);
+    let parent = std::process::id();
+    // SAFETY: the closure runs in the forked child before exec and only makes the system
+    // calls of `die_with_parent`, which allocates nothing and takes no lock.
+    unsafe {
+        command.pre_exec(move || envhub_shm::die_with_parent(parent));
+    }
+    let mut child = spawn(command).map_err(|e| HubError::WorkerBinary {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
     let pid = child.id();
     match read_reply(&mut child, start_timeout) {
         Ok(WorkerReply::Ready(spec)) => Ok((child, spec)),
         Ok(WorkerReply::Error(message)) => {
-            let _ = child.wait();
+            // It exits once it has said why; one that hangs on the way out (a simulator's
+            // teardown, a Python exit handler) is killed rather than waited on.
+            if crate::bounded::wait_within(&mut child, EXIT_AFTER_ERROR).is_none() {
+                tracing::warn!(
+                    pid,
+                    "the worker did not exit within {} of reporting an error; killed it",
+                    crate::bounded::seconds(EXIT_AFTER_ERROR)
+                );
+            }
             Err(HubError::MakeFailed(message))
         }
         Err(why) => {
@@ -148,6 +168,39 @@ pub(crate) fn launch_local(
             })
         }
     }
+}
+
+/// Spawns `command` on the spawner thread, one thread that lives as long as the process.
+///
+/// Workers die with their parent through the kernel's parent-death signal (see
+/// [`envhub_shm::die_with_parent`]), which fires when the *thread* that forked the child
+/// ends; sessions start their workers from short-lived threads (one per worker, and Python
+/// users make envs in threads that end), so no worker is forked from those.
+fn spawn(command: Command) -> std::io::Result<Child> {
+    type Request = (Command, mpsc::Sender<std::io::Result<Child>>);
+    /// The spawner's channel, with the pid of the process it belongs to: a forked child
+    /// (Python's `multiprocessing`) inherits the channel but not the thread, and starts its own.
+    static SPAWNER: Mutex<Option<(u32, mpsc::Sender<Request>)>> = Mutex::new(None);
+    let gone = || std::io::Error::other("the thread that spawns workers is gone");
+    let (tx, rx) = mpsc::channel();
+    {
+        let mut spawner = SPAWNER.lock().unwrap_or_else(|e| e.into_inner());
+        let pid = std::process::id();
+        if spawner.as_ref().is_none_or(|(owner, _)| *owner != pid) {
+            let (requests, incoming) = mpsc::channel::<Request>();
+            std::thread::Builder::new()
+                .name("envhub-spawner".into())
+                .spawn(move || {
+                    for (mut command, reply) in incoming {
+                        let _ = reply.send(command.spawn());
+                    }
+                })?;
+            *spawner = Some((pid, requests));
+        }
+        let (_, requests) = spawner.as_ref().ok_or_else(gone)?;
+        requests.send((command, tx)).map_err(|_| gone())?;
+    }
+    rx.recv().map_err(|_| gone())?
 }
 
 /// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.

@@ -7,6 +7,7 @@
 
 mod async_step;
 mod batch;
+mod bounded;
 mod catalog;
 mod daemon;
 mod daemon_client;

@@ -13,7 +13,8 @@ const DEFAULT_REGISTRY: &str = include_str!("../../configs/env_registry.yaml");
 pub const DEFAULT_REGISTRY_NAME: &str = "@default";
 
 /// An error loading a registry file or looking something up in it.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, thiserror::Error, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", content = "fields", rename_all = "snake_case")]
 pub enum RegistryError {
     /// The file could not be read.
     #[error(
@@ -24,6 +25,7 @@ pub enum RegistryError {
         path: PathBuf,
         /// The OS error.
         #[source]
+        #[serde(with = "crate::error::io_text")]
         source: std::io::Error,
     },
     /// The YAML is malformed or does not fit the format.
@@ -50,7 +52,8 @@ pub enum RegistryError {
         /// Index of the entry.
         index: usize,
         /// The field.
-        field: &'static str,
+        #[serde(deserialize_with = "crate::error::interned")]
+        field: crate::error::StaticName,
         /// What is wrong.
         message: String,
     },

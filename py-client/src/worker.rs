@@ -11,10 +11,10 @@
 //! Python is absent); and the module reused here is the one the client already ships. The
 //! cost is a second entry point (`python -m envhub.worker`) the hub must know how to start.
 //!
-//! Zero copy as far as Python allows: an env's action arrives as a read-only numpy view of
-//! the request sample, and its observation is copied once, by numpy, into the response
-//! sample. The views are valid only during the call (an env that keeps the action array
-//! sees later requests' bytes; envs copy actions into their simulator, so none does).
+//! Copies kept to what Python needs: the wrapper gets a read-only view of the request sample
+//! and gives the env its own copy of its action (the sample is reused by later requests, and
+//! an env may keep its action, as "previous action" features do); the observation is copied
+//! once, by numpy, into the response sample.
 
 use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions, Space, Transition};
 use envhub_shm::{
@@ -46,7 +46,8 @@ fn memory_view<'py>(
         pyo3::ffi::PyBUF_READ
     };
     // SAFETY: the memory stays mapped for the whole call that uses the view (it is the
-    // request or response sample being served); see the module docs about keeping it.
+    // request or response sample being served); the wrappers in `envhub.worker` copy what an
+    // env may keep beyond it (its action).
     unsafe {
         let view = pyo3::ffi::PyMemoryView_FromMemory(
             ptr as *mut std::ffi::c_char,

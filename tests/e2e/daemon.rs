@@ -347,3 +347,50 @@ fn user_adapters_of_a_client_reach_the_daemon() {
     );
     assert!(d.alive());
 }
+
+/// The error of `make(id, config)` on `hub`, as the variant and message a caller sees.
+fn make_error(hub: &Hub, id: &str, config: &EnvConfig) -> HubError {
+    match hub.make(id, config) {
+        Ok(_) => panic!("`{id}` made"),
+        Err(e) => e,
+    }
+}
+
+#[test]
+fn errors_through_the_daemon_are_the_embedded_hubs() {
+    let d = Daemon::start("errors");
+    let (remote, local) = (d.hub(), Hub::new(Registry::builtin()));
+    let mut bad_option = EnvConfig::default();
+    bad_option.extra.insert("gravty".into(), 9.8.into());
+    let cases = [
+        ("mujoco-antt", EnvConfig::default()),
+        ("isaac-franka-lift", EnvConfig::default()),
+        ("gym-pendulum", bad_option),
+    ];
+    for (id, config) in &cases {
+        let (through, here) = (
+            make_error(&remote, id, config),
+            make_error(&local, id, config),
+        );
+        assert_eq!(
+            std::mem::discriminant(&through),
+            std::mem::discriminant(&here),
+            "`{id}`: through the daemon {through:?}, embedded {here:?}"
+        );
+        assert_eq!(through.to_string(), here.to_string(), "`{id}`");
+    }
+    match make_error(&remote, "mujoco-antt", &EnvConfig::default()) {
+        HubError::Registry(envhub::RegistryError::UnknownId { id, closest }) => {
+            assert_eq!(id, "mujoco-antt");
+            assert!(closest.iter().any(|c| c == "mujoco-ant"), "{closest:?}");
+        }
+        other => panic!("expected UnknownId, got {other:?}"),
+    }
+    let unavailable = make_error(&remote, "isaac-franka-lift", &EnvConfig::default());
+    assert!(
+        matches!(unavailable, HubError::Unavailable { ref adapter, .. } if adapter == "isaac_lab"),
+        "{unavailable:?}"
+    );
+    let bad = make_error(&remote, "gym-pendulum", &cases[2].1);
+    assert!(matches!(bad, HubError::MakeFailed(_)), "{bad:?}");
+}

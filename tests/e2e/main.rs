@@ -11,3 +11,4 @@ mod failures;
 mod python_worker;
 mod rapier_rollouts;
 mod rendering;
+mod worker_lifetime;

@@ -5,10 +5,12 @@
 //! Each test skips (with the reason) when the interpreter the hub uses cannot import the
 //! compiled `envhub._envhub`, unless `ENVHUB_PY_REQUIRED` is set.
 
-use envhub::env_vars::ENVHUB_ADAPTERS;
+use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
 use envhub::{EnvConfig, HubError, Registry, VecEnv};
 use envhub_e2e::{PyModule, TestHub, kill_worker_expect_died, python_worker_available};
 use rand::SeedableRng;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
 
 /// Entries pinned to the Python host, beside the built-in (native) ones.
 const REGISTRY: &str = "
@@ -26,6 +28,12 @@ environments:
     env_id: HalfCheetah-v5
     adapter: gymnasium
     robot_type: biped
+    env_type: floor
+  - id: py-stuck
+    name: An env whose worker hangs on exit after failing to make it
+    framework: e2e_stuck
+    env_id: Stuck-v0
+    robot_type: custom
     env_type: floor
   - id: py-boom
     name: An env that raises in step
@@ -67,6 +75,28 @@ class BoomAdapter(envhub.EnvAdapter):
 
     def make(self, env_id, config):
         return BoomEnv()
+"#;
+
+/// A user adapter module that blocks at import.
+const HANG_AT_IMPORT: &str = "import time\n\ntime.sleep(3600)\n";
+
+/// A user adapter that cannot make its env and then hangs in its worker's exit.
+const STUCK_ADAPTER: &str = r#"
+import atexit
+import time
+
+import envhub
+
+
+class StuckAdapter(envhub.EnvAdapter):
+    name = "e2e_stuck"
+    frameworks = ["e2e_stuck"]
+    requires = []
+    description = "fails to make its env, then hangs on exit"
+
+    def make(self, env_id, config):
+        atexit.register(time.sleep, 3600)
+        raise RuntimeError("cannot make Stuck-v0 on purpose")
 "#;
 
 fn hub(name: &str) -> TestHub {
@@ -227,4 +257,106 @@ fn a_killed_python_worker_is_worker_died_within_a_second() {
         Err(HubError::InvalidState(_))
     ));
     other.step_i64(&[0, 1]).unwrap();
+}
+
+#[test]
+fn an_adapter_that_hangs_at_import_is_named_and_stalls_nothing_else() {
+    if !python_worker_available(
+        "python_worker::an_adapter_that_hangs_at_import_is_named_and_stalls_nothing_else",
+    ) {
+        return;
+    }
+    let module = PyModule::write("pyhang", "e2e_hang_adapter", HANG_AT_IMPORT);
+    // As above: this process's environment is the workers' (nextest runs each test alone).
+    unsafe {
+        std::env::set_var(ENVHUB_ADAPTERS, "e2e_hang_adapter:HangAdapter");
+        std::env::set_var("PYTHONPATH", module.pythonpath());
+        std::env::set_var(ENVHUB_DESCRIBE_TIMEOUT, "2");
+    }
+    let bound = Duration::from_secs(2);
+    envhub::refresh_adapters();
+    let t = std::sync::Arc::new(hub("pyhang"));
+    // Resolved first, as every session of a native env does; Python is not asked for it.
+    t.hub.make_vec("gym-cartpole", 1, &workers(1)).unwrap();
+
+    // A Python env: asking the Python worker what it hosts hangs in the import.
+    let (tx, python) = mpsc::channel();
+    let hub_a = t.clone();
+    std::thread::spawn(move || {
+        let start = Instant::now();
+        let result = hub_a.hub.make_vec("py-cartpole", 1, &workers(1)).map(drop);
+        let _ = tx.send((result, start.elapsed()));
+    });
+    std::thread::sleep(Duration::from_millis(300));
+
+    // Meanwhile a native env is made and steps, without waiting for the hang.
+    let start = Instant::now();
+    let mut native = t.hub.make_vec("gym-cartpole", 2, &workers(1)).unwrap();
+    native.reset(Some(0)).unwrap();
+    native.step_i64(&[0, 1]).unwrap();
+    assert!(
+        start.elapsed() < Duration::from_secs(1),
+        "a native make waited {:?}",
+        start.elapsed()
+    );
+    assert!(
+        python.try_recv().is_err(),
+        "the hanging describe was still running meanwhile"
+    );
+    // And the catalog, which needs the Python worker too, waits at most the bound.
+    let (tx, catalog) = mpsc::channel();
+    let hub_b = t.clone();
+    std::thread::spawn(move || {
+        let _ = tx.send(hub_b.hub.adapters());
+    });
+    let listed = catalog
+        .recv_timeout(bound + Duration::from_secs(3))
+        .expect("the catalog waits at most the bound, not behind the hanging describe")
+        .unwrap();
+    let gymnasium = listed.iter().find(|a| a.name == "gymnasium").unwrap();
+    assert!(!gymnasium.availability.is_available(), "{gymnasium:?}");
+
+    let (result, took) = python
+        .recv_timeout(Duration::from_secs(20))
+        .expect("the make that hit the hanging import returns");
+    assert!(took < bound + Duration::from_secs(3), "it took {took:?}");
+    let err = result.unwrap_err();
+    let HubError::Unavailable { reason, hint, .. } = &err else {
+        panic!("expected Unavailable, got {err:?}");
+    };
+    for needle in [
+        "envhub.worker describe",
+        "did not finish within 2 s",
+        "e2e_hang_adapter:HangAdapter",
+    ] {
+        assert!(reason.contains(needle), "no {needle:?} in: {reason}");
+    }
+    assert!(hint.contains("ENVHUB_DESCRIBE_TIMEOUT"), "{hint}");
+}
+
+#[test]
+fn a_worker_that_hangs_after_reporting_an_error_is_killed() {
+    if !python_worker_available(
+        "python_worker::a_worker_that_hangs_after_reporting_an_error_is_killed",
+    ) {
+        return;
+    }
+    let module = PyModule::write("pystuck", "e2e_stuck_adapter", STUCK_ADAPTER);
+    unsafe {
+        std::env::set_var(ENVHUB_ADAPTERS, "e2e_stuck_adapter:StuckAdapter");
+        std::env::set_var("PYTHONPATH", module.pythonpath());
+    }
+    envhub::refresh_adapters();
+    let t = hub("pystuck");
+    let start = Instant::now();
+    let Err(err) = t.hub.make_vec("py-stuck", 1, &workers(1)) else {
+        panic!("py-stuck was made");
+    };
+    let took = start.elapsed();
+    assert!(
+        matches!(&err, HubError::MakeFailed(m) if m.contains("cannot make Stuck-v0 on purpose")),
+        "{err:?}"
+    );
+    // The worker gets a few seconds to exit after its error line, then is killed.
+    assert!(took < Duration::from_secs(10), "it took {took:?}");
 }

@@ -2,19 +2,12 @@
 
 use envhub::EnvConfig;
 use envhub_core::ResetOptions;
-use envhub_e2e::TestHub;
+use envhub_e2e::{TestHub, mujoco_available};
 
 #[test]
 fn frames_come_through_the_hub() {
     let t = TestHub::new("render");
-    let adapters = t.hub.adapters().unwrap();
-    let mujoco = adapters
-        .iter()
-        .find(|a| a.name == "mujoco")
-        .expect("the mujoco adapter is listed");
-    if !mujoco.availability.is_available() {
-        // Only a worker built without the `mujoco` feature gets here; `make test` builds it.
-        eprintln!("skipped: {:?}", mujoco.availability);
+    if !mujoco_available(&t.hub, "rendering::frames_come_through_the_hub") {
         return;
     }
     let mut config = EnvConfig {
@@ -62,10 +55,10 @@ fn render_fps_reaches_the_client() {
     let envs = t.hub.make_vec("gym-pendulum", 4, &config).unwrap();
     assert_eq!(envs.render_fps(), Some(30.0));
 
-    let adapters = t.hub.adapters().unwrap();
-    let mujoco = adapters.iter().find(|a| a.name == "mujoco").unwrap();
-    if !mujoco.availability.is_available() {
-        eprintln!("skipped the MuJoCo part: {:?}", mujoco.availability);
+    if !mujoco_available(
+        &t.hub,
+        "rendering::render_fps_reaches_the_client (MuJoCo part)",
+    ) {
         return;
     }
     let hopper = t.hub.make("mujoco-hopper", &EnvConfig::default()).unwrap();

@@ -25,7 +25,9 @@ os.environ.pop("ENVHUB_HUB", None)
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 # A registry entry for the `null` adapter: an env that does no work and misbehaves on
-# request (`sleep_ms`, `exit_after`, `error_after`), for failure tests.
+# request (`sleep_ms`, `exit_after`, `error_after`), for failure tests. A test adapter: the
+# catalog lists it (so the entry routes) only with ENVHUB_TEST_ADAPTERS=1.
+os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
 NULL_REGISTRY = textwrap.dedent(
     """\
     environments:
@@ -50,6 +52,17 @@ def import_envhub():
             raise
         pytest.skip(f"the envhub package is not built ({exc}); run `make py-install`")
     return envhub
+
+
+def mujoco_or_skip(envhub) -> None:
+    """A skip when envhub's MuJoCo adapter cannot run here (a worker built without it), or a
+    failure under `ENVHUB_MUJOCO_REQUIRED` (as `make py-test` sets, so in CI)."""
+    if "mujoco" in envhub.AdapterRegistry().list_available():
+        return
+    message = "envhub's MuJoCo adapter is not available here"
+    if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
+        pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
+    pytest.skip(message)
 
 
 @pytest.fixture

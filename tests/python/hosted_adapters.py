@@ -59,3 +59,36 @@ class MissingDepAdapter(envhub.EnvAdapter):
     requires = ["envhub_no_such_module_xyz"]
     description = "depends on a module that is not installed"
     install_hint = "pip install envhub-no-such-module-xyz"
+
+
+class KeepsActionsEnv(gym.Env):
+    """Keeps every action it is given, as "previous action" features do, and reports the
+    action of `LAG` steps ago: observation `[t, that action]` (0 before step `LAG + 1`)."""
+
+    LAG = 5
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self.kept: list[Any] = []
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        super().reset(seed=seed)
+        self.kept = []
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action: Any) -> Any:
+        self.kept.append(action)  # the array itself, not a copy of it
+        t = len(self.kept)
+        old = float(self.kept[t - 1 - self.LAG][0]) if t > self.LAG else 0.0
+        return np.array([t, old], np.float32), 0.0, False, False, {}
+
+
+class KeepsActionsAdapter(envhub.EnvAdapter):
+    name = "keepsim"
+    frameworks = ["keepsim"]
+    requires = ["numpy"]
+    description = "an env that keeps the actions it is given"
+
+    def make(self, env_id: str, config: Any) -> Any:
+        return KeepsActionsEnv()

@@ -106,3 +106,36 @@ def test_an_adapter_that_cannot_be_imported_is_named(daemon, monkeypatch):
         envhub.make("mysim-echo")
     assert "cannot import `envhub_no_such_module_xyz:Nope`" in str(caught.value)
     assert daemon.poll() is None
+
+
+#: Failures that reach the client from the hub: an unknown id, an adapter that cannot run
+#: here, an option the env does not take.
+FAILING_MAKES = [("mujoco-antt", {}), ("isaac-franka-lift", {}), ("gym-pendulum", {"gravty": 9.8})]
+
+#: The attributes a caller reads off envhub's exceptions.
+FIELDS = ("env_id", "suggestions", "adapter", "reason", "hint", "worker", "pid", "envs")
+
+
+def _make_error(entry_id: str, kwargs: dict) -> Exception:
+    try:
+        envhub.make(entry_id, **kwargs).close()
+    except envhub.EnvHubError as e:
+        return e
+    raise AssertionError(f"`{entry_id}` was made")
+
+
+def test_errors_through_the_daemon_are_the_embedded_ones(daemon, monkeypatch):
+    """Same class, message and attributes whether the hub is a daemon or in this process."""
+    through = [_make_error(i, kw) for i, kw in FAILING_MAKES]
+    monkeypatch.delenv("ENVHUB_HUB")
+    here = [_make_error(i, kw) for i, kw in FAILING_MAKES]
+    for (entry_id, _), a, b in zip(FAILING_MAKES, through, here, strict=True):
+        assert type(a) is type(b), f"{entry_id}: {type(a).__name__} through the daemon, {type(b).__name__} here"
+        assert str(a) == str(b), entry_id
+        assert {f: getattr(a, f, None) for f in FIELDS} == {f: getattr(b, f, None) for f in FIELDS}, entry_id
+    unknown, unavailable, bad_option = through
+    assert isinstance(unknown, KeyError) and isinstance(unknown, envhub.UnknownEnvError)
+    assert unknown.env_id == "mujoco-antt" and "mujoco-ant" in unknown.suggestions
+    assert isinstance(unavailable, envhub.AdapterUnavailableError) and unavailable.adapter == "isaac_lab"
+    assert isinstance(bad_option, envhub.MakeError) and "gravty" in str(bad_option)
+    assert daemon.poll() is None

@@ -7,7 +7,7 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub
+from conftest import import_envhub, mujoco_or_skip
 from gymnasium.utils.env_checker import check_env
 
 envhub = import_envhub()
@@ -182,8 +182,7 @@ def test_seed_given_at_make_seeds_the_first_reset():
 
 
 def test_render_rgb_array():
-    if "mujoco" not in envhub.AdapterRegistry().list_available():
-        pytest.skip("envhub's MuJoCo adapter is not available here")
+    mujoco_or_skip(envhub)
     env = envhub.make("mujoco-ant", render_mode="rgb_array")
     try:
         assert env.metadata["render_modes"] == ["rgb_array"]
@@ -255,8 +254,7 @@ def test_render_fps_follows_frame_skip():
 
 def test_rendering_wrappers_accept_envhub_envs(tmp_path):
     """`HumanRendering` needs `render_fps`; `RecordVideo` writes its video at that rate."""
-    if "mujoco" not in envhub.AdapterRegistry().list_available():
-        pytest.skip("envhub's MuJoCo adapter is not available here")
+    mujoco_or_skip(envhub)
     env = envhub.make("mujoco-reacher", render_mode="rgb_array", width=64, height=64)
     try:
         human = gymnasium.wrappers.HumanRendering(env)  # raises without `render_fps`

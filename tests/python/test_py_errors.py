@@ -253,3 +253,38 @@ def test_missing_worker_binary(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     assert out.stdout.startswith("ok"), out.stdout + out.stderr
     assert "nowhere" in out.stdout
+
+
+def test_envs_made_after_a_fork_work():
+    """A forked child (multiprocessing's `fork`) makes and steps envs of its own, although the
+    parent's thread that starts workers did not survive the fork."""
+    import select
+
+    env = envhub.make("gym-cartpole")
+    env.reset(seed=0)
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read)
+        try:
+            fresh = envhub.make("gym-cartpole")
+            fresh.reset(seed=0)
+            fresh.step(0)
+            fresh.close()
+            result = "stepped"
+        except BaseException as e:  # noqa: BLE001
+            result = f"{type(e).__name__}: {e}"
+        os.write(write, result.encode())
+        os._exit(0)
+    os.close(write)
+    try:
+        ready, _, _ = select.select([read], [], [], 60)
+        if not ready:
+            os.kill(pid, signal.SIGKILL)
+        result = os.read(read, 4096).decode() if ready else "no answer within 60 s"
+        os.waitpid(pid, 0)
+        assert result == "stepped", result
+        env.step(1)  # the parent's env still works
+    finally:
+        os.close(read)
+        env.close()

@@ -88,6 +88,12 @@ REGISTRY = textwrap.dedent(
         task_tags: [echo, test]
         description: Echoes its config.
         kwargs: {gain: 2}
+      - id: keeps-actions
+        name: Keeps its actions
+        framework: keepsim
+        env_id: Keep-v0
+        robot_type: custom
+        env_type: floor
       - id: missing-dep
         name: Needs a missing module
         framework: needs_missing
@@ -112,6 +118,7 @@ def user_adapters() -> None:
     reg = envhub.AdapterRegistry()
     reg.register(hosted_adapters.MySimAdapter)
     reg.register(hosted_adapters.MissingDepAdapter)
+    reg.register(hosted_adapters.KeepsActionsAdapter)
 
 
 def test_cartpole_native_and_python_hosted_agree(registry):
@@ -288,6 +295,27 @@ def test_user_adapter_make_receives_the_config_unchanged(registry, user_adapters
         assert reward == 1.0 and not terminated and not truncated
     finally:
         env.close()
+
+
+def test_an_env_that_keeps_its_actions_reads_them_back_unchanged(registry, user_adapters):
+    """The worker gives each env its own action array: one the env keeps still holds that
+    action after later requests have reused the shared-memory sample it arrived in."""
+    import hosted_adapters
+
+    lag = hosted_adapters.KeepsActionsEnv.LAG
+    envs = envhub.make_vec("keeps-actions", 2, num_workers=1, registry=registry)
+    try:
+        envs.reset(seed=0)
+        sent = []
+        for t in range(1, 41):
+            actions = np.array([[t / 100], [-t / 100]], np.float32)
+            sent.append(actions.copy())
+            obs, *_ = envs.step(actions)
+            assert obs[:, 0].tolist() == [t, t], obs
+            if t > lag:
+                np.testing.assert_array_equal(obs[:, 1], sent[t - 1 - lag][:, 0], err_msg=f"step {t}")
+    finally:
+        envs.close()
 
 
 def test_python_exception_names_the_env_with_the_traceback(registry, user_adapters):

@@ -233,3 +233,24 @@ def test_an_exception_in_the_vector_env_carries_its_traceback(registry, counter_
         assert obs.shape == (2, 4)
     finally:
         env.close()
+
+
+def test_a_vector_env_that_keeps_its_actions_reads_them_back_unchanged(registry, counter_adapter):
+    """The worker gives the vector env its own copy of each action batch: one it keeps still
+    holds those actions after later requests have reused the shared-memory sample."""
+    import vector_adapters
+
+    lag = vector_adapters.LAG
+    envs = envhub.make_vec("counter-vector", 2, num_workers=1, registry=registry, autoreset_mode="same_step")
+    try:
+        envs.reset(seed=0)
+        sent = []
+        for t in range(1, 31):
+            actions = np.array([[t / 100, 0.0], [-t / 100, 0.0]], np.float32)
+            sent.append(actions.copy())
+            *_, info = envs.step(actions)
+            if t > lag:
+                want = sent[t - 1 - lag][:, 0].astype(np.float64)
+                np.testing.assert_array_equal(info["lagged"], want, err_msg=f"step {t}")
+    finally:
+        envs.close()

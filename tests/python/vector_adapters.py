@@ -12,6 +12,10 @@ from gymnasium.vector import AutoresetMode
 import envhub
 
 
+#: How many steps back `CounterVectorEnv` reports a kept action from (`info["lagged"]`).
+LAG = 5
+
+
 class CounterVectorEnv(gym.vector.VectorEnv):
     """Env `i` counts its steps and sums its actions; its episode ends (terminated) after
     `2 + i` steps and restarts in the same step (SAME_STEP: the last observation in
@@ -34,6 +38,8 @@ class CounterVectorEnv(gym.vector.VectorEnv):
         self.t = np.zeros(num_envs, np.int64)
         self.sum = np.zeros((num_envs, 2), np.float32)
         self.calls = 0
+        # Every action batch as given (not copied), as "previous action" features keep them.
+        self.kept: list[Any] = []
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"t": self.t[:, None].copy(), "sum": self.sum.copy()}
@@ -50,9 +56,13 @@ class CounterVectorEnv(gym.vector.VectorEnv):
             raise ValueError("boom: the vector env failed in step")
         self.t += 1
         self.sum += actions
+        self.kept.append(actions)
         terminated = self.t >= 2 + np.arange(self.num_envs)
         rewards = self.t.astype(np.float64)
         info: dict[str, Any] = {"t": self.t.copy(), "_t": np.ones(self.num_envs, np.bool_), "calls": self.calls}
+        if len(self.kept) > LAG:
+            # Each env's first action value of LAG steps ago, read from the kept batch now.
+            info["lagged"] = self.kept[-1 - LAG][:, 0].astype(np.float64)
         if terminated.any():
             final = self._obs()
             info["final_obs"] = np.array(

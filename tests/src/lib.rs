@@ -114,6 +114,29 @@ pub fn python_worker_available(test: &str) -> bool {
     false
 }
 
+/// Whether `hub`'s MuJoCo adapter can run here (a worker built with its `mujoco` feature, which
+/// finds libmujoco). If not, prints why and returns false so the test skips, unless
+/// `ENVHUB_MUJOCO_REQUIRED` is set (as `make rust-test` does, so in CI), when it panics: a
+/// worker built without MuJoCo must not pass the MuJoCo tests by skipping them.
+pub fn mujoco_available(hub: &envhub::Hub, test: &str) -> bool {
+    let adapters = hub.adapters().expect("the adapter catalog");
+    let availability = adapters
+        .iter()
+        .find(|a| a.name == "mujoco")
+        .map(|a| a.availability.clone());
+    let why = match availability {
+        Some(a) if a.is_available() => return true,
+        Some(envhub_core::Availability::Unavailable { reason, .. }) => reason,
+        _ => "the worker lists no `mujoco` adapter".into(),
+    };
+    assert!(
+        std::env::var_os(envhub::env_vars::ENVHUB_MUJOCO_REQUIRED).is_none_or(|v| v.is_empty()),
+        "{test}: MuJoCo is required (ENVHUB_MUJOCO_REQUIRED) but unavailable: {why}\nhint: `make build` builds the worker with the `mujoco` feature and libmujoco"
+    );
+    eprintln!("skipped {test}: MuJoCo is unavailable: {why}");
+    false
+}
+
 /// A temp folder holding one Python module (a user adapter for the Python worker), removed
 /// when dropped.
 pub struct PyModule {

@@ -42,11 +42,26 @@ impl Drop for ProcessWatch {
     }
 }
 
-/// Asks the kernel to kill this process when its parent dies (the hub or client that spawned
-/// it), so a crashed owner never leaves workers behind.
-pub fn die_with_parent() {
+/// Asks the kernel to kill this process (SIGKILL) when its parent dies, even in the middle of
+/// a step, so a crashed owner never leaves workers behind; fails if the parent is no longer
+/// `parent` (it died before the request could take effect).
+///
+/// For a spawned child between fork and exec (`CommandExt::pre_exec`): the request survives
+/// `exec`, and this makes two system calls and allocates nothing, as code there must. The
+/// kernel sends the signal when the parent *thread* that forked the child ends, so the parent
+/// must spawn from a thread that lives as long as it does.
+pub fn die_with_parent(parent: u32) -> std::io::Result<()> {
     // SAFETY: prctl with PR_SET_PDEATHSIG and a signal number has no memory effects.
-    unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) };
+    if unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    // The parent may have died before the request: then this process has been handed to
+    // another one and will never get the signal.
+    // SAFETY: getppid has no preconditions.
+    if unsafe { libc::getppid() } as u32 != parent {
+        return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
+    }
+    Ok(())
 }
 
 /// Sends SIGKILL to `pid` (a hung worker).

@@ -2,18 +2,45 @@
 
 use envhub_core::EnvAdapter;
 
-/// The adapters compiled into this binary. Adding one is one line here.
+/// Set to `1` to list the test adapters (`null`) in `describe`, hence in the hub's catalog
+/// (`ENVHUB_TEST_ADAPTERS`, declared with the other variables in `envhub::env_vars`).
+const TEST_ADAPTERS_VAR: &str = "ENVHUB_TEST_ADAPTERS";
+
+/// The adapters users see. Adding one is one line here.
 pub fn all() -> Vec<Box<dyn EnvAdapter>> {
     vec![
         Box::new(envhub_classic::ClassicControl),
         Box::new(envhub_mujoco::Mujoco::default()),
         Box::new(envhub_mujoco::CustomMjcf::default()),
         Box::new(envhub_rapier::Rapier),
-        Box::new(crate::null_env::NullAdapter),
     ]
 }
 
-/// The adapter named `name`.
+/// Adapters for tests and benches only: served when a job names them, listed only when
+/// `ENVHUB_TEST_ADAPTERS=1`.
+fn testing() -> Vec<Box<dyn EnvAdapter>> {
+    vec![Box::new(crate::null_env::NullAdapter)]
+}
+
+/// The adapters `describe` lists: [`all`], plus the test adapters when asked for.
+pub fn listed() -> Vec<Box<dyn EnvAdapter>> {
+    let mut list = all();
+    if std::env::var(TEST_ADAPTERS_VAR).is_ok_and(|v| v == "1") {
+        list.extend(testing());
+    }
+    list
+}
+
+/// Whether `name` is a test adapter (`describe` marks them, so the hub can keep them out of
+/// its catalog while still launching them).
+pub fn is_testing(name: &str) -> bool {
+    testing().iter().any(|a| a.name() == name)
+}
+
+/// The adapter named `name`, test adapters included.
 pub fn by_name(name: &str) -> Option<Box<dyn EnvAdapter>> {
-    all().into_iter().find(|a| a.name() == name)
+    all()
+        .into_iter()
+        .chain(testing())
+        .find(|a| a.name() == name)
 }

@@ -19,7 +19,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print the adapters this binary hosts, with availability, as JSON.
+    /// Print the adapters this binary hosts, with availability, as JSON (the test adapter
+    /// `null` only with ENVHUB_TEST_ADAPTERS=1).
     Describe,
     /// Serve a job (JSON) over shared memory until closed or the owner exits.
     Serve {
@@ -87,17 +88,21 @@ fn main() -> ExitCode {
 }
 
 fn describe() -> anyhow::Result<()> {
-    let list: Vec<serde_json::Value> = adapters::all()
+    let list: Vec<serde_json::Value> = adapters::listed()
         .iter()
         .map(|a| {
-            serde_json::json!({
+            let mut entry = serde_json::json!({
                 "name": a.name(),
                 "frameworks": a.frameworks(),
                 "requires": a.requires(),
                 "description": a.description(),
                 "availability": a.availability(),
                 "envs": a.list_envs(),
-            })
+            });
+            if adapters::is_testing(a.name()) {
+                entry["testing"] = true.into();
+            }
+            entry
         })
         .collect();
     println!("{}", serde_json::to_string(&list)?);

@@ -9,11 +9,18 @@ use envhub_core::{
 const ENV_ID: &str = "Null-v0";
 const OPTIONS: &[&str] = &["sleep_ms", "exit_after", "error_after"];
 
-/// Adapter with one env, `Null-v0`: CartPole-sized spaces, no computation.
+/// Adapter with one env, `Null-v0`: CartPole-sized spaces, no computation. A test adapter:
+/// the worker lists it only when asked to (see `adapters::listed`).
 pub struct NullAdapter;
 
+/// The observation's first float counts the env's steps (a `u32`, so up to 2^32); the others
+/// stay 0.
 fn spaces() -> (Space, Space) {
-    (Space::box_f32(&[4], -1.0, 1.0), Space::discrete(2))
+    let steps_max = f64::from(u32::MAX) + 1.0;
+    (
+        Space::box_f32_bounds(vec![0.0, -1.0, -1.0, -1.0], vec![steps_max, 1.0, 1.0, 1.0]),
+        Space::discrete(2),
+    )
 }
 
 impl EnvAdapter for NullAdapter {
@@ -127,12 +134,39 @@ impl Env for NullEnv {
             });
         }
         self.t = self.t.wrapping_add(1);
-        // The step count in the first float, so a test can see the env really stepped.
+        // The step count in the first float, so a test can see the env really stepped; the
+        // whole observation is written, as the slot it goes to holds an earlier step's.
+        obs.fill(0);
         obs[..4].copy_from_slice(&(self.t as f32).to_le_bytes());
         Ok(Transition {
             reward: 1.0,
             terminated: false,
             truncated: false,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn observations_lie_in_the_declared_space() {
+        let config = EnvConfig::default();
+        let mut env = NullAdapter.make(ENV_ID, &config).unwrap();
+        let space = NullAdapter.spec(ENV_ID, &config).unwrap().observation_space;
+        // A slot that held something else before: the env must overwrite all of it.
+        let mut obs = vec![0xAAu8; space.byte_len()];
+        let mut info = Info::default();
+        env.reset(Some(0), &ResetOptions::new(), &mut obs, &mut info)
+            .unwrap();
+        assert!(space.contains(&obs), "after reset: {obs:?}");
+        let action = 0i64.to_le_bytes();
+        for t in 1..=50 {
+            obs.fill(0xAA);
+            env.step(&action, &mut obs, &mut info).unwrap();
+            assert!(space.contains(&obs), "after step {t}: {obs:?}");
+            assert_eq!(f32::from_le_bytes(obs[..4].try_into().unwrap()), t as f32);
+        }
     }
 }

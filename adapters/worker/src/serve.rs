@@ -9,7 +9,7 @@ use std::io::Write;
 /// Creates a job's envs, each wrapped in the episode limit.
 pub(crate) fn make_envs(job: &WorkerJob) -> Result<(EnvBatch, ReadySpec), String> {
     let adapter = adapters::by_name(&job.adapter).ok_or_else(|| {
-        let names: Vec<&str> = adapters::all().iter().map(|a| a.name()).collect();
+        let names: Vec<&str> = adapters::listed().iter().map(|a| a.name()).collect();
         format!(
             "this worker has no adapter `{}`\nhint: it hosts: {}",
             job.adapter,

@@ -3,8 +3,9 @@
 Started by the hub for Python-hosted adapters (see `envhub.hosted`). `describe` prints the
 adapters this interpreter can host, as JSON; `serve` creates a job's envs here and hands
 them to the Rust serve loop in `envhub._envhub.serve_worker`, which speaks the same
-shared-memory protocol as the Rust `envhub-worker`: actions arrive as read-only numpy views
-of the request sample, each observation is copied once into the response sample.
+shared-memory protocol as the Rust `envhub-worker`: each env gets its own copy of its action
+(the request sample is reused by the next request, and an env may keep its action), each
+observation is copied once into the response sample.
 
 An adapter whose `make_vec` returns a vector env (one object stepping all of the worker's
 envs, as Isaac Lab and Gymnasium's `vector_entry_point` envs do) is served whole instead,
@@ -82,7 +83,9 @@ class HostedEnv:
         return info_json(info)
 
     def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, str | None]:
-        act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8))
+        # A copy the env owns: `action` views the request sample, which the next request
+        # overwrites, and envs may keep their action ("previous action" features).
+        act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8).copy())
         obs, reward, terminated, truncated, info = self.env.step(act)
         _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
         return float(reward), bool(terminated), bool(truncated), info_json(info)
@@ -98,8 +101,8 @@ class HostedVectorEnv:
     """A vector env (Gymnasium 1.x `VectorEnv` contract) holding all of a worker's envs, as
     `serve_vector_worker` drives it. It steps every env at once and autoresets them itself, so
     it is served only under the autoreset mode it declares. Each result is copied once, for
-    the whole batch, into the response block it is given; actions are numpy views of the
-    request block."""
+    the whole batch, into the response block it is given; actions are a copy of the request
+    block that the vector env owns."""
 
     def __init__(self, env: Any, env_id: str, obs_desc: dict[str, Any], act_desc: dict[str, Any]) -> None:
         self.env = env
@@ -158,7 +161,8 @@ class HostedVectorEnv:
         final_obs: memoryview | None,
         final_mask: memoryview,
     ) -> str | None:
-        values, reward, term, trunc, info = self.env.step(_read(self.act_tree, self._rows(actions)))
+        # One copy of the batch's actions per step, which the vector env owns (as for `HostedEnv`).
+        values, reward, term, trunc, info = self.env.step(_read(self.act_tree, self._rows(actions).copy()))
         _write(self.obs_tree, values, self._rows(obs))
         np.frombuffer(rewards, dtype=np.float64)[:] = reward
         np.frombuffer(terminated, dtype=np.uint8)[:] = term
