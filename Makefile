@@ -131,7 +131,7 @@ rust-test: setup py-install
 
 # The Python package `envhub` into .venv/, editable: the extension module `make build`
 # compiled goes next to the pure-Python sources, which a .pth file puts on the venv's path,
-# and the release worker goes beside them. (`make wheel` is where maturin packages it.)
+# and the release worker goes beside them (maturin, through pyproject.toml, builds wheels).
 PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 PY_EXT_SUFFIX = $(shell $(VPY) -c 'import importlib.machinery as m; print(m.EXTENSION_SUFFIXES[0])')
 py-install: build
