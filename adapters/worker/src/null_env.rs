@@ -1,5 +1,6 @@
 //! `null`: an env that does no work, for measuring the data plane alone — and, through its
-//! options, for misbehaving on purpose in failure tests (`sleep_ms`, `exit_after`).
+//! options, for misbehaving on purpose in failure tests (`sleep_ms`, `exit_after`) and for
+//! observations of any size (`frame`: a `uint8` image, for data-plane benchmarks).
 
 use envhub_core::{
     Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec, Info, ResetOptions, Space,
@@ -7,20 +8,52 @@ use envhub_core::{
 };
 
 const ENV_ID: &str = "Null-v0";
-const OPTIONS: &[&str] = &["sleep_ms", "exit_after", "error_after"];
+const OPTIONS: &[&str] = &["sleep_ms", "exit_after", "error_after", "frame"];
 
 /// Adapter with one env, `Null-v0`: CartPole-sized spaces, no computation. A test adapter:
 /// the worker lists it only when asked to (see `adapters::listed`).
 pub struct NullAdapter;
 
 /// The observation's first float counts the env's steps (a `u32`, so up to 2^32); the others
-/// stay 0.
-fn spaces() -> (Space, Space) {
+/// stay 0. With `frame`, the observation is instead a `uint8` image of that shape, every byte
+/// the step count's low byte.
+fn spaces(frame: Option<&[usize]>) -> (Space, Space) {
     let steps_max = f64::from(u32::MAX) + 1.0;
-    (
-        Space::box_f32_bounds(vec![0.0, -1.0, -1.0, -1.0], vec![steps_max, 1.0, 1.0, 1.0]),
-        Space::discrete(2),
-    )
+    let obs = match frame {
+        None => Space::box_f32_bounds(vec![0.0, -1.0, -1.0, -1.0], vec![steps_max, 1.0, 1.0, 1.0]),
+        Some(shape) => {
+            let n = shape.iter().product();
+            Space::Box {
+                dtype: envhub_core::DType::Uint8,
+                shape: shape.to_vec(),
+                low: vec![0.0; n],
+                high: vec![255.0; n],
+            }
+        }
+    };
+    (obs, Space::discrete(2))
+}
+
+/// The `frame` option: a shape of 1 to 4 positive dimensions, at most 64 MiB in all.
+fn frame_shape(config: &EnvConfig) -> Result<Option<Vec<usize>>, EnvError> {
+    let keys = config.extra_keys(ENV_ID, OPTIONS)?;
+    let Some(value) = keys.value("frame") else {
+        return Ok(None);
+    };
+    let shape: Option<Vec<usize>> = value.as_array().and_then(|dims| {
+        dims.iter()
+            .map(|d| d.as_u64().filter(|&d| d > 0).map(|d| d as usize))
+            .collect()
+    });
+    match shape {
+        Some(s) if (1..=4).contains(&s.len()) && s.iter().product::<usize>() <= 64 << 20 => {
+            Ok(Some(s))
+        }
+        _ => Err(keys.error(
+            "frame",
+            "must be a list of 1 to 4 positive dimensions of at most 64 MiB in all, e.g. [84, 84, 4]",
+        )),
+    }
 }
 
 impl EnvAdapter for NullAdapter {
@@ -53,7 +86,7 @@ impl EnvAdapter for NullAdapter {
             return Err(self.unknown_env(env_id));
         }
         config.extra_keys(env_id, OPTIONS)?;
-        let (observation_space, action_space) = spaces();
+        let (observation_space, action_space) = spaces(frame_shape(config)?.as_deref());
         Ok(EnvSpec {
             env_id: ENV_ID.to_string(),
             observation_space,
@@ -66,8 +99,10 @@ impl EnvAdapter for NullAdapter {
     fn make(&self, env_id: &str, config: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
         self.spec(env_id, config)?;
         let keys = config.extra_keys(env_id, OPTIONS)?;
-        let (obs, act) = spaces();
+        let frame = frame_shape(config)?;
+        let (obs, act) = spaces(frame.as_deref());
         Ok(Box::new(NullEnv {
+            frame: frame.is_some(),
             obs,
             act,
             t: 0,
@@ -80,6 +115,8 @@ impl EnvAdapter for NullAdapter {
 }
 
 struct NullEnv {
+    /// The observation is a `uint8` image (`frame`).
+    frame: bool,
     obs: Space,
     act: Space,
     t: u32,
@@ -134,10 +171,14 @@ impl Env for NullEnv {
             });
         }
         self.t = self.t.wrapping_add(1);
-        // The step count in the first float, so a test can see the env really stepped; the
-        // whole observation is written, as the slot it goes to holds an earlier step's.
-        obs.fill(0);
-        obs[..4].copy_from_slice(&(self.t as f32).to_le_bytes());
+        // The step count in the first float (every byte of a frame), so a test can see the env
+        // really stepped; the whole observation is written, as its slot held an earlier step's.
+        if self.frame {
+            obs.fill(self.t as u8);
+        } else {
+            obs.fill(0);
+            obs[..4].copy_from_slice(&(self.t as f32).to_le_bytes());
+        }
         Ok(Transition {
             reward: 1.0,
             terminated: false,
@@ -149,6 +190,35 @@ impl Env for NullEnv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn frames_of_any_shape_and_clear_errors() {
+        let mut config = EnvConfig::default();
+        config
+            .extra
+            .insert("frame".into(), serde_json::json!([84, 84, 4]));
+        let mut env = NullAdapter.make(ENV_ID, &config).unwrap();
+        assert_eq!(env.observation_space().byte_len(), 84 * 84 * 4);
+        let mut obs = vec![0u8; 84 * 84 * 4];
+        let mut info = Info::default();
+        env.reset(None, &ResetOptions::new(), &mut obs, &mut info)
+            .unwrap();
+        env.step(&0i64.to_le_bytes(), &mut obs, &mut info).unwrap();
+        assert!(obs.iter().all(|&b| b == 1));
+        assert!(env.observation_space().contains(&obs));
+        for bad in [
+            serde_json::json!([0]),
+            serde_json::json!("84x84"),
+            serde_json::json!([1, 2, 3, 4, 5]),
+        ] {
+            config.extra.insert("frame".into(), bad);
+            let err = NullAdapter.make(ENV_ID, &config).err().unwrap().to_string();
+            assert!(
+                err.contains("frame") && err.contains("[84, 84, 4]"),
+                "{err}"
+            );
+        }
+    }
 
     #[test]
     fn observations_lie_in_the_declared_space() {
