@@ -335,9 +335,12 @@ pub(crate) struct Renderer {
     height: usize,
 }
 
-// SAFETY: the renderer owns its EGL context and surface; `render` makes the context current on
-// the calling thread before drawing, and an env (hence its renderer) is used by one thread at a
-// time (`&mut self`), which is all EGL requires to move a context between threads.
+// SAFETY: the renderer owns its EGL context and surface and is only used through `&mut self`,
+// so never from two threads at once. Every draw first makes the context current on the calling
+// thread (mujoco-rs), and EGL refuses, with an error and no GL call, to make it current on a
+// thread while it is current on another — a renderer moved between threads fails to render,
+// it does not race. `Env` must be `Send` for worker threads (`envhub-worker inproc`), which
+// create, step and render each env on one thread.
 unsafe impl Send for Renderer {}
 
 impl Renderer {
