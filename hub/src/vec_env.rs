@@ -13,7 +13,7 @@ use crate::routing::Route;
 use crate::session_options::SessionOptions;
 use crate::worker_link::{InterruptCheck, WorkerLink, split_envs};
 use envhub_core::{AutoresetMode, DType, Space};
-use envhub_shm::{BatchLayout, ChannelName, SlotPool, SlotsName, WorkerJob};
+use envhub_shm::{BatchLayout, ChannelName, Doorbells, SlotPool, SlotsName, WorkerJob};
 use std::sync::Arc;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -90,9 +90,11 @@ impl VecEnv {
             session: session.clone(),
         };
         let policy = options.wait_policy(workers);
+        let bells = Doorbells::create(&slots, workers)?;
         let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
             .into_iter()
-            .map(|(env_offset, count)| {
+            .enumerate()
+            .map(|(worker_index, (env_offset, count))| {
                 let mut config = route.config.clone();
                 config.num_envs = count;
                 WorkerJob {
@@ -107,6 +109,8 @@ impl VecEnv {
                         service: String::new(),
                     },
                     slots: slots.clone(),
+                    worker_index,
+                    session_workers: workers,
                     owner_pid: std::process::id(),
                     spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
@@ -121,8 +125,19 @@ impl VecEnv {
                 .enumerate()
                 .map(|(index, job)| {
                     let (session, start_timeout) = (&session, options.start_timeout);
+                    let bell = bells.bell(index);
                     scope.spawn(move || {
-                        WorkerLink::start(index, job, session, 0, policy, start_timeout, launcher)
+                        let bell = bell?;
+                        WorkerLink::start(
+                            index,
+                            job,
+                            session,
+                            0,
+                            policy,
+                            start_timeout,
+                            launcher,
+                            bell,
+                        )
                     })
                 })
                 .collect();
@@ -137,7 +152,13 @@ impl VecEnv {
                 })
                 .collect()
         });
-        let links = started.into_iter().collect::<Result<Vec<_>, _>>()?;
+        let links = match started.into_iter().collect::<Result<Vec<_>, _>>() {
+            Ok(links) => links,
+            Err(e) => {
+                slots.unlink_all();
+                return Err(e);
+            }
+        };
         let observation_space = links[0].spec.observation_space.clone();
         let action_space = links[0].spec.action_space.clone();
         let layout = BatchLayout::new(

@@ -3,7 +3,8 @@
 use crate::error::HubError;
 use crate::launcher::{Launcher, WorkerProcess};
 use envhub_shm::{
-    ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy, WorkerJob,
+    Bell, ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy,
+    WorkerJob,
 };
 
 /// Asked while waiting on workers: `true` stops the wait with [`HubError::Interrupted`] (the
@@ -21,6 +22,7 @@ pub(crate) struct WorkerLink {
     launcher: Launcher,
     watch: ProcessWatch,
     generation: u32,
+    bell: Bell,
     /// A request is in flight.
     pub pending: bool,
     /// A response received but not yet handed to the caller (`recv` returns it later).
@@ -39,6 +41,7 @@ pub(crate) struct WorkerLink {
 
 impl WorkerLink {
     /// Creates the channel, starts the worker and waits for it to report ready.
+    #[allow(clippy::too_many_arguments)] // one worker's whole identity, used in one place
     pub fn start(
         index: usize,
         mut job: WorkerJob,
@@ -47,10 +50,12 @@ impl WorkerLink {
         policy: WaitPolicy,
         start_timeout: Duration,
         launcher: &Launcher,
+        bell: Bell,
     ) -> Result<WorkerLink, HubError> {
         job.channel.service = format!("envhub/{session}/{index}/{generation}");
         let node_name = format!("client-{}-{index}", std::process::id());
         let mut channel = ClientChannel::create(&job.channel, &node_name, policy)?;
+        channel.set_bell(bell.clone());
         let (process, spec) = launcher.launch(&job, start_timeout).map_err(|e| match e {
             HubError::WorkerDied { pid, why, envs, .. } => HubError::WorkerDied {
                 worker: index,
@@ -78,6 +83,7 @@ impl WorkerLink {
             launcher: launcher.clone(),
             watch,
             generation,
+            bell,
             pending: false,
             response: None,
             slot: 0,
@@ -215,6 +221,7 @@ impl WorkerLink {
             policy,
             start_timeout,
             &self.launcher,
+            self.bell.clone(),
         )?;
         let restarts = self.restarts + 1;
         *self = fresh;

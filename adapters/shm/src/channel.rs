@@ -6,11 +6,11 @@ use crate::DataPlaneError;
 use crate::layout::{
     Layout, RequestHeader, ResponseBlocksMut, ResponseHeader, command, env_flag, status,
 };
-use crate::slots::SlotMap;
+use crate::slots::{Bell, Side, SlotMap};
 use crate::transport::{
     ChannelName, Ipc, Ports, client_ports, node, request_publisher, worker_ports,
 };
-use crate::wait::{AdaptiveSpin, WaitPolicy, next_sample};
+use crate::wait::{AdaptiveSpin, Blocked, WaitPolicy, next_sample, ring};
 use iceoryx2::node::Node;
 use iceoryx2::prelude::{CallbackProgression, SignalHandlingMode, WaitSetBuilder};
 use iceoryx2::sample::Sample;
@@ -42,6 +42,7 @@ pub struct ClientChannel {
     policy: WaitPolicy,
     spin: AdaptiveSpin,
     sent_at: std::time::Instant,
+    bell: Option<Bell>,
     _node: Node<Ipc>,
 }
 
@@ -92,8 +93,19 @@ impl ClientChannel {
             policy,
             spin: AdaptiveSpin::default(),
             sent_at: std::time::Instant::now(),
+            bell: None,
             _node: node,
         })
+    }
+
+    /// Uses `bell`'s flags: the worker is notified only while it is blocked, and says when this
+    /// side must be (without a bell, every send notifies).
+    pub fn set_bell(&mut self, bell: Bell) {
+        self.bell = Some(bell);
+    }
+
+    fn flag(&self, side: Side) -> Option<&std::sync::atomic::AtomicU32> {
+        self.bell.as_ref().map(|b| b.flag(side))
     }
 
     /// Sets the request layout once the worker has reported its spaces, and makes the request
@@ -142,10 +154,7 @@ impl ClientChannel {
         fill(&layout, payload);
         sample.send().map_err(send_failed("send request"))?;
         self.sent_at = std::time::Instant::now();
-        self.ports
-            .notifier
-            .notify()
-            .map_err(send_failed("notify"))?;
+        ring(&self.ports.notifier, self.flag(Side::Worker))?;
         Ok(self.seq)
     }
 
@@ -212,6 +221,7 @@ impl ClientChannel {
                 &self.ports.listener,
                 self.spin.budget(&self.policy),
                 self.policy.tick,
+                self.bell.as_ref().map(|b| b.flag(Side::Client)),
                 &mut alive,
             )?;
             // A response to an earlier request (one abandoned after an error) is skipped.
@@ -251,6 +261,21 @@ pub fn wait_any(channels: &[&ClientChannel], timeout: Duration) -> Result<(), Da
     if channels.is_empty() {
         std::thread::sleep(timeout);
         return Ok(());
+    }
+    // Blocked from here on, as the workers must know before they answer; a response that
+    // came before the flags went up is seen below, without waiting.
+    let _blocked: Vec<Blocked<'_>> = channels
+        .iter()
+        .map(|c| Blocked::raise(c.flag(Side::Client)))
+        .collect();
+    for c in channels {
+        if c.ports
+            .subscriber
+            .has_samples()
+            .map_err(send_failed("look for responses"))?
+        {
+            return Ok(());
+        }
     }
     let waitset = WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -321,6 +346,7 @@ pub struct WorkerChannel {
     first_env: usize,
     policy: WaitPolicy,
     spin: AdaptiveSpin,
+    bell: Option<Bell>,
     _node: Node<Ipc>,
 }
 
@@ -344,8 +370,14 @@ impl WorkerChannel {
             first_env,
             policy,
             spin: AdaptiveSpin::default(),
+            bell: None,
             _node: node,
         })
+    }
+
+    /// Uses `bell`'s flags (see [`ClientChannel::set_bell`]).
+    pub fn set_bell(&mut self, bell: Bell) {
+        self.bell = Some(bell);
     }
 
     /// The session's batch slots as this worker maps them.
@@ -367,6 +399,7 @@ impl WorkerChannel {
             &self.ports.listener,
             self.spin.budget(&self.policy),
             self.policy.tick,
+            self.bell.as_ref().map(|b| b.flag(Side::Worker)),
             alive,
         )?;
         self.spin.observe(idle_since.elapsed());
@@ -434,10 +467,10 @@ impl WorkerChannel {
             reserved: 0,
         };
         out.send().map_err(send_failed("send response"))?;
-        self.ports
-            .notifier
-            .notify()
-            .map_err(send_failed("notify"))?;
+        ring(
+            &self.ports.notifier,
+            self.bell.as_ref().map(|b| b.flag(Side::Client)),
+        )?;
         Ok(command)
     }
 }

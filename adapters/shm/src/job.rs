@@ -28,6 +28,12 @@ pub struct WorkerJob {
     pub channel: ChannelName,
     /// The session's batch slots, which the worker writes its results into.
     pub slots: SlotsName,
+    /// This worker's index in the session (its channel's doorbell).
+    #[serde(default)]
+    pub worker_index: usize,
+    /// Workers of the session, hence doorbells (0: none, every send notifies).
+    #[serde(default)]
+    pub session_workers: usize,
     /// The process whose exit ends this worker (the client that uses it).
     pub owner_pid: u32,
     /// Spin at least this long before blocking, in microseconds (0: never spin).

@@ -32,7 +32,10 @@ pub use layout::{
 pub use pingpong::{ping, pong};
 pub use process::{ProcessWatch, die_with_parent, kill};
 pub use serve::{ServedBatch, serve_batch};
-pub use slots::{MAX_SLOTS, Slot, SlotLease, SlotMap, SlotPool, SlotsName, remove_stale_slots};
+pub use slots::{
+    Bell, Doorbells, MAX_SLOTS, Side, Slot, SlotLease, SlotMap, SlotPool, SlotsName,
+    remove_stale_slots,
+};
 pub use transport::{ChannelName, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
 

@@ -4,8 +4,8 @@
 //! same protocol and only differ in what their envs are.
 
 use crate::{
-    BatchLayout, DataPlaneError, Layout, ProcessWatch, ReadySpec, Reply, ResponseBlocksMut,
-    SlotMap, WaitPolicy, WorkerChannel, WorkerJob, WorkerReply, command,
+    BatchLayout, DataPlaneError, Doorbells, Layout, ProcessWatch, ReadySpec, Reply,
+    ResponseBlocksMut, SlotMap, WaitPolicy, WorkerChannel, WorkerJob, WorkerReply, command,
 };
 use envhub_core::{AutoresetMode, EnvError, ResetOptions};
 use std::time::Duration;
@@ -139,6 +139,15 @@ pub fn serve_batch(
             .map_err(io);
         }
     };
+    if job.session_workers > 0 {
+        // Without the doorbells every response notifies: slower, never wrong.
+        match Doorbells::open(&job.slots, job.session_workers)
+            .and_then(|b| b.bell(job.worker_index))
+        {
+            Ok(bell) => channel.set_bell(bell),
+            Err(e) => tracing::debug!(error = %e, "no doorbells; notifying every response"),
+        }
+    }
     let owner = ProcessWatch::new(job.owner_pid).map_err(|e| {
         DataPlaneError::PeerGone(format!("the owner process {} is gone: {e}", job.owner_pid))
     })?;
@@ -288,6 +297,8 @@ mod tests {
                 prefix: prefix.into(),
                 session: format!("{}-serve-test", std::process::id()),
             },
+            worker_index: 0,
+            session_workers: 0,
             owner_pid: std::process::id(),
             spin_us: 0,
             max_spin_us: 0,

@@ -188,6 +188,84 @@ impl Drop for Mapping {
     }
 }
 
+/// Where each side of each channel says that it is blocked, so the other side rings (sends
+/// an iceoryx2 notification, a syscall) only then: while both sides spin, a round trip costs
+/// no syscall. One cache line per flag; a `u32` each, shared by the session's processes.
+pub struct Doorbells {
+    map: Mapping,
+    channels: usize,
+}
+
+/// Bytes between two flags (one cache line each, so two sides never share a line).
+const BELL_STRIDE: usize = 64;
+
+impl Doorbells {
+    fn path(name: &SlotsName) -> Result<CString, DataPlaneError> {
+        CString::new(format!("/{}bells", name.stem()))
+            .map_err(|_| DataPlaneError::Protocol("slot name holds a NUL byte".into()))
+    }
+
+    /// Creates the flags of `channels` channels (the client, before starting its workers).
+    pub fn create(name: &SlotsName, channels: usize) -> Result<Arc<Doorbells>, DataPlaneError> {
+        remove_stale_slots(&name.prefix);
+        let map = Mapping::map(&Self::path(name)?, channels * 2 * BELL_STRIDE, true)?;
+        Ok(Arc::new(Doorbells { map, channels }))
+    }
+
+    /// Opens the client's flags (a worker).
+    pub fn open(name: &SlotsName, channels: usize) -> Result<Arc<Doorbells>, DataPlaneError> {
+        let map = Mapping::map(&Self::path(name)?, channels * 2 * BELL_STRIDE, false)?;
+        Ok(Arc::new(Doorbells { map, channels }))
+    }
+
+    /// The flags of channel `index`.
+    pub fn bell(self: &Arc<Self>, index: usize) -> Result<Bell, DataPlaneError> {
+        if index >= self.channels {
+            return Err(DataPlaneError::Protocol(format!(
+                "channel {index} of a session with {} channels",
+                self.channels
+            )));
+        }
+        Ok(Bell {
+            bells: self.clone(),
+            index,
+        })
+    }
+}
+
+/// One channel's two flags: the client's and the worker's "I am blocked".
+#[derive(Clone)]
+pub struct Bell {
+    bells: Arc<Doorbells>,
+    index: usize,
+}
+
+/// A side of a channel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The client (sends requests).
+    Client,
+    /// The worker (sends responses).
+    Worker,
+}
+
+impl Bell {
+    /// The flag of `side`: non-zero while that side is blocked on its listener.
+    pub fn flag(&self, side: Side) -> &std::sync::atomic::AtomicU32 {
+        let offset = (2 * self.index + usize::from(side == Side::Worker)) * BELL_STRIDE;
+        // SAFETY: inside the mapping (`bell` checked the index), 64-byte aligned (page-aligned
+        // mapping, stride 64), and only ever accessed atomically by every process.
+        unsafe {
+            &*self
+                .bells
+                .map
+                .ptr
+                .add(offset)
+                .cast::<std::sync::atomic::AtomicU32>()
+        }
+    }
+}
+
 /// One slot: a whole batch's results, laid out by a [`BatchLayout`].
 pub struct Slot {
     index: u32,

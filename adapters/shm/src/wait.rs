@@ -12,6 +12,7 @@ use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ZeroCopySend;
 use iceoryx2::sample::Sample;
+use std::sync::atomic::{AtomicU32, Ordering, fence};
 use std::time::{Duration, Instant};
 
 /// How long to spin on `receive` before blocking. Spinning saves the wake-up latency (tens of
@@ -77,13 +78,55 @@ impl AdaptiveSpin {
     }
 }
 
+/// Raises a "blocked" flag for as long as it lives, so the peer notifies (see [`ring`]).
+pub(crate) struct Blocked<'a>(Option<&'a AtomicU32>);
+
+impl<'a> Blocked<'a> {
+    /// Raises `flag` (if any). The fence orders the raise before the caller's next look at
+    /// its queue, so a peer that published before seeing the flag is seen by that look.
+    pub fn raise(flag: Option<&'a AtomicU32>) -> Blocked<'a> {
+        if let Some(f) = flag {
+            f.store(1, Ordering::SeqCst);
+            fence(Ordering::SeqCst);
+        }
+        Blocked(flag)
+    }
+}
+
+impl Drop for Blocked<'_> {
+    fn drop(&mut self) {
+        if let Some(f) = self.0 {
+            f.store(0, Ordering::SeqCst);
+        }
+    }
+}
+
+/// Notifies the peer after a publish, unless its flag says it is not blocked (it is spinning
+/// and will see the sample without a wake-up). No flag: always notify. A notification missed
+/// through a race costs at most one tick: a blocked side looks at its queue every tick.
+pub(crate) fn ring(
+    notifier: &iceoryx2::port::notifier::Notifier<Ipc>,
+    peer_blocked: Option<&AtomicU32>,
+) -> Result<(), DataPlaneError> {
+    fence(Ordering::SeqCst);
+    if peer_blocked.is_none_or(|f| f.load(Ordering::SeqCst) != 0) {
+        notifier.notify().map_err(|e| DataPlaneError::Ipc {
+            what: "notify",
+            detail: format!("{e:?}"),
+        })?;
+    }
+    Ok(())
+}
+
 /// Receives the next sample, calling `alive` every `policy.tick` while none arrives. An error
-/// from `alive` ends the wait with that error.
+/// from `alive` ends the wait with that error. `blocked` is this side's flag, raised while it
+/// blocks (see [`ring`]).
 pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
     subscriber: &Subscriber<Ipc, [u8], H>,
     listener: &Listener<Ipc>,
     spin: Duration,
     tick: Duration,
+    blocked: Option<&AtomicU32>,
     mut alive: impl FnMut() -> Result<(), DataPlaneError>,
 ) -> Result<Sample<Ipc, [u8], H>, DataPlaneError> {
     let receive = || {
@@ -107,6 +150,7 @@ pub(crate) fn next_sample<H: std::fmt::Debug + ZeroCopySend>(
         }
     }
     let mut next_check = Instant::now() + tick;
+    let _blocked = Blocked::raise(blocked);
     loop {
         if let Some(sample) = receive()? {
             return Ok(sample);

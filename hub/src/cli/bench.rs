@@ -73,6 +73,8 @@ fn inproc_throughput(
             prefix: String::new(),
             session: String::new(),
         },
+        worker_index: 0,
+        session_workers: 0,
         owner_pid: std::process::id(),
         spin_us: 0,
         max_spin_us: 0,
