@@ -140,12 +140,19 @@ pub fn serve_batch(
         }
     };
     if job.session_workers > 0 {
-        // Without the doorbells every response notifies: slower, never wrong.
+        // The client rings only workers whose flag says they are blocked, so a worker without
+        // its doorbell would wait out every tick: that is a start-up error, not a fallback.
         match Doorbells::open(&job.slots, job.session_workers)
             .and_then(|b| b.bell(job.worker_index))
         {
             Ok(bell) => channel.set_bell(bell),
-            Err(e) => tracing::debug!(error = %e, "no doorbells; notifying every response"),
+            Err(e) => {
+                batch.close();
+                return reply(&WorkerReply::Error(format!(
+                    "cannot open the session's doorbells: {e}"
+                )))
+                .map_err(io);
+            }
         }
     }
     let owner = ProcessWatch::new(job.owner_pid).map_err(|e| {
