@@ -276,3 +276,42 @@ def test_rendering_wrappers_accept_envhub_envs(tmp_path):
     finally:
         env.close()
     assert list(videos.glob("*.mp4")), "no video written"
+
+
+def test_gymnasium_specs_carry_the_episode_limit():
+    spec, ref = gymnasium.spec("envhub/gym-cartpole"), gymnasium.spec("CartPole-v1")
+    assert spec.max_episode_steps == ref.max_episode_steps == 500
+    assert spec.reward_threshold == ref.reward_threshold
+    assert spec.nondeterministic == ref.nondeterministic
+
+
+def _truncation_step(env, steps=600):
+    """The step (1-based) at which an episode of `env` truncates, pushing the pole upright
+    so that it does not terminate first; None if it does not within `steps`."""
+    obs, _ = env.reset(seed=3)
+    for t in range(1, steps + 1):
+        obs, _, terminated, truncated, _ = env.step(int(obs[2] + obs[3] > 0))
+        assert not terminated, f"terminated at step {t}"
+        if truncated:
+            return t
+    return None
+
+
+@pytest.mark.parametrize(("limit", "want"), [(None, 500), (7, 7), (550, 550)])
+def test_gymnasium_make_truncates_once_where_gymnasium_does(limit, want):
+    """`gymnasium.make` wraps the env in `TimeLimit` (the spec's 500, or the caller's); the
+    worker then applies no limit of its own, so the episode truncates where Gymnasium's
+    CartPole-v1 does, even past the worker's default."""
+    kwargs = {} if limit is None else {"max_episode_steps": limit}
+    ref = gymnasium.make("CartPole-v1", **kwargs)
+    env = gymnasium.make("envhub/gym-cartpole", **kwargs)
+    try:
+        assert _truncation_step(ref) == want
+        assert _truncation_step(env) == want
+    finally:
+        env.close()
+    venv = gymnasium.make_vec("envhub/gym-cartpole", num_envs=2)
+    try:
+        assert venv.max_episode_steps == 500
+    finally:
+        venv.close()
