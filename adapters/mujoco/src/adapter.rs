@@ -188,11 +188,11 @@ impl EnvAdapter for CustomMjcf {
         }
     }
 
-    /// Generic: any env id names the model given by `asset_path`.
     fn render_modes(&self) -> &'static [&'static str] {
         &[RGB_ARRAY]
     }
 
+    /// Generic: any env id names the model given by `asset_path`.
     fn list_envs(&self) -> Vec<String> {
         Vec::new()
     }
