@@ -49,6 +49,11 @@ pub struct AdapterInfo {
     /// The worker process that hosts it.
     #[serde(default)]
     pub host: Host,
+    /// The render modes its envs draw (empty: none), where it declares them; `None` for an
+    /// adapter that forwards the mode to its framework, which decides (the Python-hosted
+    /// ones).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render_modes: Option<Vec<String>>,
 }
 
 type Cached = Result<Arc<[AdapterInfo]>, (String, String)>;
@@ -314,6 +319,7 @@ fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
             },
             envs: vec![],
             host: Host::Python,
+            render_modes: None,
         })
         .collect()
 }

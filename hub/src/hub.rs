@@ -10,7 +10,7 @@ use crate::error::HubError;
 use crate::launcher::Launcher;
 use crate::python_host::UserAdapters;
 use crate::registry::Registry;
-use crate::routing::{Route, route};
+use crate::routing::{Route, renders, route};
 use crate::session_options::SessionOptions;
 use crate::settings::Settings;
 use crate::vec_env::VecEnv;
@@ -122,8 +122,14 @@ impl Hub {
         user: &UserAdapters,
     ) -> Result<Route, HubError> {
         let entry = self.registry.get(id)?;
-        // Native adapters first: when one runs the entry, Python is never started to ask.
-        if let Ok(found) = route(entry, &catalog::native_adapters()?, config) {
+        // Native adapters first: when one runs the entry (and draws the render mode asked
+        // for), Python is never started to ask.
+        let native = catalog::native_adapters()?;
+        if let Ok(found) = route(entry, &native, config)
+            && native
+                .iter()
+                .any(|a| a.name == found.adapter && renders(a, found.config.render_mode.as_deref()))
+        {
             return Ok(found);
         }
         route(entry, &catalog::adapters_with(user)?, config)

@@ -3,7 +3,9 @@
 //! The description is cut into task words; the words that mean something to the registry
 //! (they match some entry's tags or robot model) are searched with the structured fields of
 //! the spec, relaxing the filters step by step as RoboSmith does. The score is the share of
-//! those words the chosen entry matches, so it is easy to explain in the reason.
+//! those words the chosen entry matches, so it is easy to explain in the reason. The
+//! robot type is never relaxed; when it (or another filter) excludes the entry that would
+//! be chosen without filters, the alternatives, or the no-match error, name it and say why.
 
 use crate::entry::EnvEntry;
 use crate::registry::{Registry, RegistryError, SearchQuery, matching_tags};
@@ -37,6 +39,30 @@ pub struct Candidate {
     pub score: f64,
     /// The task words it matched.
     pub matched_tags: Vec<String>,
+    /// Set when the task's filters excluded it although it matches clearly more task words
+    /// than the chosen entry: which filters, in words ("its robot type is \`custom\`, not
+    /// \`biped\`").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub excluded: Option<String>,
+}
+
+impl Candidate {
+    /// The candidate in one line for people, out of `total` task words ("\`mujoco-hopper\`
+    /// matches 2/2 task words (hop, forward)", then for an excluded one "but its robot type
+    /// is \`custom\`, not \`biped\`").
+    pub fn describe(&self, total: usize) -> String {
+        let mut line = format!(
+            "`{}` matches {}/{} task words ({})",
+            self.id,
+            self.matched_tags.len(),
+            total,
+            self.matched_tags.join(", ")
+        );
+        if let Some(why) = &self.excluded {
+            line.push_str(&format!(" but {why}"));
+        }
+        line
+    }
 }
 
 /// The best entry for a task, why, and the runners-up.
@@ -70,6 +96,9 @@ pub enum MatchError {
 
 /// How many runners-up a match reports.
 const MAX_ALTERNATIVES: usize = 5;
+
+/// How many of the runners-up may be entries the task's filters excluded.
+const MAX_EXCLUDED: usize = 2;
 
 /// Once a filter the user gave has been relaxed, the match must cover at least this share of
 /// the task words: the user asked for something else, so weak word overlap is not enough.
@@ -165,6 +194,33 @@ pub fn match_task<'a>(
     // mostly about things no entry offers ("a submarine in a reef") must not score high.
     let total = said.len();
     let score = |n: usize| (n as f64 / total as f64 * 100.0).round() / 100.0;
+    // The entries that would be chosen without any filter, when the filters of `query`
+    // exclude them and they match more task words than `matched` (and at least half of
+    // them): the user should hear about them.
+    let excluded_better = |query: &SearchQuery, matched: usize| -> Vec<Candidate> {
+        let any = SearchQuery {
+            tags: tags.clone(),
+            ..SearchQuery::default()
+        };
+        let hits = registry.search(&any);
+        let top = hits.first().map_or(0, |h| h.matched_tags.len());
+        if top <= matched || score(top) < MIN_RELAXED_SCORE {
+            return Vec::new();
+        }
+        hits.into_iter()
+            .take_while(|h| h.matched_tags.len() == top)
+            .filter_map(|h| {
+                let unmet = query.unmet_filters(h.entry);
+                (!unmet.is_empty()).then(|| Candidate {
+                    id: h.entry.id.clone(),
+                    score: score(h.matched_tags.len()),
+                    matched_tags: h.matched_tags,
+                    excluded: Some(unmet.join(" and ")),
+                })
+            })
+            .take(MAX_EXCLUDED)
+            .collect()
+    };
     let mut rejected: Option<String> = None;
     let mut previous: Option<SearchQuery> = None;
     for (how, query, relaxed) in attempts {
@@ -189,16 +245,18 @@ pub fn match_task<'a>(
             });
             continue;
         }
-        let alternatives = hits
-            .iter()
-            .skip(1)
-            .take(MAX_ALTERNATIVES)
-            .map(|h| Candidate {
-                id: h.entry.id.clone(),
-                score: score(h.matched_tags.len()),
-                matched_tags: h.matched_tags.clone(),
-            })
-            .collect();
+        let mut alternatives = excluded_better(&query, best.matched_tags.len());
+        alternatives.extend(
+            hits.iter()
+                .skip(1)
+                .take(MAX_ALTERNATIVES - alternatives.len())
+                .map(|h| Candidate {
+                    id: h.entry.id.clone(),
+                    score: score(h.matched_tags.len()),
+                    matched_tags: h.matched_tags.clone(),
+                    excluded: None,
+                }),
+        );
         let unmatched: Vec<&str> = said
             .iter()
             .filter(|w| !best.matched_tags.contains(w))
@@ -231,7 +289,7 @@ pub fn match_task<'a>(
     .iter()
     .filter_map(|(name, v)| v.as_ref().map(|v| format!("{name} `{v}`")))
     .collect();
-    let why = rejected.unwrap_or_else(|| {
+    let mut why = rejected.unwrap_or_else(|| {
         format!(
             "no entry{} matches any of the task words ({})",
             if filters.is_empty() {
@@ -242,14 +300,24 @@ pub fn match_task<'a>(
             tags.join(", ")
         )
     });
-    Err(MatchError::NoMatch {
-        why,
-        hint: format!(
-            "robot types in the registry: {}; environment types: {}",
-            registry.robot_types().join(", "),
-            registry.distinct("env_type").join(", ")
-        ),
-    })
+    // The loosest search tried keeps the robot type: entries that only it excluded.
+    let excluded = previous.map_or_else(Vec::new, |q| excluded_better(&q, 0));
+    let mut hint = String::new();
+    if !excluded.is_empty() {
+        for c in &excluded {
+            why.push_str(&format!("; {}", c.describe(total)));
+        }
+        hint = format!(
+            "change or leave out the filter that excludes `{}`; ",
+            excluded[0].id
+        );
+    }
+    hint.push_str(&format!(
+        "robot types in the registry: {}; environment types: {}",
+        registry.robot_types().join(", "),
+        registry.distinct("env_type").join(", ")
+    ));
+    Err(MatchError::NoMatch { why, hint })
 }
 
 /// The words of a description that some entry of the registry can match.

@@ -105,6 +105,34 @@ pub struct SearchQuery {
     pub tags: Vec<String>,
 }
 
+impl SearchQuery {
+    /// The filters of this query that `entry` fails, in words ("its robot type is
+    /// \`custom\`, not \`biped\`"); empty when it passes them all. Task words are not
+    /// filters.
+    pub(crate) fn unmet_filters(&self, entry: &EnvEntry) -> Vec<String> {
+        let filters = [
+            ("robot type", "robot_type", &self.robot_type),
+            ("environment type", "env_type", &self.env_type),
+            ("framework", "framework", &self.framework),
+            ("robot model", "robot_model", &self.robot_model),
+            ("action type", "action_type", &self.action_type),
+        ];
+        filters
+            .iter()
+            .filter_map(|(name, field, wanted)| {
+                let wanted = wanted.as_deref().filter(|v| !v.trim().is_empty())?;
+                let value = entry.field(field);
+                let passes = if *field == "framework" {
+                    framework_matches(value, wanted)
+                } else {
+                    contains_ci(value, wanted)
+                };
+                (!passes).then(|| format!("its {name} is `{value}`, not `{}`", wanted.trim()))
+            })
+            .collect()
+    }
+}
+
 /// One search result.
 #[derive(Clone, Debug)]
 pub struct SearchHit<'a> {
@@ -263,25 +291,10 @@ impl Registry {
     /// Entries that pass every filter of `query`; with tags, only entries matching at least
     /// one tag, sorted by the number matched (ties keep file order).
     pub fn search(&self, query: &SearchQuery) -> Vec<SearchHit<'_>> {
-        let filters = [
-            ("robot_type", &query.robot_type),
-            ("env_type", &query.env_type),
-            ("robot_model", &query.robot_model),
-            ("action_type", &query.action_type),
-        ];
         let mut hits: Vec<SearchHit<'_>> = self
             .entries
             .iter()
-            .filter(|e| {
-                filters.iter().all(|(field, value)| match value {
-                    Some(v) if !v.trim().is_empty() => contains_ci(e.field(field), v),
-                    _ => true,
-                })
-            })
-            .filter(|e| match &query.framework {
-                Some(f) if !f.trim().is_empty() => framework_matches(&e.framework, f),
-                _ => true,
-            })
+            .filter(|e| query.unmet_filters(e).is_empty())
             .map(|e| SearchHit {
                 entry: e,
                 matched_tags: matching_tags(e, &query.tags),

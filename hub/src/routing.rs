@@ -43,9 +43,20 @@ fn check_available(a: &AdapterInfo) -> Result<(), HubError> {
     }
 }
 
+/// Whether `adapter` draws `render_mode` (no mode: yes; an adapter that declares no modes
+/// forwards the mode to its framework, which decides).
+pub(crate) fn renders(adapter: &AdapterInfo, render_mode: Option<&str>) -> bool {
+    match (render_mode, &adapter.render_modes) {
+        (Some(mode), Some(modes)) => modes.iter().any(|m| m == mode),
+        _ => true,
+    }
+}
+
 /// Picks the adapter for `entry`: the pinned one if the entry names one; else an available
-/// adapter of its framework that implements the env id natively; else a generic adapter of
-/// the framework that forwards any id.
+/// adapter of its framework that implements the env id natively and draws the config's
+/// render mode; else a generic adapter of the framework that forwards any id (Gymnasium's
+/// own env, the same dynamics as the native one, when only it renders); else the native
+/// adapter, which refuses the render mode itself with the modes it has.
 pub fn route(
     entry: &EnvEntry,
     adapters: &[AdapterInfo],
@@ -101,11 +112,29 @@ pub fn route(
         .iter()
         .filter(|a| a.envs.contains(&entry.env_id))
         .collect();
-    if let Some(a) = native.iter().find(|a| a.availability.is_available()) {
+    let mode = config.render_mode.as_deref();
+    let usable = |a: &AdapterInfo| a.availability.is_available() && renders(a, mode);
+    if let Some(a) = native.iter().find(|a| usable(a)) {
         return done(a);
     }
     let generic: Vec<&&AdapterInfo> = of_framework.iter().filter(|a| a.envs.is_empty()).collect();
-    if let Some(a) = generic.iter().find(|a| a.availability.is_available()) {
+    if let Some(a) = generic.iter().find(|a| usable(a)) {
+        return done(a);
+    }
+    if let Some(a) = native.iter().find(|a| a.availability.is_available()) {
+        // It cannot draw the mode, and no generic adapter that could is available.
+        if let (Some(mode), Some(g)) = (mode, generic.first())
+            && let Availability::Unavailable { reason, hint } = &g.availability
+        {
+            return Err(HubError::Unavailable {
+                adapter: g.name.clone(),
+                reason: format!(
+                    "`{}` runs `{}` but does not draw render mode `{mode}`, which `{}` would: {reason}",
+                    a.name, entry.env_id, g.name
+                ),
+                hint: format!("{hint}; or make it without a render mode"),
+            });
+        }
         return done(a);
     }
     if let Some(a) = native.first().or(generic.first()) {
@@ -164,7 +193,64 @@ mod tests {
             },
             envs: envs.iter().map(|s| s.to_string()).collect(),
             host: Default::default(),
+            render_modes: None,
         }
+    }
+
+    fn drawing(mut a: AdapterInfo, modes: &[&str]) -> AdapterInfo {
+        a.render_modes = Some(modes.iter().map(|s| s.to_string()).collect());
+        a
+    }
+
+    #[test]
+    fn a_render_mode_the_native_adapter_lacks_goes_to_the_generic_one() {
+        let classic = drawing(
+            adapter("classic_control", &["gymnasium"], &["CartPole-v1"], true),
+            &[],
+        );
+        let mujoco = drawing(
+            adapter("mujoco", &["gymnasium"], &["Ant-v5"], true),
+            &["rgb_array"],
+        );
+        let gymnasium = adapter("gymnasium", &["gymnasium"], &[], true);
+        let adapters = [classic.clone(), mujoco, gymnasium.clone()];
+        let drawn = EnvConfig {
+            render_mode: Some("rgb_array".into()),
+            ..EnvConfig::default()
+        };
+        let via = |e: &EnvEntry, adapters: &[AdapterInfo], c: &EnvConfig| {
+            route(e, adapters, c).map(|r| r.adapter)
+        };
+        let cartpole = entry("gym", "CartPole-v1");
+        assert_eq!(via(&cartpole, &adapters, &drawn).unwrap(), "gymnasium");
+        assert_eq!(
+            via(&cartpole, &adapters, &EnvConfig::default()).unwrap(),
+            "classic_control"
+        );
+        // A native adapter that draws the mode keeps the entry.
+        assert_eq!(
+            via(&entry("gym", "Ant-v5"), &adapters, &drawn).unwrap(),
+            "mujoco"
+        );
+        // A pin is kept: the adapter refuses the mode itself.
+        let mut pinned = cartpole.clone();
+        pinned.adapter = Some("classic_control".into());
+        assert_eq!(via(&pinned, &adapters, &drawn).unwrap(), "classic_control");
+        // Without a generic adapter, the native one refuses the mode itself; with an
+        // unavailable one, the error says what would draw it and why it cannot.
+        assert_eq!(
+            via(&cartpole, std::slice::from_ref(&classic), &drawn).unwrap(),
+            "classic_control"
+        );
+        let missing = adapter("gymnasium", &["gymnasium"], &[], false);
+        let err = route(&cartpole, &[classic, missing], &drawn)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("`classic_control` runs `CartPole-v1` but does not draw render mode `rgb_array`, which `gymnasium` would: missing")
+                && err.contains("hint: install it; or make it without a render mode"),
+            "{err}"
+        );
     }
 
     fn entry(framework: &str, env_id: &str) -> EnvEntry {

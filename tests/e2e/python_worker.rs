@@ -360,3 +360,55 @@ fn a_worker_that_hangs_after_reporting_an_error_is_killed() {
     // The worker gets a few seconds to exit after its error line, then is killed.
     assert!(took < Duration::from_secs(10), "it took {took:?}");
 }
+
+#[test]
+fn a_render_mode_the_native_adapter_lacks_runs_gymnasiums_own_env() {
+    if !python_worker_available(
+        "python_worker::a_render_mode_the_native_adapter_lacks_runs_gymnasiums_own_env",
+    ) {
+        return;
+    }
+    let t = hub("pyrender");
+    let drawn = EnvConfig {
+        render_mode: Some("rgb_array".into()),
+        ..workers(2)
+    };
+    // The native classic-control adapter draws nothing: the unpinned entry goes to the
+    // Gymnasium-hosted adapter, whose frames are Gymnasium's.
+    let mut python = t.hub.make_vec("gym-cartpole", 4, &drawn).unwrap();
+    python.reset(Some(0)).unwrap();
+    let frames = python.render().unwrap();
+    assert_eq!(frames.len(), 4);
+    for frame in frames {
+        let frame = frame.expect("a frame per env");
+        assert_eq!(
+            (frame.height, frame.width, frame.rgb.len()),
+            (400, 600, 400 * 600 * 3)
+        );
+    }
+    python.close();
+    // Its trajectory is the native one's, bit for bit.
+    let native = t.hub.make_vec("gym-cartpole", 4, &workers(2)).unwrap();
+    let python = t.hub.make_vec("gym-cartpole", 4, &drawn).unwrap();
+    assert!(assert_same_rollout(native, python, 300) > 0);
+    // An entry pinned to the native adapter keeps its pin, which refuses the mode.
+    let mut registry = Registry::builtin();
+    registry
+        .add_yaml(
+            "environments:\n  - {id: pinned-cartpole, name: CartPole, framework: gymnasium, env_id: CartPole-v1, adapter: classic_control, robot_type: custom, env_type: floor}\n",
+            "pinned.yaml",
+            &std::env::temp_dir(),
+        )
+        .unwrap();
+    let pinned = TestHub::over("pyrender-pin", registry, |_| {});
+    let err = pinned
+        .hub
+        .make_vec("pinned-cartpole", 2, &drawn)
+        .err()
+        .expect("the pinned adapter refuses the mode")
+        .to_string();
+    assert!(
+        err.contains("render mode `rgb_array` is not supported by `CartPole-v1`"),
+        "{err}"
+    );
+}

@@ -200,9 +200,54 @@ def test_render_rgb_array():
         assert len(frames) == 2 and all(f.shape == frame.shape for f in frames)
     finally:
         envs.close()
-    with pytest.raises(envhub.MakeError, match="render"):
-        envhub.make("gym-cartpole", render_mode="rgb_array")
     assert envhub.make("gym-cartpole").render() is None
+
+
+def test_classic_control_renders_through_gymnasiums_own_env(tmp_path):
+    """The native classic-control envs draw nothing: with a render mode, the entry runs
+    Gymnasium's own env in the Python worker (the same dynamics), so its frames are
+    Gymnasium's. An entry pinned to the native adapter still refuses the mode."""
+    ref = gymnasium.make("CartPole-v1", render_mode="rgb_array")
+    env = envhub.make("gym-cartpole", render_mode="rgb_array")
+    try:
+        assert env.adapter == "gymnasium"
+        assert env.reset(seed=4)[0].tolist() == ref.reset(seed=4)[0].tolist()
+        for _ in range(5):
+            ours, want = env.step(1), ref.step(1)
+            assert ours[0].tolist() == want[0].tolist() and ours[1:4] == want[1:4]
+        frame = env.render()
+        assert frame.shape == (400, 600, 3) and frame.dtype == np.uint8
+        np.testing.assert_array_equal(frame, ref.render())
+    finally:
+        env.close()
+    # As Stable-Baselines3's `make_vec_env("envhub/gym-cartpole", 8)` makes its envs.
+    envs = [gymnasium.make("envhub/gym-cartpole", render_mode="rgb_array") for _ in range(2)]
+    try:
+        for e in envs:
+            e.reset(seed=0)
+            assert e.render().shape == (400, 600, 3)
+    finally:
+        for e in envs:
+            e.close()
+    pinned = tmp_path / "pinned.yaml"
+    pinned.write_text(
+        "environments:\n  - {id: pinned-cartpole, name: CartPole, framework: gymnasium, env_id: CartPole-v1,"
+        " adapter: classic_control, robot_type: custom, env_type: floor}\n"
+    )
+    with pytest.raises(envhub.MakeError, match="render mode `rgb_array` is not supported"):
+        envhub.make("pinned-cartpole", render_mode="rgb_array", registry=str(pinned))
+
+
+def test_stable_baselines3_make_vec_env_renders():
+    """SB3's `make_vec_env` asks every env for `render_mode="rgb_array"` (SB3 is not in the
+    default test set-up: `pip install stable-baselines3` to run this)."""
+    sb3 = pytest.importorskip("stable_baselines3.common.env_util")
+    venv = sb3.make_vec_env("envhub/gym-cartpole", 2)
+    try:
+        venv.reset()
+        assert venv.get_images()[0].shape == (400, 600, 3)
+    finally:
+        venv.close()
 
 
 @pytest.mark.parametrize(
@@ -276,3 +321,42 @@ def test_rendering_wrappers_accept_envhub_envs(tmp_path):
     finally:
         env.close()
     assert list(videos.glob("*.mp4")), "no video written"
+
+
+def test_gymnasium_specs_carry_the_episode_limit():
+    spec, ref = gymnasium.spec("envhub/gym-cartpole"), gymnasium.spec("CartPole-v1")
+    assert spec.max_episode_steps == ref.max_episode_steps == 500
+    assert spec.reward_threshold == ref.reward_threshold
+    assert spec.nondeterministic == ref.nondeterministic
+
+
+def _truncation_step(env, steps=600):
+    """The step (1-based) at which an episode of `env` truncates, pushing the pole upright
+    so that it does not terminate first; None if it does not within `steps`."""
+    obs, _ = env.reset(seed=3)
+    for t in range(1, steps + 1):
+        obs, _, terminated, truncated, _ = env.step(int(obs[2] + obs[3] > 0))
+        assert not terminated, f"terminated at step {t}"
+        if truncated:
+            return t
+    return None
+
+
+@pytest.mark.parametrize(("limit", "want"), [(None, 500), (7, 7), (550, 550)])
+def test_gymnasium_make_truncates_once_where_gymnasium_does(limit, want):
+    """`gymnasium.make` wraps the env in `TimeLimit` (the spec's 500, or the caller's); the
+    worker then applies no limit of its own, so the episode truncates where Gymnasium's
+    CartPole-v1 does, even past the worker's default."""
+    kwargs = {} if limit is None else {"max_episode_steps": limit}
+    ref = gymnasium.make("CartPole-v1", **kwargs)
+    env = gymnasium.make("envhub/gym-cartpole", **kwargs)
+    try:
+        assert _truncation_step(ref) == want
+        assert _truncation_step(env) == want
+    finally:
+        env.close()
+    venv = gymnasium.make_vec("envhub/gym-cartpole", num_envs=2)
+    try:
+        assert venv.max_episode_steps == 500
+    finally:
+        venv.close()

@@ -77,6 +77,20 @@ def test_match_task_to_env():
     assert envhub.match_task_to_env(envhub.TaskSpec("balance a pole"), reg, framework="isaac_lab").entry.id == "isaac-cartpole"
 
 
+
+def test_match_names_a_better_entry_the_robot_type_excludes():
+    """The registry types Hopper `custom`: a biped hopping task says so."""
+    reg = envhub.EnvRegistry()
+    found = envhub.match_task_to_env(envhub.TaskSpec("hop forward", robot_type="biped"), reg)
+    assert found.entry.robot_type == "biped"
+    hopper = found.alternatives[0]
+    assert hopper["id"] == "mujoco-hopper" and hopper["score"] == 1.0
+    assert hopper["excluded"] == "its robot type is `custom`, not `biped`"
+    assert all("excluded" not in a for a in found.alternatives[1:])
+    with pytest.raises(envhub.NoMatchError) as caught:
+        envhub.match_task_to_env(envhub.TaskSpec("one-legged robot hopping", robot_type="biped"), reg, strict=True)
+    assert "`mujoco-hopper` matches 2/2 task words (legged, hopping) but its robot type is `custom`" in str(caught.value)
+
 def test_env_config_fields():
     cfg = envhub.EnvConfig(seed=3, max_episode_steps=50, extra={"g": 9.81})
     assert (cfg.render_mode, cfg.num_envs, cfg.asset_path, cfg.workers) == (None, 1, None, None)

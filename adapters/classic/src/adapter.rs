@@ -69,6 +69,12 @@ impl EnvAdapter for ClassicControl {
         Availability::Available
     }
 
+    fn render_modes(&self) -> &'static [&'static str] {
+        // Native classic-control envs do not draw: an entry made with a render mode goes to the
+        // Gymnasium-hosted adapter (the same dynamics, bit for bit).
+        &[]
+    }
+
     fn list_envs(&self) -> Vec<String> {
         ENVS.iter().map(|e| e.id.to_string()).collect()
     }

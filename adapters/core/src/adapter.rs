@@ -57,6 +57,11 @@ pub trait EnvAdapter: Send + Sync {
     /// Whether its dependencies are present, and if not, why and how to fix it.
     fn availability(&self) -> Availability;
 
+    /// The render modes its envs draw (`rgb_array`); empty when none renders. The hub routes
+    /// an entry made with another mode to an adapter that draws it, unless the entry pins
+    /// this one.
+    fn render_modes(&self) -> &'static [&'static str];
+
     /// Every env id it implements natively. Empty for a generic adapter that forwards any id
     /// to its framework.
     fn list_envs(&self) -> Vec<String>;

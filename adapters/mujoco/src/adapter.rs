@@ -3,6 +3,9 @@
 
 use envhub_core::{Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec};
 
+/// The only render mode (both adapters draw it).
+pub(crate) const RGB_ARRAY: &str = "rgb_array";
+
 /// Every env id of the `mujoco` adapter, with Gymnasium's registered episode limit. The same
 /// list as `tasks::ENVS` (a test checks), kept here so that a build without libmujoco can
 /// still say which envs it would run.
@@ -101,6 +104,10 @@ impl EnvAdapter for Mujoco {
         }
     }
 
+    fn render_modes(&self) -> &'static [&'static str] {
+        &[RGB_ARRAY]
+    }
+
     fn list_envs(&self) -> Vec<String> {
         ENV_IDS.iter().map(|(id, _)| id.to_string()).collect()
     }
@@ -179,6 +186,10 @@ impl EnvAdapter for CustomMjcf {
             let (reason, hint) = not_linked();
             Availability::Unavailable { reason, hint }
         }
+    }
+
+    fn render_modes(&self) -> &'static [&'static str] {
+        &[RGB_ARRAY]
     }
 
     /// Generic: any env id names the model given by `asset_path`.

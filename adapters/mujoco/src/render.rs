@@ -14,6 +14,7 @@
 //! last, so a `trackbodyid` in a config never makes the free camera track a body; the same
 //! holds here.
 
+use crate::adapter::RGB_ARRAY;
 use envhub_core::{EnvConfig, EnvError, ExtraKeys};
 use mujoco_rs::prelude::*;
 use mujoco_rs::renderer::MjRenderer;
@@ -34,9 +35,6 @@ pub(crate) const OPTIONS: &[&str] = &[
     "camera_name",
     "default_camera_config",
 ];
-
-/// The only render mode.
-const RGB_ARRAY: &str = "rgb_array";
 
 /// Gymnasium's `default_camera_config`: `MjvCamera` fields set after the free camera is aimed
 /// at the model (each `None` keeps that). A task declares its default as a

@@ -81,6 +81,10 @@ impl EnvAdapter for Rapier {
         Availability::Available
     }
 
+    fn render_modes(&self) -> &'static [&'static str] {
+        &[crate::render::RGB_ARRAY]
+    }
+
     fn list_envs(&self) -> Vec<String> {
         ENVS.iter().map(|e| e.id.to_string()).collect()
     }

@@ -23,7 +23,7 @@ pub(crate) const OPTIONS: &[&str] = &["width", "height"];
 const DEFAULT_SIZE: u64 = 240;
 
 /// The only render mode.
-const RGB_ARRAY: &str = "rgb_array";
+pub(crate) const RGB_ARRAY: &str = "rgb_array";
 
 /// Frame size, from the env's options.
 #[derive(Clone, Copy, Debug)]

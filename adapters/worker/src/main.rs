@@ -98,6 +98,7 @@ fn describe() -> anyhow::Result<()> {
                 "description": a.description(),
                 "availability": a.availability(),
                 "envs": a.list_envs(),
+                "render_modes": a.render_modes(),
             });
             if adapters::is_testing(a.name()) {
                 entry["testing"] = true.into();

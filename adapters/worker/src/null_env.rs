@@ -77,6 +77,11 @@ impl EnvAdapter for NullAdapter {
         Availability::Available
     }
 
+    fn render_modes(&self) -> &'static [&'static str] {
+        // Renders nothing; its env ignores `render_mode`.
+        &[]
+    }
+
     fn list_envs(&self) -> Vec<String> {
         vec![ENV_ID.to_string()]
     }

@@ -67,8 +67,12 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
     if !found.alternatives.is_empty() {
         println!("alternatives:");
         for alt in &found.alternatives {
+            let excluded = alt
+                .excluded
+                .as_ref()
+                .map_or_else(String::new, |why| format!(" but {why}"));
             println!(
-                "  {:<32} {:.2}  ({})",
+                "  {:<32} {:.2}  ({}){excluded}",
                 alt.id,
                 alt.score,
                 alt.matched_tags.join(", ")

@@ -132,6 +132,21 @@ fn match_human_and_json() {
 }
 
 #[test]
+fn match_names_a_better_entry_the_robot_type_excludes() {
+    let run = envhub(&[
+        "match",
+        "a robot hops forward on one leg",
+        "--robot",
+        "biped",
+    ]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    insta::assert_snapshot!(run.stdout);
+    let none = envhub(&["match", "one-legged robot hopping", "--robot", "biped"]);
+    assert_eq!(none.code, 1);
+    insta::assert_snapshot!(none.stderr);
+}
+
+#[test]
 fn match_nothing_exits_one_with_why() {
     let run = envhub(&[
         "match",

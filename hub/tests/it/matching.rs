@@ -93,3 +93,48 @@ fn env_type_is_relaxed_only_for_strong_matches() {
         .to_string();
     assert!(err.contains("no task words"), "{err}");
 }
+
+#[test]
+fn a_better_entry_the_robot_type_excludes_is_an_alternative_with_the_reason() {
+    let reg = Registry::builtin();
+    // The registry types Hopper `custom`: asking for a biped still chooses a biped, and says
+    // that Hopper matches every word but is excluded by the robot type.
+    let m = match_task(&spec("hop forward", Some("biped"), None), &reg).unwrap();
+    assert_eq!(m.entry.robot_type, "biped");
+    let hopper = &m.alternatives[0];
+    assert_eq!(
+        (hopper.id.as_str(), hopper.score, hopper.excluded.as_deref()),
+        (
+            "mujoco-hopper",
+            1.0,
+            Some("its robot type is `custom`, not `biped`")
+        )
+    );
+    assert_eq!(
+        hopper.describe(2),
+        "`mujoco-hopper` matches 2/2 task words (hop, forward) but its robot type is `custom`, not `biped`"
+    );
+    // Only entries the filters exclude carry a reason, and only ones clearly better.
+    assert!(m.alternatives[1..].iter().all(|a| a.excluded.is_none()));
+    let m = match_task(&spec("hop forward", Some("custom"), None), &reg).unwrap();
+    assert_eq!(m.entry.id, "mujoco-hopper");
+    assert!(m.alternatives.iter().all(|a| a.excluded.is_none()));
+}
+
+#[test]
+fn no_match_under_the_filters_names_the_entry_they_exclude() {
+    let reg = Registry::builtin();
+    let err = match_task(&spec("one-legged robot hopping", Some("biped"), None), &reg)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(
+            "`mujoco-hopper` matches 2/2 task words (legged, hopping) but its robot type is `custom`, not `biped`"
+        ),
+        "{err}"
+    );
+    assert!(
+        err.contains("hint: change or leave out the filter that excludes `mujoco-hopper`"),
+        "{err}"
+    );
+}

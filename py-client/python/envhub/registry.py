@@ -162,7 +162,9 @@ class TaskSpec:
 @dataclass(frozen=True)
 class MatchResult:
     """The best entry for a task, its score in [0, 1], why, and the runners-up
-    (`[{"id", "score", "matched_tags"}]`)."""
+    (`[{"id", "score", "matched_tags"}]`). A runner-up that the task's filters excluded
+    although it matches clearly more task words also has `"excluded"`, which says why
+    (`its robot type is `custom`, not `biped``)."""
 
     entry: EnvEntry
     score: float
