@@ -226,8 +226,13 @@ fn native() -> Result<Native, (String, String)> {
     let shown = path.display().to_string();
     let timeout = describe_timeout();
     let mut command = std::process::Command::new(&path);
-    // Test adapters too, marked: whether they are shown is this process's choice.
-    command.arg("describe").env(ENVHUB_TEST_ADAPTERS, "1");
+    // Test adapters too, marked: whether they are shown is this process's choice. The
+    // worker finds Gymnasium's MuJoCo assets through the hub's interpreter (the Python
+    // client's own, when the hub runs inside it), not whatever `python3` is on PATH.
+    command.arg("describe").env(ENVHUB_TEST_ADAPTERS, "1").env(
+        crate::env_vars::ENVHUB_PYTHON,
+        crate::python_host::python_interpreter(),
+    );
     let out = bounded::output_within(&mut command, timeout)
         .map_err(|why| (shown.clone(), format!("`{shown} describe`: {why}")))?;
     if !out.status.success() {

@@ -115,7 +115,13 @@ pub(crate) fn launch_local(
     let (mut command, path) = match crate::catalog::host_of(&job.adapter, user) {
         Host::Native => {
             let path = worker_binary();
-            (Command::new(&path), path)
+            let mut command = Command::new(&path);
+            // As for `describe`: the hub's interpreter locates Gymnasium's assets.
+            command.env(
+                crate::env_vars::ENVHUB_PYTHON,
+                crate::python_host::python_interpreter(),
+            );
+            (command, path)
         }
         Host::Python => (
             crate::python_host::worker_command(user),
