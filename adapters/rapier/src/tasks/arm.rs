@@ -133,4 +133,15 @@ impl Arm {
             joint.apply_torque(world, action[i] * self.spec.max_torque[i] + damping);
         }
     }
+
+    /// Drives the arm with `action` for `frames` physics steps — forces cleared before each,
+    /// as rapier keeps them between steps — and returns the control cost `Σ a²`.
+    pub(crate) fn drive(&self, world: &mut PhysicsWorld, action: &[f32], frames: usize) -> f64 {
+        for _ in 0..frames {
+            physics::clear_forces(world);
+            self.actuate(world, action);
+            world.step();
+        }
+        action.iter().map(|a| f64::from(a * a)).sum()
+    }
 }

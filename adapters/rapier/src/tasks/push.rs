@@ -167,16 +167,11 @@ impl Task for Push {
 
     fn step(&mut self, action: &[f32], info: &mut Info) -> StepResult {
         let arm = self.arm.expect("reset before step");
-        for _ in 0..FRAME_SKIP {
-            physics::clear_forces(&mut self.world);
-            arm.actuate(&mut self.world, action);
-            self.world.step();
-        }
+        let ctrl = arm.drive(&mut self.world, action, FRAME_SKIP);
         let tip = arm.tip(&self.world);
         let puck = self.puck_xz();
         let near = f64::from((tip[0] - puck[0]).hypot(tip[1] - puck[1]));
         let dist = f64::from(self.puck_to_goal());
-        let ctrl: f64 = action.iter().map(|a| f64::from(a * a)).sum();
         let reward_near = -self.near_weight * near;
         let reward_dist = -self.dist_weight * dist;
         let reward_ctrl = -self.ctrl_weight * ctrl;

@@ -118,13 +118,8 @@ impl Task for Reach {
 
     fn step(&mut self, action: &[f32], info: &mut Info) -> StepResult {
         let arm = self.arm.expect("reset before step");
-        for _ in 0..FRAME_SKIP {
-            physics::clear_forces(&mut self.world);
-            arm.actuate(&mut self.world, action);
-            self.world.step();
-        }
+        let ctrl = arm.drive(&mut self.world, action, FRAME_SKIP);
         let dist = f64::from(self.distance());
-        let ctrl: f64 = action.iter().map(|a| f64::from(a * a)).sum();
         let reward_dist = -self.dist_weight * dist;
         let reward_ctrl = -self.ctrl_weight * ctrl;
         info.set_f64("reward_dist", reward_dist);
