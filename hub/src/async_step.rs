@@ -10,7 +10,7 @@
 use crate::batch::Batch;
 use crate::error::HubError;
 use crate::vec_env::{Phase, VecEnv};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 impl VecEnv {
     /// Sends actions to the envs in `env_ids` (one action each, in that order) without
@@ -192,10 +192,5 @@ impl VecEnv {
             group.push(next);
         }
         group
-    }
-
-    /// How long workers may take before a wait gives up on them (the step timeout).
-    pub fn step_timeout(&self) -> Duration {
-        self.options.step_timeout
     }
 }

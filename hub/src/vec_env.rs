@@ -34,6 +34,8 @@ pub struct VecEnv {
     pub(crate) observation_space: Space,
     pub(crate) action_space: Space,
     pub(crate) num_envs: usize,
+    /// `0..num_envs`, for checking a full batch without allocating on every step.
+    all_env_ids: Vec<usize>,
     pub(crate) phase: Phase,
     pub(crate) pool: SlotPool,
     pub(crate) results: Results,
@@ -176,6 +178,7 @@ impl VecEnv {
             observation_space,
             action_space,
             num_envs,
+            all_env_ids: (0..num_envs).collect(),
             phase: Phase::Created,
             pool,
             results: Results::default(),
@@ -366,9 +369,8 @@ impl VecEnv {
     /// Steps every env with `actions` (one per env, back to back in the action space's layout).
     pub fn step(&mut self, actions: &[u8]) -> Result<Batch<'_>, HubError> {
         self.check_steppable()?;
-        let all: Vec<usize> = (0..self.num_envs).collect();
-        self.check_not_failed(&all)?;
-        self.validate_actions(actions, &all)?;
+        self.check_not_failed(&self.all_env_ids)?;
+        self.validate_actions(actions, &self.all_env_ids)?;
         let ab = self.action_space.byte_len();
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
@@ -395,6 +397,10 @@ impl VecEnv {
 
     /// Refuses to step envs whose last step or reset failed (their state is unknown).
     pub(crate) fn check_not_failed(&self, env_ids: &[usize]) -> Result<(), HubError> {
+        // The usual case, checked without allocating: nothing failed.
+        if !self.must_reset.contains(&true) {
+            return Ok(());
+        }
         let failed: Vec<usize> = env_ids
             .iter()
             .copied()

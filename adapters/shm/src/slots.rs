@@ -324,11 +324,6 @@ impl Slot {
         // SAFETY: inside the mapping (checked above); exclusive as the caller guarantees.
         unsafe { self.map.ptr.add(self.layout.truncated + env).write(1) };
     }
-
-    /// Address of env `first`'s observation (for views that outlive a borrow).
-    pub fn obs_ptr(&self, first: usize) -> *const u8 {
-        self.rows(first, 0).obs.as_ptr()
-    }
 }
 
 /// The client's slots of one session.
@@ -359,16 +354,6 @@ impl SlotPool {
             owner_pid: std::process::id(),
             closed: false,
         }
-    }
-
-    /// The layout of every slot.
-    pub fn layout(&self) -> &BatchLayout {
-        &self.layout
-    }
-
-    /// The names of this pool's slots.
-    pub fn name(&self) -> &SlotsName {
-        &self.name
     }
 
     /// Slots created so far (lendable ones; the scratch slot is not counted).
