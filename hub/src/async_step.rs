@@ -65,7 +65,7 @@ impl VecEnv {
                 }
             }
             if selected.iter().any(|&s| s) {
-                w.channel.send_step(slot, &block, Some(&selected))?;
+                w.send_step(slot, &block, Some(&selected))?;
                 let envs = (0..n).filter(|&k| selected[k]).map(|k| lo + k);
                 w.sent(slot, envs);
             }
@@ -128,7 +128,7 @@ impl VecEnv {
             .workers
             .iter()
             .filter(|w| w.pending)
-            .map(|w| w.channel.spin_budget())
+            .map(|w| w.spin_budget())
             .max()
             .unwrap_or_default();
         let start = Instant::now();
@@ -140,15 +140,7 @@ impl VecEnv {
         }
         let tick = self.options.wait_policy(self.workers.len()).tick;
         loop {
-            {
-                let pending: Vec<&envhub_shm::ClientChannel> = self
-                    .workers
-                    .iter()
-                    .filter(|w| w.pending)
-                    .map(|w| &w.channel)
-                    .collect();
-                envhub_shm::wait_any(&pending, tick)?;
-            }
+            self.block_on_pending(tick)?;
             if self.poll_all(true)? {
                 return Ok(());
             }
@@ -162,6 +154,38 @@ impl VecEnv {
                 return Ok(());
             }
         }
+    }
+
+    /// Blocks until a pending worker may have answered, or `tick`: on the local workers'
+    /// listeners (an iceoryx2 WaitSet), on the session's remote inbox, or — with both kinds
+    /// pending — on each in turn with a short wait, so neither waits a tick behind the other.
+    fn block_on_pending(&mut self, tick: std::time::Duration) -> Result<(), HubError> {
+        let local: Vec<&envhub_shm::ClientChannel> = self
+            .workers
+            .iter()
+            .filter(|w| w.pending)
+            .filter_map(|w| w.local_channel())
+            .collect();
+        let remote: Vec<&crate::remote::link::RemoteConn> = self
+            .workers
+            .iter()
+            .filter(|w| w.pending)
+            .filter_map(|w| w.remote_conn())
+            .collect();
+        const SHARED: std::time::Duration = std::time::Duration::from_micros(200);
+        match (local.is_empty(), remote.first()) {
+            (_, None) => envhub_shm::wait_any(&local, tick)?,
+            (true, Some(r)) => {
+                let links: Vec<usize> = remote.iter().map(|r| r.link).collect();
+                r.wait_any(&links, tick);
+            }
+            (false, Some(r)) => {
+                envhub_shm::wait_any(&local, SHARED)?;
+                let links: Vec<usize> = remote.iter().map(|r| r.link).collect();
+                r.wait_any(&links, SHARED);
+            }
+        }
+        Ok(())
     }
 
     /// The answered workers to return now: the lowest answered one and the answered workers

@@ -41,7 +41,7 @@ pub fn default_socket() -> PathBuf {
 
 /// Binds `socket` (replacing a stale one, refusing a live one) and serves clients until the
 /// process is stopped. `on_ready` runs once the socket accepts connections.
-pub fn serve(socket: &Path, hub: Hub, on_ready: impl FnOnce()) -> Result<(), HubError> {
+pub fn serve(socket: &Path, hub: Arc<Hub>, on_ready: impl FnOnce()) -> Result<(), HubError> {
     let fail = |reason: String| HubError::Daemon {
         socket: socket.display().to_string(),
         reason,
@@ -60,7 +60,6 @@ pub fn serve(socket: &Path, hub: Hub, on_ready: impl FnOnce()) -> Result<(), Hub
     }
     // Resolve the adapter catalog once, before clients ask.
     hub.adapters()?;
-    let hub = Arc::new(hub);
     let workers = Arc::new(AtomicUsize::new(0));
     on_ready();
     for stream in listener.incoming() {

@@ -101,6 +101,49 @@ pub enum HubError {
     /// A wait on the workers was interrupted (Ctrl-C); the session was aborted.
     #[error("interrupted while waiting for the workers; the session was closed")]
     Interrupted,
+    /// A remote hub went away (its process died, froze, or the network to it was cut): its
+    /// envs are lost unless the session places them again (`restart_on_crash`).
+    #[error(
+        "hub `{hub}` (envs {envs}) was lost: {why}\nhint: the other hubs' envs are unaffected; enable `restart_on_crash` to place lost envs on the hubs that remain"
+    )]
+    HubLost {
+        /// The hub's name.
+        hub: String,
+        /// Env range of the session it hosted, `a..b`.
+        envs: String,
+        /// What was seen.
+        why: String,
+    },
+    /// A hub named by the caller is not among the live hubs.
+    #[error(
+        "no live hub named `{name}`{closest}; live hubs: {live}\nhint: `envhub hubs` lists them; check `--connect` / ENVHUB_CONNECT and the hub's `--name`"
+    )]
+    UnknownHub {
+        /// The name asked for.
+        name: String,
+        /// The live hubs, comma-separated (`none` when none answered).
+        live: String,
+        /// ` (closest: a, b)` or empty.
+        closest: String,
+    },
+    /// Reaching other hubs over the network failed.
+    #[error("network: {reason}\nhint: {hint}")]
+    Network {
+        /// What failed.
+        reason: String,
+        /// What to check.
+        hint: String,
+    },
+    /// A remote hub refused a request (security policy or its limits).
+    #[error("hub `{hub}` refused: {reason}\nhint: {hint}")]
+    Refused {
+        /// The hub's name.
+        hub: String,
+        /// Why.
+        reason: String,
+        /// What is allowed.
+        hint: String,
+    },
     /// The shared-memory layer failed.
     #[error(transparent)]
     #[serde(with = "data_plane")]

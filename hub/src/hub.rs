@@ -8,13 +8,20 @@ use crate::daemon_client::DaemonClient;
 use crate::env::Env;
 use crate::error::HubError;
 use crate::launcher::Launcher;
+use crate::placement::{LOCAL, Placement};
 use crate::python_host::UserAdapters;
 use crate::registry::Registry;
+use crate::remote::client::{DISCOVERY, Network};
+use crate::remote::keys;
+use crate::remote::net::NetConfig;
+use crate::remote::serve::HubInfo;
 use crate::routing::{Route, renders, route};
 use crate::session_options::SessionOptions;
 use crate::settings::Settings;
-use crate::vec_env::VecEnv;
+use crate::vec_env::{StartPlan, VecEnv};
 use envhub_core::{AutoresetMode, EnvConfig};
+use std::sync::Arc;
+use std::time::Duration;
 
 /// The hub logic: resolves registry ids to adapters and starts worker sessions — here
 /// (embedded), or through a hub daemon (`envhub serve`) when connected to one.
@@ -22,6 +29,8 @@ pub struct Hub {
     registry: Registry,
     options: SessionOptions,
     launcher: Launcher,
+    /// How to reach other hubs (used only when a placement names some).
+    net: NetConfig,
 }
 
 impl Hub {
@@ -31,6 +40,7 @@ impl Hub {
             registry,
             options: SessionOptions::default(),
             launcher: Launcher::Local,
+            net: NetConfig::default().with_overrides(&[], &[], None),
         }
     }
 
@@ -41,6 +51,7 @@ impl Hub {
             registry,
             options: SessionOptions::default(),
             launcher: Launcher::Daemon(DaemonClient::connect(socket)?),
+            net: NetConfig::default().with_overrides(&[], &[], None),
         })
     }
 
@@ -71,10 +82,95 @@ impl Hub {
         if crate::python_host::configure(settings.python.clone(), settings.adapters.clone()) {
             crate::catalog::refresh_adapters();
         }
-        match std::env::var_os(crate::env_vars::ENVHUB_HUB).filter(|s| !s.is_empty()) {
-            Some(socket) => Hub::connect(std::path::Path::new(&socket), registry),
-            None => Ok(Hub::new(registry)),
+        let hub = match std::env::var_os(crate::env_vars::ENVHUB_HUB).filter(|s| !s.is_empty()) {
+            Some(socket) => Hub::connect(std::path::Path::new(&socket), registry)?,
+            None => Hub::new(registry),
+        };
+        Ok(hub.with_network(settings.zenoh.clone().with_overrides(&[], &[], None)))
+    }
+
+    /// Replaces how this hub reaches other hubs (see [`NetConfig::with_overrides`] for what
+    /// the command line and environment add).
+    pub fn with_network(mut self, net: NetConfig) -> Hub {
+        self.net = net;
+        self
+    }
+
+    /// How this hub reaches other hubs.
+    pub fn network_config(&self) -> &NetConfig {
+        &self.net
+    }
+
+    /// This process's presence on the hubs' network (opened on first use).
+    pub fn network(&self) -> Result<Arc<Network>, HubError> {
+        Network::get(&self.net)
+    }
+
+    /// The live hubs with their info (waits briefly for discovery on first use).
+    pub fn hubs(&self) -> Result<Vec<HubInfo>, HubError> {
+        self.network()?.hubs(DISCOVERY)
+    }
+
+    /// The registry of hub `name`.
+    pub fn remote_registry(&self, name: &str) -> Result<Registry, HubError> {
+        let network = self.network()?;
+        network.wait_for(&[name.to_string()], DISCOVERY)?;
+        let entries: Vec<crate::EnvEntry> =
+            network.query(name, &keys::hub_catalog(name), None, Duration::from_secs(5))?;
+        Ok(Registry::from_entries(entries, &format!("hub `{name}`")))
+    }
+
+    /// The adapters of hub `name`, with their availability there.
+    pub fn remote_adapters(&self, name: &str) -> Result<Vec<AdapterInfo>, HubError> {
+        let network = self.network()?;
+        network.wait_for(&[name.to_string()], DISCOVERY)?;
+        network.query(
+            name,
+            &keys::hub_adapters(name),
+            None,
+            Duration::from_secs(30),
+        )
+    }
+
+    /// `num_envs` envs of registry entry `id`, placed as `placement` says: here, on remote
+    /// hubs (each runs the id from its own catalog), or both. The same `VecEnv` either way.
+    pub fn make_vec_on(
+        &self,
+        id: &str,
+        num_envs: usize,
+        config: &EnvConfig,
+        placement: &Placement,
+    ) -> Result<VecEnv, HubError> {
+        if placement.is_local() {
+            return self.make_vec(id, num_envs, config);
         }
+        let network = self.network()?;
+        let slices = crate::placement::resolve(placement, num_envs, Some(&network))?;
+        let mut config = config.clone();
+        config.num_envs = num_envs;
+        let local_envs: usize = slices
+            .iter()
+            .filter(|s| s.place == LOCAL)
+            .map(|s| s.num_envs)
+            .sum();
+        let route = if local_envs > 0 {
+            let mut local = config.clone();
+            local.num_envs = local_envs;
+            Some(self.route(id, &local)?)
+        } else {
+            None
+        };
+        VecEnv::start_placed(
+            StartPlan {
+                id,
+                route,
+                config,
+                slices,
+                network: Some(network),
+            },
+            self.options.clone(),
+            &self.launcher,
+        )
     }
 
     /// Replaces the session options (timeouts, restart policy, namespace).

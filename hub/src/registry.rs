@@ -159,6 +159,14 @@ impl Registry {
         registry
     }
 
+    /// A registry of `entries` as another hub sent them (`source` names it in messages).
+    pub fn from_entries(entries: Vec<EnvEntry>, source: &str) -> Registry {
+        Registry {
+            entries,
+            sources: vec![source.to_string()],
+        }
+    }
+
     /// Loads and combines registry files, in order. `@default` stands for the built-in
     /// catalog. An id that appears in a later file replaces the earlier entry in place (so a
     /// user's file can override a default entry without reordering the catalog); within one

@@ -3,8 +3,66 @@
 
 use crate::batch::{Batch, as_bools};
 use crate::error::HubError;
+use crate::remote::bridge::HUB_ERROR;
+use crate::remote::wire::{RemoteAnswer, land_rows};
 use crate::vec_env::VecEnv;
-use envhub_shm::{DataPlaneError, status};
+use crate::worker_link::{Answer, WorkerLink, env_range};
+use envhub_shm::{DataPlaneError, SlotPool, status};
+
+/// Copies a remote hub's result rows of the envs it was sent into the batch slot, where a
+/// local worker would have written them.
+fn land_remote_rows(
+    pool: &SlotPool,
+    w: &WorkerLink,
+    answer: &RemoteAnswer,
+) -> Result<(), HubError> {
+    let Some(remote) = w.remote_conn() else {
+        return Ok(());
+    };
+    let layout = &remote.rows_layout;
+    let rows = answer.rows();
+    if rows.len() != layout.size() {
+        return Err(DataPlaneError::Protocol(format!(
+            "hub `{}` sent {} bytes of results; its {} envs take {}",
+            remote.hub,
+            rows.len(),
+            layout.num_envs,
+            layout.size()
+        ))
+        .into());
+    }
+    let slot = pool.get(w.slot).ok_or_else(|| {
+        DataPlaneError::Protocol(format!(
+            "results name batch slot {}, which is not open",
+            w.slot
+        ))
+    })?;
+    let lo = w.job.env_offset;
+    let envs: Vec<usize> = w.sent.iter().map(|e| e - lo).collect();
+    // SAFETY: these rows belong to this link's envs, which no worker writes (a remote slice
+    // has none here), and results are being made: nothing reads them until they are placed.
+    let mut to = unsafe { slot.rows_mut(lo, w.job.num_envs) };
+    land_rows(layout, rows, &envs, &mut to, 0);
+    Ok(())
+}
+
+/// The error a remote hub sent for its whole slice (its session there is over).
+fn remote_error(w: &WorkerLink, answer: &RemoteAnswer) -> HubError {
+    let hub = w.remote_conn().map_or("?", |r| r.hub.as_str());
+    match serde_json::from_slice::<HubError>(answer.info_bytes()) {
+        Ok(HubError::WorkerDied { pid, why, .. }) => HubError::WorkerDied {
+            worker: w.index,
+            envs: env_range(&w.job),
+            pid,
+            why: format!("on hub `{hub}`: {why}"),
+        },
+        Ok(e) => e,
+        Err(_) => HubError::Remote(format!(
+            "hub `{hub}`: {}",
+            String::from_utf8_lossy(answer.info_bytes())
+        )),
+    }
+}
 
 /// Where the last results are.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -116,9 +174,7 @@ impl VecEnv {
         let (slot, sent) = (self.workers[i].slot, self.workers[i].sent.clone());
         self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
         let n = self.workers[i].job.num_envs;
-        self.workers[i]
-            .channel
-            .send_reset(slot, &vec![None; n], None, "")?;
+        self.workers[i].send_reset(slot, &vec![None; n], None, "")?;
         self.workers[i].sent(slot, sent);
         let interrupt = self.interrupt.clone();
         match self.workers[i].wait(self.options.step_timeout, &*interrupt) {
@@ -143,6 +199,18 @@ impl VecEnv {
                 continue;
             };
             let header = *response.header();
+            if let Answer::Remote(answer) = &response {
+                match header.status {
+                    status::OK | status::ENV_FAILED => {
+                        land_remote_rows(&self.pool, w, answer)?;
+                    }
+                    HUB_ERROR => {
+                        let err = remote_error(w, answer);
+                        return Err(self.give_up(err));
+                    }
+                    _ => {}
+                }
+            }
             match header.status {
                 status::OK => {
                     let parsed = response

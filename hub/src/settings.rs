@@ -31,6 +31,9 @@ pub struct Settings {
     /// User adapters hosted in Python workers, as import paths (`my_pkg.sim:MySimAdapter`):
     /// `envhub.EnvAdapter` subclasses; registry entries with their `framework` route to them.
     pub adapters: Vec<String>,
+    /// How to reach other hubs over Zenoh (`connect`, `listen`, `config`, `multicast`,
+    /// `lease_ms`); the command line and `ENVHUB_CONNECT` add to it.
+    pub zenoh: crate::remote::net::NetConfig,
     /// Where the settings came from, for messages.
     #[serde(skip)]
     pub source: Option<PathBuf>,
@@ -49,7 +52,9 @@ pub enum SettingsError {
         source: std::io::Error,
     },
     /// The file is not valid.
-    #[error("{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `adapters`")]
+    #[error(
+        "{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `adapters`, `zenoh` (with `connect`, `listen`, `config`, `multicast`, `lease_ms`)"
+    )]
     Parse {
         /// The file.
         path: PathBuf,
@@ -94,6 +99,11 @@ impl Settings {
                 p
             }
         });
+        if let Some(config) = &settings.zenoh.config
+            && config.is_relative()
+        {
+            settings.zenoh.config = Some(dir.join(config));
+        }
         settings.source = Some(path.to_path_buf());
         Ok(settings)
     }

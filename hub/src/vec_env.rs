@@ -8,6 +8,10 @@
 use crate::batch::{Batch, Frame};
 use crate::error::HubError;
 use crate::launcher::Launcher;
+use crate::placement::{LOCAL, Slice};
+use crate::remote::client::{Inbox, Network};
+use crate::remote::link::RemoteConn;
+use crate::remote::serve::OpenRequest;
 use crate::results::Results;
 use crate::routing::Route;
 use crate::session_options::SessionOptions;
@@ -61,6 +65,28 @@ fn session_name() -> String {
     )
 }
 
+/// One link of a session to start: local worker `job`, or a remote hub's slice.
+enum Planned {
+    Local(WorkerJob),
+    Remote {
+        hub: String,
+        env_offset: usize,
+        num_envs: usize,
+    },
+}
+
+/// What a session is started with besides its options.
+pub(crate) struct StartPlan<'a> {
+    /// The registry id (or env id) — what remote hubs are asked for.
+    pub id: &'a str,
+    /// The local route, when some envs run here.
+    pub route: Option<Route>,
+    /// The session's config (`num_envs` is the whole session's).
+    pub config: envhub_core::EnvConfig,
+    pub slices: Vec<Slice>,
+    pub network: Option<Arc<Network>>,
+}
+
 impl VecEnv {
     /// Starts the workers of a routed entry. `id` names the session in errors.
     pub(crate) fn start(
@@ -70,40 +96,93 @@ impl VecEnv {
         launcher: &Launcher,
     ) -> Result<VecEnv, HubError> {
         let num_envs = route.config.num_envs;
+        VecEnv::start_placed(
+            StartPlan {
+                id,
+                config: route.config.clone(),
+                route: Some(route),
+                slices: vec![Slice {
+                    place: LOCAL.into(),
+                    num_envs,
+                }],
+                network: None,
+            },
+            options,
+            launcher,
+        )
+    }
+
+    /// Starts a session over local workers and remote hubs: envs `0..a` on the first slice's
+    /// place, `a..b` on the second's, and so on.
+    pub(crate) fn start_placed(
+        plan: StartPlan<'_>,
+        options: SessionOptions,
+        launcher: &Launcher,
+    ) -> Result<VecEnv, HubError> {
+        let StartPlan {
+            id,
+            route,
+            config,
+            slices,
+            network,
+        } = plan;
+        let num_envs: usize = slices.iter().map(|s| s.num_envs).sum();
         if num_envs == 0 {
             return Err(HubError::InvalidConfig {
                 what: "num_envs",
                 reason: "must be at least 1".into(),
             });
         }
+        let local_envs: usize = slices
+            .iter()
+            .filter(|s| s.place == LOCAL)
+            .map(|s| s.num_envs)
+            .sum();
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let workers = route.config.workers.unwrap_or_else(|| cores.min(num_envs));
-        if workers == 0 || workers > num_envs {
-            return Err(HubError::InvalidConfig {
-                what: "workers",
-                reason: format!(
-                    "{workers} workers for {num_envs} envs; use between 1 and {num_envs} (each worker hosts at least one env)"
-                ),
-            });
-        }
+        let local_workers = if local_envs == 0 {
+            0
+        } else {
+            let workers = config.workers.unwrap_or_else(|| cores.min(local_envs));
+            if workers == 0 || workers > local_envs {
+                return Err(HubError::InvalidConfig {
+                    what: "workers",
+                    reason: format!(
+                        "{workers} workers for {local_envs} envs; use between 1 and {local_envs} (each worker hosts at least one env)"
+                    ),
+                });
+            }
+            workers
+        };
         let session = session_name();
         let slots = SlotsName {
             prefix: options.namespace.clone(),
             session: session.clone(),
         };
-        let policy = options.wait_policy(workers);
-        let bells = Doorbells::create(&slots, workers)?;
-        let jobs: Vec<WorkerJob> = split_envs(num_envs, workers)
-            .into_iter()
-            .enumerate()
-            .map(|(worker_index, (env_offset, count))| {
+        let policy = options.wait_policy(local_workers.max(1));
+        let mut planned = Vec::new();
+        let mut offset = 0;
+        let mut worker_index = 0;
+        for slice in &slices {
+            if slice.place != LOCAL {
+                planned.push(Planned::Remote {
+                    hub: slice.place.clone(),
+                    env_offset: offset,
+                    num_envs: slice.num_envs,
+                });
+                offset += slice.num_envs;
+                continue;
+            }
+            let route = route.as_ref().ok_or_else(|| {
+                HubError::InvalidState("envs placed here without a local route".into())
+            })?;
+            for (local_offset, count) in split_envs(slice.num_envs, local_workers) {
                 let mut config = route.config.clone();
                 config.num_envs = count;
-                WorkerJob {
+                planned.push(Planned::Local(WorkerJob {
                     adapter: route.adapter.clone(),
                     env_id: route.env_id.clone(),
                     config,
-                    env_offset,
+                    env_offset: offset + local_offset,
                     num_envs: count,
                     session_envs: num_envs,
                     channel: ChannelName {
@@ -112,66 +191,180 @@ impl VecEnv {
                     },
                     slots: slots.clone(),
                     worker_index,
-                    session_workers: workers,
+                    session_workers: local_workers,
                     owner_pid: std::process::id(),
                     spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
-                }
-            })
-            .collect();
-        // Workers start in parallel: a simulator that takes a while to load (MuJoCo, Python)
-        // costs its load time once, not once per worker.
-        let started: Vec<Result<WorkerLink, HubError>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = jobs
-                .into_iter()
-                .enumerate()
-                .map(|(index, job)| {
-                    let (session, start_timeout) = (&session, options.start_timeout);
-                    let bell = bells.bell(index);
-                    scope.spawn(move || {
-                        let bell = bell?;
-                        WorkerLink::start(
-                            index,
-                            job,
-                            session,
-                            0,
-                            policy,
-                            start_timeout,
-                            launcher,
-                            bell,
-                        )
-                    })
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| {
-                    h.join().unwrap_or_else(|_| {
-                        Err(HubError::InvalidState(
-                            "a worker start thread panicked".into(),
-                        ))
-                    })
-                })
-                .collect()
-        });
-        let links = match started.into_iter().collect::<Result<Vec<_>, _>>() {
-            Ok(links) => links,
-            Err(e) => {
-                slots.unlink_all();
-                return Err(e);
+                }));
+                worker_index += 1;
             }
+            offset += slice.num_envs;
+        }
+        let bells = if local_workers > 0 {
+            Some(Doorbells::create(&slots, local_workers)?)
+        } else {
+            None
         };
+        let inbox = Arc::new(Inbox::default());
+        let with_final = config.autoreset_mode == AutoresetMode::SameStep;
+        // Workers and remote slices start in parallel: a simulator that takes a while to load
+        // (MuJoCo, Python) costs its load time once, not once per worker or hub.
+        let started: Vec<Result<(WorkerLink, Option<Route>), HubError>> =
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = planned
+                    .into_iter()
+                    .enumerate()
+                    .map(|(index, plan)| {
+                        let (session, options, config) = (&session, &options, &config);
+                        let (bells, inbox, network, slots) = (&bells, &inbox, &network, &slots);
+                        scope.spawn(move || match plan {
+                            Planned::Local(job) => {
+                                let bell = bells
+                                    .as_ref()
+                                    .expect("made for local workers")
+                                    .bell(job.worker_index)?;
+                                let link = WorkerLink::start(
+                                    index,
+                                    job,
+                                    session,
+                                    0,
+                                    policy,
+                                    options.start_timeout,
+                                    launcher,
+                                    bell,
+                                )?;
+                                Ok((link, None))
+                            }
+                            Planned::Remote {
+                                hub,
+                                env_offset,
+                                num_envs: n,
+                            } => {
+                                let network = network.as_ref().ok_or_else(|| {
+                                    HubError::InvalidState("remote envs without a network".into())
+                                })?;
+                                let mut config = config.clone();
+                                config.num_envs = n;
+                                let request = OpenRequest {
+                                    id: id.to_string(),
+                                    config,
+                                    client: network.client_id().to_string(),
+                                    restart_on_crash: options.restart_on_crash,
+                                    step_timeout_ms: options.step_timeout.as_millis() as u64,
+                                };
+                                let reply =
+                                    network.open_session(&hub, &request, options.start_timeout)?;
+                                let rows_layout = BatchLayout::new(
+                                    n,
+                                    reply.spec.observation_space.byte_len(),
+                                    with_final,
+                                );
+                                let conn = RemoteConn::connect(
+                                    network.clone(),
+                                    inbox.clone(),
+                                    index,
+                                    &hub,
+                                    &reply.session,
+                                    n,
+                                    reply.spec.action_space.byte_len(),
+                                    rows_layout,
+                                )?;
+                                let job = WorkerJob {
+                                    adapter: reply.route.adapter.clone(),
+                                    env_id: reply.route.env_id.clone(),
+                                    config: request.config,
+                                    env_offset,
+                                    num_envs: n,
+                                    session_envs: num_envs,
+                                    channel: ChannelName {
+                                        prefix: String::new(),
+                                        service: String::new(),
+                                    },
+                                    slots: slots.clone(),
+                                    worker_index: index,
+                                    session_workers: 0,
+                                    owner_pid: std::process::id(),
+                                    spin_us: 0,
+                                    max_spin_us: 0,
+                                };
+                                Ok((
+                                    WorkerLink::remote(index, job, reply.spec, conn),
+                                    Some(reply.route),
+                                ))
+                            }
+                        })
+                    })
+                    .collect();
+                handles
+                    .into_iter()
+                    .map(|h| {
+                        h.join().unwrap_or_else(|_| {
+                            Err(HubError::InvalidState(
+                                "a worker start thread panicked".into(),
+                            ))
+                        })
+                    })
+                    .collect()
+            });
+        let mut links = Vec::with_capacity(started.len());
+        let mut route = route;
+        let mut failure = None;
+        for result in started {
+            match result {
+                Ok((link, remote_route)) => {
+                    if route.is_none() {
+                        route = remote_route;
+                    }
+                    links.push(link);
+                }
+                Err(e) => failure = failure.or(Some(e)),
+            }
+        }
+        if let Some(e) = failure {
+            for mut link in links {
+                link.close();
+            }
+            slots.unlink_all();
+            return Err(e);
+        }
         let observation_space = links[0].spec.observation_space.clone();
         let action_space = links[0].spec.action_space.clone();
-        let layout = BatchLayout::new(
-            num_envs,
-            observation_space.byte_len(),
-            route.config.autoreset_mode == AutoresetMode::SameStep,
-        );
+        if let Some(odd) = links.iter().find(|l| {
+            l.spec.observation_space != observation_space || l.spec.action_space != action_space
+        }) {
+            let where_ = |l: &WorkerLink| {
+                l.remote_conn().map_or_else(
+                    || "this machine".to_string(),
+                    |r| format!("hub `{}`", r.hub),
+                )
+            };
+            let message = format!(
+                "`{id}` has different spaces on {} ({} / {}) and {} ({} / {}); the hubs run different versions of it",
+                where_(&links[0]),
+                observation_space,
+                action_space,
+                where_(odd),
+                odd.spec.observation_space,
+                odd.spec.action_space
+            );
+            for mut link in links {
+                link.close();
+            }
+            slots.unlink_all();
+            return Err(HubError::InvalidState(message));
+        }
+        let route = route.expect("some link started");
+        let layout = BatchLayout::new(num_envs, observation_space.byte_len(), with_final);
         let pool = SlotPool::new(slots, layout, options.pool_bytes);
         Ok(VecEnv {
             id: id.to_string(),
-            route,
+            route: Route {
+                config: envhub_core::EnvConfig {
+                    num_envs,
+                    ..route.config
+                },
+                ..route
+            },
             session,
             options,
             workers: links,
@@ -187,6 +380,22 @@ impl VecEnv {
             obs_bytes_copied: 0,
             steps_taken: 0,
         })
+    }
+
+    /// The hubs this session runs on, with the env range each hosts (`local`: this machine).
+    pub fn placement(&self) -> Vec<(String, std::ops::Range<usize>)> {
+        let mut out: Vec<(String, std::ops::Range<usize>)> = Vec::new();
+        for w in &self.workers {
+            let place = w
+                .remote_conn()
+                .map_or_else(|| LOCAL.to_string(), |r| r.hub.clone());
+            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            match out.last_mut() {
+                Some((p, r)) if *p == place && r.end == range.start => r.end = range.end,
+                _ => out.push((place, range)),
+            }
+        }
+        out
     }
 
     /// Number of envs.
@@ -321,7 +530,7 @@ impl VecEnv {
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
-            w.channel.send_reset(
+            w.send_reset(
                 slot,
                 &seeds[range.clone()],
                 mask.map(|m| &m[range.clone()]),
@@ -375,8 +584,7 @@ impl VecEnv {
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let (lo, n) = (w.job.env_offset, w.job.num_envs);
-            w.channel
-                .send_step(slot, &actions[lo * ab..(lo + n) * ab], None)?;
+            w.send_step(slot, &actions[lo * ab..(lo + n) * ab], None)?;
             w.sent(slot, lo..lo + n);
         }
         let workers: Vec<usize> = (0..self.workers.len()).collect();
@@ -472,9 +680,7 @@ impl VecEnv {
     pub fn render(&mut self) -> Result<Vec<Option<Frame>>, HubError> {
         self.check_open()?;
         for w in &mut self.workers {
-            w.channel.send_render(None)?;
-            w.pending = true;
-            w.sent_at = std::time::Instant::now();
+            w.send_render()?;
         }
         let mut frames = Vec::with_capacity(self.num_envs);
         for i in 0..self.workers.len() {

@@ -1,10 +1,14 @@
-//! One worker process as its owner sees it: started, watched, waited for, killed, restarted.
+//! One worker as its owner sees it: a local process (started, watched, waited for, killed,
+//! restarted) reached over iceoryx2, or a remote hub's slice of the session reached over
+//! Zenoh. Both answer the same requests with the same statuses and result rows.
 
 use crate::error::HubError;
 use crate::launcher::{Launcher, WorkerProcess};
+use crate::remote::link::RemoteConn;
+use crate::remote::wire::{RemoteAnswer, RequestBody};
 use envhub_shm::{
-    Bell, ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, WaitPolicy,
-    WorkerJob,
+    Bell, ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, ResponseHeader,
+    WaitPolicy, WorkerJob, command, status,
 };
 
 /// Asked while waiting on workers: `true` stops the wait with [`HubError::Interrupted`] (the
@@ -12,21 +16,66 @@ use envhub_shm::{
 pub type InterruptCheck = dyn Fn() -> bool + Send + Sync;
 use std::time::{Duration, Instant};
 
-/// A running worker and the client's end of its channel.
-pub(crate) struct WorkerLink {
-    pub index: usize,
-    pub job: WorkerJob,
-    pub spec: ReadySpec,
+/// A local worker process and the client's end of its channel.
+pub(crate) struct LocalConn {
     pub channel: ClientChannel,
     process: WorkerProcess,
     launcher: Launcher,
     watch: ProcessWatch,
     generation: u32,
     bell: Bell,
+}
+
+/// How a link reaches its envs.
+pub(crate) enum Conn {
+    Local(LocalConn),
+    Remote(RemoteConn),
+}
+
+/// A worker's answer: in place in iceoryx2 shared memory, or a remote hub's message (whose
+/// result rows are copied into the batch slot when the results are taken).
+pub(crate) enum Answer {
+    Local(Response),
+    Remote(RemoteAnswer),
+}
+
+impl Answer {
+    pub fn header(&self) -> &ResponseHeader {
+        match self {
+            Answer::Local(r) => r.header(),
+            Answer::Remote(r) => r.header(),
+        }
+    }
+
+    pub fn info_bytes(&self) -> &[u8] {
+        match self {
+            Answer::Local(r) => r.info_bytes(),
+            Answer::Remote(r) => r.info_bytes(),
+        }
+    }
+
+    pub fn info_json(&self) -> Option<&str> {
+        let bytes = self.info_bytes();
+        (!bytes.is_empty()).then(|| std::str::from_utf8(bytes).unwrap_or(""))
+    }
+
+    /// The message of an [`status::ERROR`] answer.
+    pub fn error(&self) -> Option<String> {
+        (self.header().status == status::ERROR)
+            .then(|| String::from_utf8_lossy(self.info_bytes()).into_owned())
+    }
+}
+
+/// A worker (local process or remote slice) and the client's end of its channel.
+pub(crate) struct WorkerLink {
+    pub index: usize,
+    pub job: WorkerJob,
+    pub spec: ReadySpec,
+    pub conn: Conn,
     /// A request is in flight.
     pub pending: bool,
     /// A response received but not yet handed to the caller (`recv` returns it later).
-    pub response: Option<Response>,
+    pub response: Option<Answer>,
     /// The batch slot of the last request with results.
     pub slot: u32,
     /// The envs (session ids, ascending) the last step or reset request selected.
@@ -78,12 +127,14 @@ impl WorkerLink {
             index,
             job,
             spec,
-            channel,
-            process,
-            launcher: launcher.clone(),
-            watch,
-            generation,
-            bell,
+            conn: Conn::Local(LocalConn {
+                channel,
+                process,
+                launcher: launcher.clone(),
+                watch,
+                generation,
+                bell,
+            }),
             pending: false,
             response: None,
             slot: 0,
@@ -94,9 +145,123 @@ impl WorkerLink {
         })
     }
 
-    /// The worker's pid.
+    /// A remote hub's slice of the session, connected.
+    pub fn remote(index: usize, job: WorkerJob, spec: ReadySpec, conn: RemoteConn) -> WorkerLink {
+        WorkerLink {
+            index,
+            job,
+            spec,
+            conn: Conn::Remote(conn),
+            pending: false,
+            response: None,
+            slot: 0,
+            sent: Vec::new(),
+            sent_at: Instant::now(),
+            restarted: false,
+            restarts: 0,
+        }
+    }
+
+    /// The worker's pid (on its hub's machine for a remote slice).
     pub fn pid(&self) -> u32 {
         self.spec.pid
+    }
+
+    /// The iceoryx2 channel of a local worker.
+    pub fn local_channel(&self) -> Option<&ClientChannel> {
+        match &self.conn {
+            Conn::Local(l) => Some(&l.channel),
+            Conn::Remote(_) => None,
+        }
+    }
+
+    /// The remote slice, if this link is one.
+    pub fn remote_conn(&self) -> Option<&RemoteConn> {
+        match &self.conn {
+            Conn::Remote(r) => Some(r),
+            Conn::Local(_) => None,
+        }
+    }
+
+    /// How long a wait for this worker may spin before blocking.
+    pub fn spin_budget(&self) -> Duration {
+        match &self.conn {
+            Conn::Local(l) => l.channel.spin_budget(),
+            Conn::Remote(_) => Duration::ZERO,
+        }
+    }
+
+    /// Sends a step of the `selected` envs (all if `None`); results go to slot `slot`.
+    pub fn send_step(
+        &mut self,
+        slot: u32,
+        actions: &[u8],
+        selected: Option<&[bool]>,
+    ) -> Result<(), HubError> {
+        match &mut self.conn {
+            Conn::Local(l) => {
+                l.channel.send_step(slot, actions, selected)?;
+            }
+            Conn::Remote(r) => r.send(
+                command::STEP,
+                slot,
+                &RequestBody {
+                    actions: Some(actions),
+                    selected,
+                    seeds: &[],
+                    options: b"",
+                },
+            )?,
+        }
+        Ok(())
+    }
+
+    /// Sends a reset of the `selected` envs (all if `None`).
+    pub fn send_reset(
+        &mut self,
+        slot: u32,
+        seeds: &[Option<u64>],
+        selected: Option<&[bool]>,
+        options_json: &str,
+    ) -> Result<(), HubError> {
+        match &mut self.conn {
+            Conn::Local(l) => {
+                l.channel.send_reset(slot, seeds, selected, options_json)?;
+            }
+            Conn::Remote(r) => r.send(
+                command::RESET,
+                slot,
+                &RequestBody {
+                    actions: None,
+                    selected,
+                    seeds,
+                    options: options_json.as_bytes(),
+                },
+            )?,
+        }
+        Ok(())
+    }
+
+    /// Asks for a frame of every env.
+    pub fn send_render(&mut self) -> Result<(), HubError> {
+        match &mut self.conn {
+            Conn::Local(l) => {
+                l.channel.send_render(None)?;
+            }
+            Conn::Remote(r) => r.send(
+                command::RENDER,
+                envhub_shm::NO_SLOT,
+                &RequestBody {
+                    actions: None,
+                    selected: None,
+                    seeds: &[],
+                    options: b"",
+                },
+            )?,
+        }
+        self.pending = true;
+        self.sent_at = Instant::now();
+        Ok(())
     }
 
     /// Notes a request just sent: its slot and the envs it selected.
@@ -116,12 +281,16 @@ impl WorkerLink {
         &mut self,
         timeout: Duration,
         interrupt: &InterruptCheck,
-    ) -> Result<Response, HubError> {
+    ) -> Result<Answer, HubError> {
         const INTERRUPTED: &str = "interrupted";
         const TIMED_OUT: &str = "timed out";
         let deadline = self.sent_at + timeout;
-        let watch = &self.watch;
-        let result = self.channel.receive(|| {
+        let local = match &mut self.conn {
+            Conn::Remote(_) => return self.wait_remote(deadline, timeout, interrupt),
+            Conn::Local(l) => l,
+        };
+        let watch = &local.watch;
+        let result = local.channel.receive(|| {
             if watch.exited() {
                 Err(DataPlaneError::PeerGone("exited".into()))
             } else if interrupt() {
@@ -135,7 +304,7 @@ impl WorkerLink {
         match result {
             Ok(response) => {
                 self.pending = false;
-                Ok(response)
+                Ok(Answer::Local(response))
             }
             Err(DataPlaneError::PeerGone(why)) if why == INTERRUPTED => Err(HubError::Interrupted),
             Err(DataPlaneError::PeerGone(why)) if why == TIMED_OUT => Err(self.hung(timeout)),
@@ -147,6 +316,33 @@ impl WorkerLink {
         }
     }
 
+    /// [`WorkerLink::wait`] for a remote slice: the answer, the hub's loss, the interrupt or
+    /// the timeout, whichever comes first; a request unanswered for a while is sent again.
+    fn wait_remote(
+        &mut self,
+        deadline: Instant,
+        timeout: Duration,
+        interrupt: &InterruptCheck,
+    ) -> Result<Answer, HubError> {
+        const TICK: Duration = Duration::from_millis(5);
+        loop {
+            if let Some(answer) = self.poll()? {
+                return Ok(answer);
+            }
+            if interrupt() {
+                return Err(HubError::Interrupted);
+            }
+            if Instant::now() >= deadline {
+                return Err(self.hung(timeout));
+            }
+            let Conn::Remote(r) = &mut self.conn else {
+                unreachable!("a remote link")
+            };
+            r.resend_if_silent()?;
+            r.wait(TICK);
+        }
+    }
+
     /// Whether the request in flight has been waited on for longer than `timeout`.
     pub fn overdue(&self, timeout: Duration) -> bool {
         self.pending && self.sent_at.elapsed() >= timeout
@@ -154,11 +350,14 @@ impl WorkerLink {
 
     /// The response if it has arrived, without asking whether the worker lives (cheap: for
     /// spinning).
-    pub fn try_take(&mut self) -> Result<Option<Response>, HubError> {
+    pub fn try_take(&mut self) -> Result<Option<Answer>, HubError> {
         if !self.pending {
             return Ok(None);
         }
-        let r = self.channel.try_receive()?;
+        let r = match &mut self.conn {
+            Conn::Local(l) => l.channel.try_receive()?.map(Answer::Local),
+            Conn::Remote(r) => r.try_take()?.map(Answer::Remote),
+        };
         if r.is_some() {
             self.pending = false;
         }
@@ -166,15 +365,18 @@ impl WorkerLink {
     }
 
     /// The response if it has arrived; a dead worker is an error.
-    pub fn poll(&mut self) -> Result<Option<Response>, HubError> {
+    pub fn poll(&mut self) -> Result<Option<Answer>, HubError> {
+        if let Some(r) = self.try_take()? {
+            return Ok(Some(r));
+        }
         if !self.pending {
             return Ok(None);
         }
-        if let Some(r) = self.channel.try_receive()? {
-            self.pending = false;
-            return Ok(Some(r));
-        }
-        if self.watch.exited() {
+        let gone = match &self.conn {
+            Conn::Local(l) => l.watch.exited(),
+            Conn::Remote(r) => !r.hub_alive(),
+        };
+        if gone {
             return Err(self.exited());
         }
         Ok(None)
@@ -183,7 +385,20 @@ impl WorkerLink {
     /// Kills a worker that did not answer within `timeout` and describes it.
     pub fn hung(&mut self, timeout: Duration) -> HubError {
         self.pending = false;
-        self.process.kill();
+        let local = match &mut self.conn {
+            Conn::Local(l) => l,
+            Conn::Remote(r) => {
+                r.close();
+                return HubError::HubLost {
+                    hub: r.hub.clone(),
+                    envs: env_range(&self.job),
+                    why: format!(
+                        "it did not answer within {timeout:?} (step timeout); its session was closed"
+                    ),
+                };
+            }
+        };
+        local.process.kill();
         HubError::WorkerDied {
             worker: self.index,
             envs: env_range(&self.job),
@@ -194,7 +409,17 @@ impl WorkerLink {
 
     fn exited(&mut self) -> HubError {
         self.pending = false;
-        let why = match self.process.exit_status(Duration::from_millis(500)) {
+        let local = match &mut self.conn {
+            Conn::Local(l) => l,
+            Conn::Remote(r) => {
+                return HubError::HubLost {
+                    hub: r.hub.clone(),
+                    envs: env_range(&self.job),
+                    why: "its liveliness token went away (the hub exited, froze past its lease, or the network to it was cut)".into(),
+                };
+            }
+        };
+        let why = match local.process.exit_status(Duration::from_millis(500)) {
             Some(status) => format!("died ({status})"),
             None => "died (exit status unknown)".to_string(),
         };
@@ -213,15 +438,20 @@ impl WorkerLink {
         policy: WaitPolicy,
         start_timeout: Duration,
     ) -> Result<(), HubError> {
+        let Conn::Local(local) = &self.conn else {
+            return Err(HubError::InvalidState(
+                "a remote slice is placed again by its session, not restarted".into(),
+            ));
+        };
         let fresh = WorkerLink::start(
             self.index,
             self.job.clone(),
             session,
-            self.generation + 1,
+            local.generation + 1,
             policy,
             start_timeout,
-            &self.launcher,
-            self.bell.clone(),
+            &local.launcher,
+            local.bell.clone(),
         )?;
         let restarts = self.restarts + 1;
         *self = fresh;
@@ -236,9 +466,14 @@ impl WorkerLink {
     /// never stepped) makes iceoryx2 warn about a lost chunk.
     pub fn close(&mut self) {
         self.response = None;
-        let asked = self.channel.send_close().is_ok();
-        if !asked || self.process.exit_status(Duration::from_secs(2)).is_none() {
-            self.process.kill();
+        match &mut self.conn {
+            Conn::Local(l) => {
+                let asked = l.channel.send_close().is_ok();
+                if !asked || l.process.exit_status(Duration::from_secs(2)).is_none() {
+                    l.process.kill();
+                }
+            }
+            Conn::Remote(r) => r.close(),
         }
     }
 
@@ -246,11 +481,14 @@ impl WorkerLink {
     pub fn abort(&mut self) {
         self.response = None;
         self.pending = false;
-        self.process.kill_now();
+        match &mut self.conn {
+            Conn::Local(l) => l.process.kill_now(),
+            Conn::Remote(r) => r.close(),
+        }
     }
 }
 
-impl Drop for WorkerLink {
+impl Drop for LocalConn {
     fn drop(&mut self) {
         if !self.watch.exited() {
             self.process.kill();
@@ -258,7 +496,7 @@ impl Drop for WorkerLink {
     }
 }
 
-fn env_range(job: &WorkerJob) -> String {
+pub(crate) fn env_range(job: &WorkerJob) -> String {
     format!("{}..{}", job.env_offset, job.env_offset + job.num_envs)
 }
 

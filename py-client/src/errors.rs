@@ -91,6 +91,25 @@ pub(crate) fn hub_error(py: Python<'_>, e: HubError) -> PyErr {
         HubError::Remote(_) | HubError::Daemon { .. } => {
             raise(py, "HubDaemonError", message, vec![])
         }
+        HubError::HubLost { hub, envs, .. } => raise(
+            py,
+            "HubLostError",
+            message,
+            vec![("hub", text(py, &hub)), ("envs", text(py, &envs))],
+        ),
+        HubError::UnknownHub { name, .. } => raise(
+            py,
+            "UnknownHubError",
+            message,
+            vec![("hub", text(py, &name))],
+        ),
+        HubError::Network { .. } => raise(py, "NetworkError", message, vec![]),
+        HubError::Refused { hub, .. } => raise(
+            py,
+            "HubRefusedError",
+            message,
+            vec![("hub", text(py, &hub))],
+        ),
     }
 }
 

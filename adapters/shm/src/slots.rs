@@ -310,6 +310,18 @@ impl Slot {
         self.layout.rows(bytes, first, n)
     }
 
+    /// The rows of envs `first..first + n`, for writing results that arrived another way (a
+    /// remote hub's message).
+    ///
+    /// # Safety
+    /// No one else may read or write these rows while the blocks live (the results are being
+    /// made: the slot is not lent and no worker was asked to write these rows).
+    pub unsafe fn rows_mut(&self, first: usize, n: usize) -> ResponseBlocksMut<'_> {
+        // SAFETY: the mapping holds `layout.size()` bytes, 8-byte aligned (page aligned);
+        // exclusive as the caller guarantees.
+        unsafe { self.layout.rows_mut(self.map.ptr, first, n) }
+    }
+
     /// Marks env `env`'s episode truncated (a restarted worker's envs).
     ///
     /// # Safety

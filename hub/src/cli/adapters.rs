@@ -12,10 +12,16 @@ pub(crate) struct Args {
     /// Print a JSON array.
     #[arg(long)]
     json: bool,
+    /// Ask this hub on the network instead of this machine.
+    #[arg(long, value_name = "NAME")]
+    hub: Option<String>,
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
-    let all = hub.adapters()?;
+    let all = match &args.hub {
+        Some(name) => hub.remote_adapters(name)?,
+        None => hub.adapters()?,
+    };
     let adapters: Vec<_> = all
         .iter()
         .filter(|a| args.all || a.availability.is_available())

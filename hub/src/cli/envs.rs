@@ -27,6 +27,9 @@ pub(crate) struct Args {
     /// Print a JSON array of entries.
     #[arg(long)]
     json: bool,
+    /// List the catalog of this hub on the network instead of this machine's.
+    #[arg(long, value_name = "NAME")]
+    pub hub: Option<String>,
 }
 
 pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {

@@ -3,6 +3,7 @@
 mod adapters;
 mod bench;
 mod envs;
+mod hubs;
 mod match_cmd;
 mod run;
 mod serve;
@@ -27,6 +28,15 @@ struct Cli {
     #[arg(long, value_name = "FILE", global = true)]
     config: Option<PathBuf>,
 
+    /// Zenoh endpoint of a hub (or router) to reach other hubs through, as
+    /// `tcp/HOST:PORT`; repeat for several. Added to ENVHUB_CONNECT and the config's.
+    #[arg(long, value_name = "ENDPOINT", global = true)]
+    connect: Vec<String>,
+
+    /// A Zenoh JSON5 config file (router, TLS, credentials) for reaching other hubs.
+    #[arg(long, value_name = "FILE", global = true)]
+    zenoh_config: Option<PathBuf>,
+
     #[command(subcommand)]
     command: Command,
 }
@@ -46,8 +56,10 @@ enum Command {
     /// Measure throughput through the hub against in-process stepping, and the round trip.
     Bench(bench::Args),
     /// Run the hub as a daemon that several client processes share (set ENVHUB_HUB to its
-    /// socket in the clients).
+    /// socket in the clients), and that clients on other machines reach over Zenoh.
     Serve(serve::Args),
+    /// List the live hubs on the network.
+    Hubs(hubs::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -73,15 +85,30 @@ pub fn run() -> ExitCode {
 fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
     let settings = Settings::discover(cli.config.as_deref())?;
     let registry = || -> anyhow::Result<Registry> { Ok(settings.registry(&cli.registries)?) };
-    let hub = || -> anyhow::Result<Hub> { Ok(Hub::from_settings(&settings, &cli.registries)?) };
+    let listen: &[String] = match &cli.command {
+        Command::Serve(args) => args.listen(),
+        _ => &[],
+    };
+    let net =
+        settings
+            .zenoh
+            .clone()
+            .with_overrides(&cli.connect, listen, cli.zenoh_config.as_deref());
+    let hub = || -> anyhow::Result<Hub> {
+        Ok(Hub::from_settings(&settings, &cli.registries)?.with_network(net.clone()))
+    };
     match cli.command {
-        Command::Envs(args) => envs::run(&registry()?, &args),
+        Command::Envs(args) => match &args.hub {
+            Some(name) => envs::run(&hub()?.remote_registry(name)?, &args),
+            None => envs::run(&registry()?, &args),
+        },
+        Command::Hubs(args) => hubs::run(&hub()?, &args),
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),
         Command::Run(args) => run::run(&hub()?, &args),
         Command::Bench(args) => bench::run(&hub()?, &args),
-        Command::Serve(args) => serve::run(Hub::new(registry()?), &args),
+        Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),
     }
 }
 

@@ -26,6 +26,10 @@ pub(crate) struct Args {
     /// Print `{"id", "steps", "seconds", "steps_per_sec", "episodes", "mean_return"}`.
     #[arg(long)]
     json: bool,
+    /// Where the envs run: `local` (default), a hub's name, `all` live hubs, a list
+    /// (`box1,box2,local`: spread by cores) or counts (`box1:48,box2:16`).
+    #[arg(long, value_name = "HUBS", default_value = "local")]
+    hub: String,
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
@@ -33,7 +37,8 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
         workers: args.workers,
         ..EnvConfig::default()
     };
-    let mut env = hub.make_vec(&args.id, args.num_envs, &config)?;
+    let placement: envhub::Placement = args.hub.parse()?;
+    let mut env = hub.make_vec_on(&args.id, args.num_envs, &config, &placement)?;
     let n = env.num_envs();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
     let batches = args.steps.div_ceil(n).max(1);

@@ -24,6 +24,10 @@ __all__ = [
     "WorkerBinaryError",
     "DataPlaneError",
     "HubDaemonError",
+    "NetworkError",
+    "HubLostError",
+    "UnknownHubError",
+    "HubRefusedError",
 ]
 
 
@@ -107,6 +111,39 @@ class DataPlaneError(EnvHubError, RuntimeError):
 
 class HubDaemonError(EnvHubError, ConnectionError):
     """Talking to an `envhub serve` daemon failed, or it reported an error."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+class NetworkError(EnvHubError, ConnectionError):
+    """Reaching other hubs over the network (Zenoh) failed."""
+
+
+class HubLostError(NetworkError):
+    """A remote hub went away (exited, froze past its lease, or was cut off): `hub` names it,
+    `envs` the range of the session's envs it hosted."""
+
+    hub: str = ""
+    envs: str = ""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+class UnknownHubError(EnvHubError, LookupError):
+    """A hub named in a placement is not live; the message lists the live ones."""
+
+    hub: str = ""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class HubRefusedError(EnvHubError, PermissionError):
+    """A remote hub refused the request (its security policy or its limits)."""
+
+    hub: str = ""
 
     def __str__(self) -> str:
         return str(self.args[0]) if self.args else ""

@@ -1,0 +1,454 @@
+//! The hub's side of a remote session: a local `VecEnv` (workers over iceoryx2, as any
+//! session) driven by the requests that arrive over Zenoh, one thread per session.
+//!
+//! Each request carries a sequence number. The answer to the last one is kept: a request
+//! sent again (the client heard nothing back, e.g. across a reconnect) is answered again
+//! without stepping twice; an older one is ignored. Anything unreadable is answered with an
+//! error naming what was wrong, and the session goes on.
+
+use super::keys;
+use super::serve::ServePolicy;
+use super::wire::{self, RowsOut};
+use crate::batch::Batch;
+use crate::error::HubError;
+use crate::vec_env::VecEnv;
+use envhub_shm::{BatchLayout, Layout, command, frames_section, status};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use zenoh::Wait;
+
+/// Response status of a remote session whose info section is a serialized [`HubError`]
+/// (the session's envs are gone: a worker died without restart, ...).
+pub(crate) const HUB_ERROR: u32 = 16;
+
+/// How often an idle session looks at its stop flag.
+const IDLE_TICK: Duration = Duration::from_millis(100);
+
+struct Entry {
+    client: String,
+    envs: usize,
+    workers: usize,
+    requests: Option<Sender<Vec<u8>>>,
+    stop: Arc<AtomicBool>,
+}
+
+/// A hub's remote sessions, and the envs and workers they hold (for its limits).
+#[derive(Default)]
+pub(crate) struct Sessions {
+    entries: Mutex<HashMap<String, Entry>>,
+    /// Envs and workers reserved by sessions still starting.
+    starting: Mutex<(usize, usize)>,
+}
+
+/// Envs and workers set aside for a session being started; given back if it fails.
+pub(crate) struct Reservation<'a> {
+    sessions: &'a Sessions,
+    envs: usize,
+    workers: usize,
+}
+
+impl Drop for Reservation<'_> {
+    fn drop(&mut self) {
+        let mut starting = self.sessions.starting.lock().expect("not poisoned");
+        starting.0 -= self.envs;
+        starting.1 -= self.workers;
+    }
+}
+
+impl Sessions {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, Entry>> {
+        self.entries.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub fn len(&self) -> usize {
+        self.lock().len()
+    }
+
+    /// Envs and workers of the open sessions.
+    pub fn totals(&self) -> (usize, usize) {
+        self.lock()
+            .values()
+            .fold((0, 0), |(e, w), s| (e + s.envs, w + s.workers))
+    }
+
+    /// Sets aside `envs` and `workers` if the limits allow; else why not and what would fit.
+    pub fn reserve(
+        &self,
+        envs: usize,
+        workers: usize,
+        policy: &ServePolicy,
+    ) -> Result<Reservation<'_>, (String, String)> {
+        let (open_envs, open_workers) = self.totals();
+        let mut starting = self.starting.lock().expect("not poisoned");
+        let used_envs = open_envs + starting.0;
+        let used_workers = open_workers + starting.1;
+        if let Some(max) = policy.max_envs
+            && used_envs + envs > max
+        {
+            return Err((
+                format!("{envs} envs would exceed its limit of {max} (it runs {used_envs})"),
+                format!(
+                    "ask for at most {} envs here, or place the rest on other hubs",
+                    max.saturating_sub(used_envs)
+                ),
+            ));
+        }
+        if let Some(max) = policy.max_workers
+            && used_workers + workers > max
+        {
+            return Err((
+                format!(
+                    "{workers} workers would exceed its limit of {max} (it runs {used_workers})"
+                ),
+                format!(
+                    "ask for at most {} workers here (`workers=`), or place envs on other hubs",
+                    max.saturating_sub(used_workers)
+                ),
+            ));
+        }
+        starting.0 += envs;
+        starting.1 += workers;
+        Ok(Reservation {
+            sessions: self,
+            envs,
+            workers,
+        })
+    }
+
+    /// Ends the sessions of a client whose token went away.
+    pub fn client_gone(&self, client_key: &str) {
+        for (id, s) in self.lock().iter_mut() {
+            if keys::client_token(&s.client) == client_key {
+                tracing::info!(session = %id, client = %s.client, "client gone: closing its session");
+                s.stop.store(true, Ordering::Relaxed);
+                s.requests = None;
+            }
+        }
+    }
+
+    pub fn stop_all(&self) {
+        for s in self.lock().values_mut() {
+            s.stop.store(true, Ordering::Relaxed);
+            s.requests = None;
+        }
+    }
+}
+
+fn session_id() -> String {
+    use std::sync::atomic::AtomicU64;
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    format!(
+        "s{:x}{:x}-{}",
+        std::process::id(),
+        nanos & 0xffff_ffff,
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Registers a started session and runs it on its own thread; returns its id.
+pub(crate) fn start(
+    sessions: &Arc<Sessions>,
+    zenoh: &zenoh::Session,
+    hub: &str,
+    client: &str,
+    vec: VecEnv,
+    reservation: Reservation<'_>,
+) -> Result<String, HubError> {
+    let id = session_id();
+    let publisher = zenoh
+        .declare_publisher(keys::responses(hub, &id))
+        .express(true)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .priority(zenoh::qos::Priority::DataHigh)
+        .wait()
+        .map_err(|e| HubError::Network {
+            reason: format!("cannot declare the session's publisher: {e}"),
+            hint: "the hub's Zenoh session is failing; see its log".into(),
+        })?;
+    let (tx, rx) = std::sync::mpsc::channel();
+    let stop = Arc::new(AtomicBool::new(false));
+    sessions.lock().insert(
+        id.clone(),
+        Entry {
+            client: client.to_string(),
+            envs: vec.num_envs(),
+            workers: vec.num_workers(),
+            requests: Some(tx),
+            stop: stop.clone(),
+        },
+    );
+    drop(reservation);
+    let (sessions, thread_id) = (sessions.clone(), id.clone());
+    std::thread::Builder::new()
+        .name(format!("envhub-session-{id}"))
+        .spawn(move || {
+            run(vec, rx, &publisher, &stop);
+            sessions.lock().remove(&thread_id);
+            tracing::info!(session = %thread_id, "remote session closed");
+        })
+        .map_err(|e| HubError::InvalidState(format!("cannot start a session thread: {e}")))?;
+    Ok(id)
+}
+
+/// Hands a request to its session, or answers that there is no such session.
+pub(crate) fn dispatch(
+    sessions: &Sessions,
+    zenoh: &zenoh::Session,
+    hub: &str,
+    key: &str,
+    payload: Vec<u8>,
+) {
+    let Some(id) = keys::session_of(hub, key) else {
+        return;
+    };
+    let seq = seq_of(&payload);
+    let sent = match sessions.lock().get(id).and_then(|s| s.requests.as_ref()) {
+        Some(tx) => tx.send(payload).is_ok(),
+        None => false,
+    };
+    if !sent {
+        tracing::warn!(session = id, "request for an unknown or closed session");
+        let message = format!("hub `{hub}` has no open session `{id}` (closed, or never opened)");
+        let answer = wire::encode_response(seq, status::ERROR, 0, &[], message.as_bytes());
+        let _ = zenoh.put(keys::responses(hub, id), answer).wait();
+    }
+}
+
+fn seq_of(payload: &[u8]) -> u64 {
+    payload
+        .get(..8)
+        .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+}
+
+fn run(
+    mut vec: VecEnv,
+    rx: Receiver<Vec<u8>>,
+    publisher: &zenoh::pubsub::Publisher<'_>,
+    stop: &AtomicBool,
+) {
+    let layout = Layout::new(vec.num_envs(), vec.action_space().byte_len());
+    let rows_layout = BatchLayout::new(
+        vec.num_envs(),
+        vec.observation_space().byte_len(),
+        vec.autoreset_mode() == envhub_core::AutoresetMode::SameStep,
+    );
+    let mut last: Option<(u64, Vec<u8>)> = None;
+    while !stop.load(Ordering::Relaxed) {
+        let bytes = match rx.recv_timeout(IDLE_TICK) {
+            Ok(b) => b,
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        let seq = seq_of(&bytes);
+        if let Some((last_seq, answer)) = &last {
+            if seq == *last_seq {
+                // Sent again: answer again, do not step again.
+                let _ = publisher.put(answer.clone()).wait();
+                continue;
+            }
+            if seq < *last_seq {
+                tracing::debug!(seq, last_seq, "stale request ignored");
+                continue;
+            }
+        }
+        let (answer, closing) = match wire::parse_request(&bytes, &layout) {
+            Ok(request) => {
+                let closing = request.header.command == command::CLOSE;
+                (serve(&mut vec, &request, &rows_layout), closing)
+            }
+            Err(message) => {
+                tracing::warn!(seq, %message, "unreadable request");
+                let text = format!("unreadable request: {message}");
+                (
+                    wire::encode_response(
+                        seq,
+                        status::ERROR,
+                        layout.num_envs,
+                        &[],
+                        text.as_bytes(),
+                    ),
+                    false,
+                )
+            }
+        };
+        if let Err(e) = publisher.put(answer.clone()).wait() {
+            tracing::warn!(error = %e, "could not send a response");
+        }
+        last = Some((seq, answer));
+        if closing {
+            break;
+        }
+    }
+    vec.close();
+}
+
+/// Runs one request on the local session; the encoded response.
+fn serve(
+    vec: &mut VecEnv,
+    request: &wire::ParsedRequest<'_>,
+    rows_layout: &BatchLayout,
+) -> Vec<u8> {
+    let seq = request.header.seq;
+    let n = vec.num_envs();
+    let all = request.selected.iter().all(|&s| s);
+    let mut out = Out::new(rows_layout);
+    let result = match request.header.command {
+        command::RESET => reset(vec, request, all, rows_layout, &mut out),
+        command::STEP => step(vec, request, all, rows_layout, &mut out),
+        command::RENDER => {
+            return match vec.render() {
+                Ok(frames) => {
+                    let frames: Vec<Option<(usize, usize, Vec<u8>)>> = frames
+                        .into_iter()
+                        .map(|f| f.map(|f| (f.height, f.width, f.rgb)))
+                        .collect();
+                    wire::encode_response(seq, status::OK, n, &[], &frames_section(frames))
+                }
+                Err(e) => error_response(seq, n, &e),
+            };
+        }
+        _ => {
+            vec.close();
+            return wire::encode_response(seq, status::CLOSED, n, &[], &[]);
+        }
+    };
+    match result {
+        Ok(()) => wire::encode_response(seq, status::OK, n, &out.rows, &out.info()),
+        Err(HubError::EnvFailed { envs, message, .. }) => {
+            if let Some(batch) = vec.last_batch() {
+                out.absorb(rows_layout, &batch);
+            }
+            let info: Option<serde_json::Value> = serde_json::from_slice(&out.info()).ok();
+            let failed: Vec<(usize, String)> =
+                envs.iter().map(|&e| (e, message_of(&message, e))).collect();
+            let report = serde_json::json!({ "failed": failed, "info": info }).to_string();
+            wire::encode_response(seq, status::ENV_FAILED, n, &out.rows, report.as_bytes())
+        }
+        Err(e) => error_response(seq, n, &e),
+    }
+}
+
+fn error_response(seq: u64, n: usize, e: &HubError) -> Vec<u8> {
+    let json = serde_json::to_vec(e).expect("errors serialize");
+    wire::encode_response(seq, HUB_ERROR, n, &[], &json)
+}
+
+/// Env `e`'s line of a failure message (`env 3: ...`), else the whole message.
+fn message_of(message: &str, e: usize) -> String {
+    let prefix = format!("env {e}: ");
+    message
+        .lines()
+        .find_map(|l| l.strip_prefix(&prefix))
+        .map_or_else(|| message.to_string(), str::to_string)
+}
+
+fn reset(
+    vec: &mut VecEnv,
+    request: &wire::ParsedRequest<'_>,
+    all: bool,
+    layout: &BatchLayout,
+    out: &mut Out,
+) -> Result<(), HubError> {
+    let options: envhub_core::ResetOptions = if request.options.is_empty() {
+        Default::default()
+    } else {
+        serde_json::from_str(request.options).map_err(|e| HubError::InvalidConfig {
+            what: "reset options",
+            reason: e.to_string(),
+        })?
+    };
+    let mask = (!all).then_some(&request.selected[..]);
+    let batch = vec.reset_with(&request.seeds, mask, &options)?;
+    out.absorb(layout, &batch);
+    Ok(())
+}
+
+fn step(
+    vec: &mut VecEnv,
+    request: &wire::ParsedRequest<'_>,
+    all: bool,
+    layout: &BatchLayout,
+    out: &mut Out,
+) -> Result<(), HubError> {
+    if all {
+        let batch = vec.step(request.actions)?;
+        out.absorb(layout, &batch);
+        return Ok(());
+    }
+    // Some envs: the local session steps them asynchronously, and every part is gathered
+    // before the one answer goes back.
+    let ab = vec.action_space().byte_len();
+    let ids: Vec<usize> = (0..vec.num_envs())
+        .filter(|&e| request.selected[e])
+        .collect();
+    let mut actions = Vec::with_capacity(ids.len() * ab);
+    for &e in &ids {
+        actions.extend_from_slice(&request.actions[e * ab..(e + 1) * ab]);
+    }
+    vec.send(&actions, &ids)?;
+    let mut got = 0;
+    while got < ids.len() {
+        let batch = vec.recv()?;
+        got += batch.env_ids.len();
+        out.absorb(layout, &batch);
+    }
+    Ok(())
+}
+
+/// A response being made: the result block and the envs' infos.
+struct Out {
+    rows: Vec<u8>,
+    infos: Vec<serde_json::Value>,
+    any_info: bool,
+}
+
+impl Out {
+    fn new(layout: &BatchLayout) -> Out {
+        Out {
+            rows: vec![0u8; layout.size()],
+            infos: Vec::new(),
+            any_info: false,
+        }
+    }
+
+    /// Writes `batch`'s rows (and infos) where its envs go.
+    fn absorb(&mut self, layout: &BatchLayout, batch: &Batch<'_>) {
+        wire::write_rows(
+            layout,
+            &mut self.rows,
+            batch.env_ids,
+            &RowsOut {
+                obs: batch.obs,
+                rewards: batch.rewards,
+                terminated: batch.terminated,
+                truncated: batch.truncated,
+                final_mask: batch.final_mask,
+                final_obs: batch.final_obs,
+            },
+        );
+        if !batch.infos.is_empty() {
+            if !self.any_info {
+                self.infos = vec![serde_json::Value::Object(Default::default()); layout.num_envs];
+                self.any_info = true;
+            }
+            for (k, &e) in batch.env_ids.iter().enumerate() {
+                self.infos[e] = batch.infos[k].clone();
+            }
+        }
+    }
+
+    /// The info section (empty when no env reported info).
+    fn info(&self) -> Vec<u8> {
+        if self.any_info {
+            serde_json::to_vec(&self.infos).expect("infos serialize")
+        } else {
+            Vec::new()
+        }
+    }
+}

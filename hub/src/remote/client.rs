@@ -1,0 +1,342 @@
+//! A client's view of the network: one Zenoh session per process and network config, which
+//! watches the hubs' liveliness tokens (history on, so hubs already up are seen at once),
+//! asks hubs for their info, catalog and adapters, and opens sessions on them.
+//!
+//! The client holds its own token (`envhub/client/<id>`): hubs end its sessions when it goes.
+
+use super::keys;
+use super::net::{self, NetConfig};
+use super::serve::{HubInfo, OpenReply, OpenRequest};
+use crate::error::HubError;
+use serde::de::DeserializeOwned;
+use serde_json::Value;
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Condvar, Mutex, Weak};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// How long `hubs()` waits for hubs to show up when none has yet (discovery, connecting).
+pub const DISCOVERY: Duration = Duration::from_secs(2);
+/// After the last hub showed up, how long to wait for more.
+const SETTLE: Duration = Duration::from_millis(300);
+
+/// The live hubs and who waits on news of them.
+#[derive(Default)]
+struct Liveness {
+    alive: Mutex<HashMap<String, Instant>>,
+    changed: Condvar,
+    inboxes: Mutex<Vec<Weak<Inbox>>>,
+}
+
+/// This process's presence on the network.
+pub struct Network {
+    session: zenoh::Session,
+    client_id: String,
+    _token: zenoh::liveliness::LivelinessToken,
+    _watch: zenoh::pubsub::Subscriber<()>,
+    liveness: Arc<Liveness>,
+    opened: Instant,
+}
+
+impl std::fmt::Debug for Network {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Network")
+            .field("client", &self.client_id)
+            .finish()
+    }
+}
+
+impl Network {
+    /// The process's network for `net` (opened on first use, then shared).
+    pub fn get(net: &NetConfig) -> Result<Arc<Network>, HubError> {
+        static OPEN: Mutex<Vec<(NetConfig, Arc<Network>)>> = Mutex::new(Vec::new());
+        let mut open = OPEN.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, n)) = open.iter().find(|(c, _)| c == net) {
+            return Ok(n.clone());
+        }
+        let n = Arc::new(Network::open(net)?);
+        open.push((net.clone(), n.clone()));
+        Ok(n)
+    }
+
+    fn open(net: &NetConfig) -> Result<Network, HubError> {
+        let session = net::open(net, false)?;
+        let failed = |e: zenoh::Error| HubError::Network {
+            reason: e.to_string(),
+            hint: "the Zenoh session is failing".into(),
+        };
+        let client_id = session.zid().to_string();
+        let liveness = Arc::new(Liveness::default());
+        let watch = {
+            let liveness = liveness.clone();
+            session
+                .liveliness()
+                .declare_subscriber(keys::ALL_HUBS)
+                .history(true)
+                .callback(move |sample| {
+                    let Some(name) = keys::hub_of_token(sample.key_expr().as_str()) else {
+                        return;
+                    };
+                    let mut alive = liveness.alive.lock().unwrap_or_else(|e| e.into_inner());
+                    match sample.kind() {
+                        zenoh::sample::SampleKind::Put => {
+                            alive.insert(name.to_string(), Instant::now());
+                        }
+                        zenoh::sample::SampleKind::Delete => {
+                            tracing::warn!(hub = name, "hub lost");
+                            alive.remove(name);
+                        }
+                    }
+                    drop(alive);
+                    liveness.changed.notify_all();
+                    let inboxes = liveness.inboxes.lock().unwrap_or_else(|e| e.into_inner());
+                    for inbox in inboxes.iter().filter_map(Weak::upgrade) {
+                        inbox.ring();
+                    }
+                })
+                .wait()
+                .map_err(failed)?
+        };
+        let token = session
+            .liveliness()
+            .declare_token(keys::client_token(&client_id))
+            .wait()
+            .map_err(failed)?;
+        Ok(Network {
+            session,
+            client_id,
+            _token: token,
+            _watch: watch,
+            liveness,
+            opened: Instant::now(),
+        })
+    }
+
+    /// This client's id (its token is `envhub/client/<id>`).
+    pub fn client_id(&self) -> &str {
+        &self.client_id
+    }
+
+    /// Whether hub `name` holds its token.
+    pub fn is_alive(&self, name: &str) -> bool {
+        self.alive_lock().contains_key(name)
+    }
+
+    fn alive_lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, Instant>> {
+        self.liveness
+            .alive
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Names of the live hubs, sorted. Right after the network opens, waits (up to
+    /// `discovery`) for the hubs to show up and settle.
+    pub fn live_hubs(&self, discovery: Duration) -> Vec<String> {
+        let deadline = self.opened + discovery;
+        let mut alive = self.alive_lock();
+        loop {
+            let now = Instant::now();
+            let newest = alive.values().max().copied();
+            let settled = newest.is_some_and(|t| now.duration_since(t) >= SETTLE);
+            if settled || now >= deadline {
+                break;
+            }
+            let wait = match newest {
+                Some(t) => (t + SETTLE).saturating_duration_since(now),
+                None => deadline - now,
+            };
+            alive = self
+                .liveness
+                .changed
+                .wait_timeout(alive, wait.max(Duration::from_millis(1)))
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+        let mut names: Vec<String> = alive.keys().cloned().collect();
+        names.sort();
+        names
+    }
+
+    /// Waits up to `timeout` for every hub of `names` to be live; the first missing one is
+    /// an error naming the live hubs and the closest names.
+    pub fn wait_for(&self, names: &[String], timeout: Duration) -> Result<(), HubError> {
+        let deadline = Instant::now() + timeout;
+        let mut alive = self.alive_lock();
+        loop {
+            let missing = names.iter().find(|n| !alive.contains_key(*n));
+            let Some(missing) = missing else {
+                return Ok(());
+            };
+            let now = Instant::now();
+            if now >= deadline {
+                let mut live: Vec<String> = alive.keys().cloned().collect();
+                live.sort();
+                return Err(unknown_hub(missing, &live));
+            }
+            alive = self
+                .liveness
+                .changed
+                .wait_timeout(alive, deadline - now)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+    }
+
+    /// The info of every live hub (waiting for discovery as [`Network::live_hubs`]).
+    pub fn hubs(&self, discovery: Duration) -> Result<Vec<HubInfo>, HubError> {
+        let names = self.live_hubs(discovery);
+        let mut infos = Vec::new();
+        for name in names {
+            match self.query::<HubInfo>(&name, &keys::hub_info(&name), None, Duration::from_secs(3))
+            {
+                Ok(info) => infos.push(info),
+                // Gone between the token and the query, or not answering: not live.
+                Err(e) => tracing::debug!(hub = %name, error = %e, "hub did not answer"),
+            }
+        }
+        Ok(infos)
+    }
+
+    /// Asks hub `hub` a query; its `{"ok": ...}` reply, or the error it sent.
+    pub(crate) fn query<T: DeserializeOwned>(
+        &self,
+        hub: &str,
+        key: &str,
+        payload: Option<Vec<u8>>,
+        timeout: Duration,
+    ) -> Result<T, HubError> {
+        let lost = |why: String| HubError::HubLost {
+            hub: hub.to_string(),
+            envs: "-".into(),
+            why,
+        };
+        let (tx, rx) = std::sync::mpsc::channel();
+        let mut get = self.session.get(key).timeout(timeout);
+        if let Some(p) = payload {
+            get = get.payload(p);
+        }
+        get.callback(move |reply| {
+            let _ = tx.send(reply);
+        })
+        .wait()
+        .map_err(|e| lost(format!("query failed: {e}")))?;
+        // The first answer; the channel closes (Err) when the query ends without one.
+        let reply = rx
+            .recv_timeout(timeout + Duration::from_secs(1))
+            .map_err(|_| lost(format!("no answer to `{key}` within {timeout:?}")))?;
+        let sample = reply
+            .result()
+            .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
+        let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
+            .map_err(|e| lost(format!("unreadable reply: {e}")))?;
+        if let Some(error) = value.get_mut("error").map(Value::take)
+            && let Ok(error) = serde_json::from_value::<HubError>(error)
+        {
+            return Err(error);
+        }
+        if let Some(err) = value.get("err") {
+            return Err(HubError::Remote(
+                err.as_str().unwrap_or("error").to_string(),
+            ));
+        }
+        serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+            .map_err(|e| lost(format!("unreadable reply: {e}")))
+    }
+
+    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`).
+    pub(crate) fn open_session(
+        &self,
+        hub: &str,
+        request: &OpenRequest,
+        start_timeout: Duration,
+    ) -> Result<OpenReply, HubError> {
+        let payload = serde_json::to_vec(request).expect("requests serialize");
+        self.query(
+            hub,
+            &keys::hub_open(hub),
+            Some(payload),
+            start_timeout + Duration::from_secs(5),
+        )
+    }
+
+    pub(crate) fn zenoh(&self) -> &zenoh::Session {
+        &self.session
+    }
+
+    /// Rings `inbox` whenever a hub comes or goes (waiters then check their hubs).
+    pub(crate) fn watch(&self, inbox: &Arc<Inbox>) {
+        let mut inboxes = self
+            .liveness
+            .inboxes
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        inboxes.retain(|w| w.strong_count() > 0);
+        inboxes.push(Arc::downgrade(inbox));
+    }
+}
+
+/// The error for a hub name that is not live: the live ones and the closest names.
+pub(crate) fn unknown_hub(name: &str, live: &[String]) -> HubError {
+    let mut scored: Vec<(f64, &String)> = live
+        .iter()
+        .map(|l| (strsim::normalized_levenshtein(name, l), l))
+        .filter(|(s, _)| *s >= 0.4)
+        .collect();
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let closest: Vec<&str> = scored.iter().take(3).map(|(_, l)| l.as_str()).collect();
+    HubError::UnknownHub {
+        name: name.to_string(),
+        live: if live.is_empty() {
+            "none".into()
+        } else {
+            live.join(", ")
+        },
+        closest: if closest.is_empty() {
+            String::new()
+        } else {
+            format!(" (closest: {})", closest.join(", "))
+        },
+    }
+}
+
+/// Responses of a session's remote links, as they arrive; waiters block on its condvar.
+#[derive(Default)]
+pub(crate) struct Inbox {
+    mail: Mutex<HashMap<usize, VecDeque<Vec<u8>>>>,
+    bell: Condvar,
+}
+
+impl Inbox {
+    /// Files a response for link `link` and wakes the waiters.
+    pub fn post(&self, link: usize, bytes: Vec<u8>) {
+        self.lock().entry(link).or_default().push_back(bytes);
+        self.bell.notify_all();
+    }
+
+    /// Wakes the waiters (something changed: a hub came or went).
+    pub fn ring(&self) {
+        let _guard = self.lock();
+        self.bell.notify_all();
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<usize, VecDeque<Vec<u8>>>> {
+        self.mail.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The oldest response of `link`, if any.
+    pub fn take(&self, link: usize) -> Option<Vec<u8>> {
+        self.lock().get_mut(&link)?.pop_front()
+    }
+
+    /// Blocks until a response for one of `links` is filed, a ring, or `timeout`.
+    pub fn wait(&self, links: &[usize], timeout: Duration) {
+        let mail = self.lock();
+        if links
+            .iter()
+            .any(|l| mail.get(l).is_some_and(|q| !q.is_empty()))
+        {
+            return;
+        }
+        let _ = self.bell.wait_timeout(mail, timeout);
+    }
+}

@@ -1,0 +1,96 @@
+//! Zenoh key expressions of envhub, in one place.
+//!
+//! - `envhub/hub/<name>`: a hub's liveliness token (alive while the hub is).
+//! - `envhub/hub/<name>/{info,catalog,adapters,open}`: its queryables.
+//! - `envhub/client/<id>`: a client's liveliness token; its sessions end when it goes.
+//! - `envhub/session/<hub>/<session>/{req,rep}`: a session's requests and responses.
+
+use crate::error::HubError;
+
+/// Every hub's token.
+pub(crate) const ALL_HUBS: &str = "envhub/hub/*";
+/// Every client's token.
+pub(crate) const ALL_CLIENTS: &str = "envhub/client/*";
+
+pub(crate) fn hub_token(name: &str) -> String {
+    format!("envhub/hub/{name}")
+}
+
+pub(crate) fn hub_info(name: &str) -> String {
+    format!("envhub/hub/{name}/info")
+}
+
+pub(crate) fn hub_catalog(name: &str) -> String {
+    format!("envhub/hub/{name}/catalog")
+}
+
+pub(crate) fn hub_adapters(name: &str) -> String {
+    format!("envhub/hub/{name}/adapters")
+}
+
+pub(crate) fn hub_open(name: &str) -> String {
+    format!("envhub/hub/{name}/open")
+}
+
+pub(crate) fn client_token(id: &str) -> String {
+    format!("envhub/client/{id}")
+}
+
+pub(crate) fn requests(hub: &str, session: &str) -> String {
+    format!("envhub/session/{hub}/{session}/req")
+}
+
+pub(crate) fn responses(hub: &str, session: &str) -> String {
+    format!("envhub/session/{hub}/{session}/rep")
+}
+
+/// Requests of every session of `hub`.
+pub(crate) fn all_requests(hub: &str) -> String {
+    format!("envhub/session/{hub}/*/req")
+}
+
+/// The session named by a request key of `hub`, if the key is one.
+pub(crate) fn session_of<'a>(hub: &str, key: &'a str) -> Option<&'a str> {
+    key.strip_prefix("envhub/session/")?
+        .strip_prefix(hub)?
+        .strip_prefix('/')?
+        .strip_suffix("/req")
+        .filter(|s| !s.contains('/'))
+}
+
+/// The hub named by a token key.
+pub(crate) fn hub_of_token(key: &str) -> Option<&str> {
+    key.strip_prefix("envhub/hub/").filter(|s| !s.contains('/'))
+}
+
+/// A hub name must be one key chunk: no `/`, no wildcards, not empty.
+pub(crate) fn check_name(name: &str) -> Result<(), HubError> {
+    let bad = name.is_empty()
+        || name
+            .chars()
+            .any(|c| matches!(c, '/' | '*' | '$' | '?' | '#' | '@') || c.is_whitespace());
+    if bad {
+        return Err(HubError::InvalidConfig {
+            what: "hub name",
+            reason: format!(
+                "`{name}` is not a valid hub name; use letters, digits, `-`, `_` and `.` (no `/`, `*`, `$`, `?`, `#`, `@` or spaces)"
+            ),
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_round_trip() {
+        assert_eq!(session_of("a", &requests("a", "s1")), Some("s1"));
+        assert_eq!(session_of("a", "envhub/session/ab/s1/req"), None);
+        assert_eq!(session_of("a", "envhub/session/a/x/y/req"), None);
+        assert_eq!(hub_of_token(&hub_token("box-1")), Some("box-1"));
+        assert!(check_name("box-1.lab").is_ok());
+        assert!(check_name("a/b").is_err() && check_name("").is_err() && check_name("*").is_err());
+    }
+}

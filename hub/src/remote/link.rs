@@ -1,0 +1,181 @@
+//! The client's end of one remote session: the slice of a `VecEnv` that a remote hub hosts.
+//!
+//! One request and one response per round trip, on express publishers with blocking
+//! congestion control (nothing dropped, nothing waits in a batch queue). Responses land in the
+//! session's shared [`Inbox`], so one wait covers every hub of the session. A request
+//! unanswered for [`RESEND`] is sent again with the same sequence number: the hub answers a
+//! repeat from its last answer without stepping twice, and answers to older requests are
+//! dropped here, so nothing is lost, repeated or reordered.
+
+use super::client::{Inbox, Network};
+use super::keys;
+use super::wire::{self, RemoteAnswer, RequestBody};
+use crate::error::HubError;
+use envhub_shm::{BatchLayout, DataPlaneError, Layout, command};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+/// Silence after which a request is sent again.
+pub(crate) const RESEND: Duration = Duration::from_secs(1);
+
+/// A remote hub's slice of a session.
+pub(crate) struct RemoteConn {
+    pub hub: String,
+    /// The session's id on its hub (for messages).
+    session: String,
+    network: Arc<Network>,
+    publisher: zenoh::pubsub::Publisher<'static>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    inbox: Arc<Inbox>,
+    /// Index of this link in the session (its mailbox in the inbox).
+    pub link: usize,
+    layout: Layout,
+    /// Layout of the hub's result rows (its envs only).
+    pub rows_layout: BatchLayout,
+    seq: u64,
+    last_request: Vec<u8>,
+    last_sent: Instant,
+    closed: bool,
+}
+
+impl RemoteConn {
+    /// Connects to session `session` on `hub`, whose `num_envs` envs have actions of
+    /// `act_bytes` and observations of `obs_bytes`.
+    #[allow(clippy::too_many_arguments)] // one remote slice's identity, used in one place
+    pub fn connect(
+        network: Arc<Network>,
+        inbox: Arc<Inbox>,
+        link: usize,
+        hub: &str,
+        session: &str,
+        num_envs: usize,
+        act_bytes: usize,
+        rows_layout: BatchLayout,
+    ) -> Result<RemoteConn, HubError> {
+        let failed = |e: zenoh::Error| HubError::Network {
+            reason: format!("session `{session}` on hub `{hub}`: {e}"),
+            hint: "the Zenoh session is failing".into(),
+        };
+        let z = network.zenoh();
+        let subscriber = {
+            let inbox = inbox.clone();
+            z.declare_subscriber(keys::responses(hub, session))
+                .callback(move |sample| inbox.post(link, sample.payload().to_bytes().into_owned()))
+                .wait()
+                .map_err(failed)?
+        };
+        let publisher = z
+            .declare_publisher(keys::requests(hub, session))
+            .express(true)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .priority(zenoh::qos::Priority::DataHigh)
+            .wait()
+            .map_err(failed)?;
+        network.watch(&inbox);
+        Ok(RemoteConn {
+            hub: hub.to_string(),
+            session: session.to_string(),
+            network,
+            publisher,
+            _subscriber: subscriber,
+            inbox,
+            link,
+            layout: Layout::new(num_envs, act_bytes),
+            rows_layout,
+            seq: 0,
+            last_request: Vec::new(),
+            last_sent: Instant::now(),
+            closed: false,
+        })
+    }
+
+    /// Sends a request (a new sequence number).
+    pub fn send(
+        &mut self,
+        command: u32,
+        slot: u32,
+        body: &RequestBody<'_>,
+    ) -> Result<(), HubError> {
+        self.seq += 1;
+        self.last_request = wire::encode_request(&self.layout, self.seq, command, slot, body);
+        self.put()
+    }
+
+    fn put(&mut self) -> Result<(), HubError> {
+        self.last_sent = Instant::now();
+        self.publisher
+            .put(self.last_request.clone())
+            .wait()
+            .map_err(|e| HubError::Network {
+                reason: format!("cannot send to hub `{}`: {e}", self.hub),
+                hint: "the Zenoh session is failing".into(),
+            })
+    }
+
+    /// The answer to the request in flight, if it has arrived.
+    pub fn try_take(&mut self) -> Result<Option<RemoteAnswer>, HubError> {
+        while let Some(bytes) = self.inbox.take(self.link) {
+            let Some(answer) = RemoteAnswer::parse(bytes) else {
+                return Err(DataPlaneError::Protocol(format!(
+                    "hub `{}` sent a response of the wrong size",
+                    self.hub
+                ))
+                .into());
+            };
+            // Answers to earlier requests (repeats of a resent one) are dropped.
+            if answer.header().seq == self.seq {
+                return Ok(Some(answer));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Whether the hub still holds its token.
+    pub fn hub_alive(&self) -> bool {
+        self.network.is_alive(&self.hub)
+    }
+
+    /// Sends the request in flight again if it has gone unanswered for [`RESEND`].
+    pub fn resend_if_silent(&mut self) -> Result<(), HubError> {
+        if !self.last_request.is_empty() && self.last_sent.elapsed() >= RESEND {
+            tracing::debug!(hub = %self.hub, session = %self.session, seq = self.seq, "no answer yet: sending again");
+            self.put()?;
+        }
+        Ok(())
+    }
+
+    /// Blocks until something arrives for this link or `timeout`.
+    pub fn wait(&self, timeout: Duration) {
+        self.inbox.wait(&[self.link], timeout);
+    }
+
+    /// Blocks until something arrives for one of `links` (of this session) or `timeout`.
+    pub fn wait_any(&self, links: &[usize], timeout: Duration) {
+        self.inbox.wait(links, timeout);
+    }
+
+    /// Asks the hub to close the session (no answer awaited: the hub ends it either way
+    /// when this client goes).
+    pub fn close(&mut self) {
+        if std::mem::replace(&mut self.closed, true) || !self.hub_alive() {
+            return;
+        }
+        let _ = self.send(
+            command::CLOSE,
+            envhub_shm::NO_SLOT,
+            &RequestBody {
+                actions: None,
+                selected: None,
+                seeds: &[],
+                options: b"",
+            },
+        );
+    }
+}
+
+impl Drop for RemoteConn {
+    fn drop(&mut self) {
+        self.close();
+    }
+}

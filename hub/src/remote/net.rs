@@ -1,0 +1,125 @@
+//! How a process reaches other hubs: the Zenoh settings shared by `envhub serve`, the CLI and
+//! the clients (`--connect`, `--listen`, `--zenoh-config`, `ENVHUB_CONNECT`, `zenoh:` in
+//! `envhub.yaml`), turned into a Zenoh config.
+
+use crate::error::HubError;
+use serde::Deserialize;
+use std::path::PathBuf;
+
+/// Comma-separated Zenoh endpoints to connect to (`tcp/10.0.0.5:7447,tcp/10.0.0.6:7447`),
+/// added to the config's and the command line's.
+pub const ENVHUB_CONNECT: &str = "ENVHUB_CONNECT";
+
+/// `0` turns multicast scouting off (tests: they must talk only to loopback).
+pub const ENVHUB_MULTICAST: &str = "ENVHUB_MULTICAST";
+
+/// Lease of this process's Zenoh links, in milliseconds. A peer that holds a liveliness token
+/// and stops answering (frozen, cut off) is declared gone after about this long; Zenoh's
+/// default (10 s) is far beyond the 2 s envhub promises. Four keep-alives per lease leave
+/// room for a loaded machine: a 750 ms stall does not expire a link.
+pub const DEFAULT_LEASE_MS: u64 = 1000;
+
+/// The `zenoh:` section of `envhub.yaml`, and what the command line and environment add.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NetConfig {
+    /// Endpoints to connect to (`tcp/host:7447`): hubs or a `zenohd` router.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on (a hub's default: Zenoh's, every interface on a free port).
+    pub listen: Vec<String>,
+    /// A standard Zenoh JSON5 config (router, TLS, credentials); the other fields are applied
+    /// on top of it.
+    pub config: Option<PathBuf>,
+    /// Multicast scouting (default on; `ENVHUB_MULTICAST=0` turns it off).
+    pub multicast: Option<bool>,
+    /// Link lease in milliseconds (default [`DEFAULT_LEASE_MS`]).
+    pub lease_ms: Option<u64>,
+}
+
+impl NetConfig {
+    /// Adds the command line's endpoints and config file, and `ENVHUB_CONNECT`'s endpoints.
+    pub fn with_overrides(
+        mut self,
+        connect: &[String],
+        listen: &[String],
+        config: Option<&std::path::Path>,
+    ) -> NetConfig {
+        self.connect.extend(connect.iter().cloned());
+        if let Ok(var) = std::env::var(ENVHUB_CONNECT) {
+            self.connect.extend(
+                var.split(',')
+                    .map(str::trim)
+                    .filter(|s| !s.is_empty())
+                    .map(String::from),
+            );
+        }
+        self.listen.extend(listen.iter().cloned());
+        if let Some(path) = config {
+            self.config = Some(path.to_path_buf());
+        }
+        if let Ok(v) = std::env::var(ENVHUB_MULTICAST) {
+            self.multicast = Some(!matches!(v.trim(), "0" | "false" | "off" | "no"));
+        }
+        self.connect.dedup();
+        self
+    }
+
+    /// The Zenoh config: the file's (if any) with envhub's settings on top. `listen_default`:
+    /// whether to keep Zenoh's default listener when no endpoint is given (hubs listen, so
+    /// peers can reach them; clients only connect out).
+    pub fn zenoh_config(&self, listen_default: bool) -> Result<zenoh::Config, HubError> {
+        let invalid = |reason: String| HubError::InvalidConfig {
+            what: "zenoh config",
+            reason,
+        };
+        let mut config = match &self.config {
+            Some(path) => zenoh::Config::from_file(path).map_err(|e| {
+                invalid(format!(
+                    "cannot use `{}`: {e}\nhint: a Zenoh JSON5 config, as `zenohd` reads",
+                    path.display()
+                ))
+            })?,
+            None => zenoh::Config::default(),
+        };
+        let mut set = |key: &str, value: String| {
+            config
+                .insert_json5(key, &value)
+                .map_err(|e| invalid(format!("`{key}` = {value}: {e}")))
+        };
+        if self.config.is_none() {
+            set("mode", "\"peer\"".into())?;
+        }
+        if !self.connect.is_empty() {
+            set("connect/endpoints", json_list(&self.connect))?;
+        }
+        if !self.listen.is_empty() {
+            set("listen/endpoints", json_list(&self.listen))?;
+        } else if !listen_default && self.config.is_none() {
+            set("listen/endpoints", "[]".into())?;
+        }
+        if let Some(on) = self.multicast {
+            set("scouting/multicast/enabled", on.to_string())?;
+        }
+        let lease = self.lease_ms.unwrap_or(DEFAULT_LEASE_MS);
+        set("transport/link/tx/lease", lease.to_string())?;
+        set("transport/link/tx/keep_alive", "4".into())?;
+        Ok(config)
+    }
+}
+
+fn json_list(items: &[String]) -> String {
+    serde_json::to_string(items).expect("strings serialize")
+}
+
+/// Opens a Zenoh session, naming the endpoints on failure.
+pub(crate) fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
+    use zenoh::Wait;
+    let config = net.zenoh_config(listen_default)?;
+    zenoh::open(config).wait().map_err(|e| HubError::Network {
+        reason: format!("cannot open a Zenoh session: {e}"),
+        hint: format!(
+            "check the endpoints (connect {:?}, listen {:?}) and the config file {:?}",
+            net.connect, net.listen, net.config
+        ),
+    })
+}

@@ -1,0 +1,414 @@
+//! A hub on the network: `envhub serve` joins Zenoh, holds its liveliness token, answers
+//! queries (info, catalog, adapters, open a session) and bridges remote sessions to its local
+//! workers (see `bridge.rs`).
+//!
+//! Remote clients get what a registry id of this hub's own catalog runs, nothing more: a
+//! request that would reach a file on the hub (`asset_path`, model-file kwargs) is refused
+//! unless the hub's owner allows it, and `--max-envs` / `--max-workers` are checked before
+//! anything starts. Clients' own Python adapters never travel (they would be code run here).
+
+use super::bridge::{self, Sessions};
+use super::keys;
+use super::net::{self, NetConfig};
+use crate::error::HubError;
+use crate::hub::Hub;
+use crate::python_host::UserAdapters;
+use crate::session_options::SessionOptions;
+use envhub_core::EnvConfig;
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use std::sync::Arc;
+use std::time::Duration;
+use zenoh::Wait;
+
+/// What a hub lets remote clients do.
+#[derive(Clone, Debug, Default)]
+pub struct ServePolicy {
+    /// Envs this hub hosts for remote clients at once, over all sessions (`None`: no limit).
+    pub max_envs: Option<usize>,
+    /// Worker processes it runs for remote clients at once (`None`: no limit).
+    pub max_workers: Option<usize>,
+    /// Let remote clients name files on this hub (`asset_path`, `xml_file`, ...).
+    pub allow_remote_files: bool,
+}
+
+/// One hub as `envhub hubs` shows it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HubInfo {
+    /// Its name (`--name`, default the host name).
+    pub name: String,
+    /// The machine's host name.
+    pub host: String,
+    /// CPU cores of the machine.
+    pub cores: usize,
+    /// envhub version.
+    pub version: String,
+    /// Adapters that can run there.
+    pub adapters: Vec<String>,
+    /// Registry entries of its catalog.
+    pub catalog: usize,
+    /// Envs it runs for remote clients now.
+    pub envs: usize,
+    /// Worker processes it runs for remote clients now.
+    pub workers: usize,
+    /// Remote sessions open now.
+    pub sessions: usize,
+    /// One-minute load average of the machine.
+    pub load: f64,
+    /// Its limits, if set.
+    pub max_envs: Option<usize>,
+    /// Its limits, if set.
+    pub max_workers: Option<usize>,
+}
+
+/// A request to open a session, as a client sends it.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct OpenRequest {
+    /// Registry id in the hub's catalog.
+    pub id: String,
+    pub config: EnvConfig,
+    /// The client's liveliness key: the session ends when it goes.
+    pub client: String,
+    pub restart_on_crash: bool,
+    pub step_timeout_ms: u64,
+}
+
+/// The hub's answer to an open request.
+#[derive(Debug, Serialize, Deserialize)]
+pub(crate) struct OpenReply {
+    /// Session key (see [`keys`]).
+    pub session: String,
+    pub spec: envhub_shm::ReadySpec,
+    pub route: crate::routing::Route,
+    pub workers: usize,
+}
+
+/// A hub joined to Zenoh. Dropping it leaves (the token goes, sessions end).
+pub struct HubNode {
+    name: String,
+    _session: zenoh::Session,
+    _token: zenoh::liveliness::LivelinessToken,
+    _queryables: Vec<zenoh::query::Queryable<()>>,
+    _requests: zenoh::pubsub::Subscriber<()>,
+    _clients: zenoh::pubsub::Subscriber<()>,
+    sessions: Arc<Sessions>,
+}
+
+impl HubNode {
+    /// Its name on the network.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Remote sessions open now.
+    pub fn session_count(&self) -> usize {
+        self.sessions.len()
+    }
+}
+
+impl Drop for HubNode {
+    fn drop(&mut self) {
+        self.sessions.stop_all();
+    }
+}
+
+/// The machine's host name (the default hub name).
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|s| s.trim().to_string())
+        .ok()
+        .filter(|s| !s.is_empty())
+        .unwrap_or_else(|| "localhost".into())
+}
+
+/// Joins the network as hub `name`: declares the token and queryables and serves remote
+/// sessions with `hub`'s catalog until the returned node is dropped.
+pub fn join(
+    hub: Arc<Hub>,
+    name: &str,
+    net: &NetConfig,
+    policy: ServePolicy,
+) -> Result<HubNode, HubError> {
+    keys::check_name(name)?;
+    let session = net::open(net, true)?;
+    let zerr = |what: &str| {
+        let what = what.to_string();
+        move |e: zenoh::Error| HubError::Network {
+            reason: format!("{what}: {e}"),
+            hint: "another hub with this name may be running; pick another `--name`".into(),
+        }
+    };
+    // A hub of the same name already live would make both unreachable by name.
+    let existing = session
+        .liveliness()
+        .get(keys::hub_token(name))
+        .timeout(Duration::from_millis(300))
+        .wait()
+        .map_err(zerr("liveliness query"))?;
+    if existing.recv().is_ok_and(|r| r.result().is_ok()) {
+        return Err(HubError::Network {
+            reason: format!("a hub named `{name}` is already live on this network"),
+            hint: "give this one another `--name`".into(),
+        });
+    }
+    let sessions = Arc::new(Sessions::default());
+    let state = Arc::new(State {
+        hub,
+        name: name.to_string(),
+        policy,
+        sessions: sessions.clone(),
+        zenoh: session.clone(),
+    });
+    let mut queryables = Vec::new();
+    for (op, key) in [
+        ("info", keys::hub_info(name)),
+        ("catalog", keys::hub_catalog(name)),
+        ("adapters", keys::hub_adapters(name)),
+        ("open", keys::hub_open(name)),
+    ] {
+        let state = state.clone();
+        let q = session
+            .declare_queryable(key)
+            .callback(move |query| {
+                let state = state.clone();
+                // Opening starts workers (seconds): never on Zenoh's own threads.
+                std::thread::spawn(move || state.answer(op, query));
+            })
+            .wait()
+            .map_err(zerr("declare queryable"))?;
+        queryables.push(q);
+    }
+    let requests = {
+        let (sessions, zenoh, name) = (sessions.clone(), session.clone(), name.to_string());
+        session
+            .declare_subscriber(keys::all_requests(&name))
+            .callback(move |sample| {
+                let payload = sample.payload().to_bytes().into_owned();
+                bridge::dispatch(
+                    &sessions,
+                    &zenoh,
+                    &name,
+                    sample.key_expr().as_str(),
+                    payload,
+                );
+            })
+            .wait()
+            .map_err(zerr("declare subscriber"))?
+    };
+    // A client that leaves (exits, crashes, or is cut off past its lease) takes its sessions.
+    let clients = {
+        let sessions = sessions.clone();
+        session
+            .liveliness()
+            .declare_subscriber(keys::ALL_CLIENTS)
+            .callback(move |sample| {
+                if sample.kind() == zenoh::sample::SampleKind::Delete {
+                    sessions.client_gone(sample.key_expr().as_str());
+                }
+            })
+            .wait()
+            .map_err(zerr("declare client watch"))?
+    };
+    let token = session
+        .liveliness()
+        .declare_token(keys::hub_token(name))
+        .wait()
+        .map_err(zerr("declare token"))?;
+    Ok(HubNode {
+        name: name.to_string(),
+        _session: session,
+        _token: token,
+        _queryables: queryables,
+        _requests: requests,
+        _clients: clients,
+        sessions,
+    })
+}
+
+struct State {
+    hub: Arc<Hub>,
+    name: String,
+    policy: ServePolicy,
+    sessions: Arc<Sessions>,
+    zenoh: zenoh::Session,
+}
+
+impl State {
+    fn answer(&self, op: &str, query: zenoh::query::Query) {
+        let reply = match self.handle(op, &query) {
+            Ok(ok) => json!({ "ok": ok }),
+            Err(e) => json!({ "err": e.to_string(), "error": e }),
+        };
+        if let Err(e) = query
+            .reply(query.key_expr().clone(), reply.to_string())
+            .wait()
+        {
+            tracing::warn!(op, error = %e, "could not answer a query");
+        }
+    }
+
+    fn handle(&self, op: &str, query: &zenoh::query::Query) -> Result<Value, HubError> {
+        match op {
+            "info" => Ok(serde_json::to_value(self.info()).expect("info serializes")),
+            "catalog" => {
+                Ok(serde_json::to_value(self.hub.registry().entries()).expect("entries serialize"))
+            }
+            "adapters" => {
+                Ok(serde_json::to_value(self.hub.adapters()?).expect("adapters serialize"))
+            }
+            "open" => {
+                let bytes = query
+                    .payload()
+                    .map(|p| p.to_bytes().into_owned())
+                    .unwrap_or_default();
+                let request: OpenRequest =
+                    serde_json::from_slice(&bytes).map_err(|e| HubError::InvalidConfig {
+                        what: "open request",
+                        reason: format!("unreadable: {e}"),
+                    })?;
+                Ok(serde_json::to_value(self.open(request)?).expect("replies serialize"))
+            }
+            _ => unreachable!("only the ops declared above"),
+        }
+    }
+
+    fn info(&self) -> HubInfo {
+        let (envs, workers) = self.sessions.totals();
+        HubInfo {
+            name: self.name.clone(),
+            host: host_name(),
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            adapters: self
+                .hub
+                .adapters()
+                .map(|all| {
+                    all.iter()
+                        .filter(|a| a.availability.is_available())
+                        .map(|a| a.name.clone())
+                        .collect()
+                })
+                .unwrap_or_default(),
+            catalog: self.hub.registry().len(),
+            envs,
+            workers,
+            sessions: self.sessions.len(),
+            load: std::fs::read_to_string("/proc/loadavg")
+                .ok()
+                .and_then(|s| s.split_whitespace().next()?.parse().ok())
+                .unwrap_or(0.0),
+            max_envs: self.policy.max_envs,
+            max_workers: self.policy.max_workers,
+        }
+    }
+
+    fn refuse(&self, reason: String, hint: &str) -> HubError {
+        HubError::Refused {
+            hub: self.name.clone(),
+            reason,
+            hint: hint.to_string(),
+        }
+    }
+
+    fn open(&self, request: OpenRequest) -> Result<OpenReply, HubError> {
+        let config = request.config;
+        if !self.policy.allow_remote_files {
+            if let Some(path) = &config.asset_path {
+                return Err(self.refuse(
+                    format!("`asset_path` ({}) names a file on this hub", path.display()),
+                    "remote clients run the hub's own registry entries; its owner can allow files with `envhub serve --allow-remote-files`",
+                ));
+            }
+            if let Some(key) = config.extra.keys().find(|k| names_a_file(k)) {
+                return Err(self.refuse(
+                    format!("kwarg `{key}` names a file on this hub"),
+                    "remote clients run the hub's own registry entries; its owner can allow files with `envhub serve --allow-remote-files`",
+                ));
+            }
+        }
+        let num_envs = config.num_envs;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let workers = config.workers.unwrap_or_else(|| cores.min(num_envs.max(1)));
+        let route = self
+            .hub
+            .route_with(&request.id, &config, &UserAdapters::default())?;
+        let mut options: SessionOptions = self.hub.options().clone();
+        options.restart_on_crash = request.restart_on_crash;
+        options.step_timeout = Duration::from_millis(request.step_timeout_ms.max(1));
+        // Reserve the envs and workers before anything starts, so two clients cannot both
+        // pass the limits.
+        let reservation = self
+            .sessions
+            .reserve(num_envs, workers, &self.policy)
+            .map_err(|(reason, hint)| self.refuse(reason, &hint))?;
+        let vec = crate::vec_env::VecEnv::start(
+            &request.id,
+            route.clone(),
+            options,
+            &crate::launcher::Launcher::Local,
+        )?;
+        let spec = envhub_shm::ReadySpec {
+            observation_space: vec.observation_space().clone(),
+            action_space: vec.action_space().clone(),
+            max_episode_steps: vec.max_episode_steps(),
+            render_fps: vec.render_fps(),
+            pid: vec.worker_pids().first().copied().unwrap_or(0),
+        };
+        let workers = vec.num_workers();
+        let session = bridge::start(
+            &self.sessions,
+            &self.zenoh,
+            &self.name,
+            &request.client,
+            vec,
+            reservation,
+        )?;
+        tracing::info!(id = %request.id, num_envs, workers, client = %request.client, %session, "remote session opened");
+        Ok(OpenReply {
+            session,
+            spec,
+            route,
+            workers,
+        })
+    }
+}
+
+/// Whether a kwarg's name says it names a file or folder (`xml_file`, `model_path`,
+/// `asset_dir`, ...).
+fn names_a_file(key: &str) -> bool {
+    let key = key.to_ascii_lowercase();
+    ["file", "path", "dir", "xml", "mjcf", "urdf", "asset"]
+        .iter()
+        .any(|w| {
+            key.split(['_', '-'])
+                .any(|part| part == *w || part == format!("{w}s"))
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kwargs_that_name_files_are_recognised() {
+        for k in [
+            "xml_file",
+            "model_path",
+            "asset_dir",
+            "urdf",
+            "robot-xml",
+            "assets",
+        ] {
+            assert!(names_a_file(k), "{k}");
+        }
+        for k in [
+            "frame_skip",
+            "reset_noise_scale",
+            "ctrl_cost_weight",
+            "profile",
+        ] {
+            assert!(!names_a_file(k), "{k}");
+        }
+    }
+}

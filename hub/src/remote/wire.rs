@@ -1,0 +1,318 @@
+//! The messages of a remote session: one request and one response per hub and round trip,
+//! each carrying the hub's whole slice in the data plane's own byte layout — no per-env
+//! messages and no serialisation on the hot path.
+//!
+//! - Request: a [`RequestHeader`] (`#[repr(C)]`, 24 bytes), then the request blocks of a
+//!   [`Layout`] for the hub's envs (actions, seeds, flags), then the reset options (JSON).
+//! - Response: a [`ResponseHeader`] whose `reserved` field holds the bytes of result rows that
+//!   follow it — a [`BatchLayout`] of the hub's envs, the blocks a batch slot holds — then the
+//!   info section (`info_len` bytes: JSON, rendered frames or an error).
+//!
+//! Messages arrive at any alignment, so every multi-byte value is read and written by copying
+//! bytes; nothing is cast in place.
+
+use envhub_shm::{
+    BatchLayout, Layout, RequestHeader, ResponseBlocksMut, ResponseHeader, command, env_flag,
+};
+
+/// Bytes of a request header.
+pub(crate) const REQUEST_HEADER: usize = std::mem::size_of::<RequestHeader>();
+/// Bytes of a response header.
+pub(crate) const RESPONSE_HEADER: usize = std::mem::size_of::<ResponseHeader>();
+
+/// What a request asks, besides its header fields.
+pub(crate) struct RequestBody<'a> {
+    /// One action per env of the hub (zeros for envs not selected); `None` for no actions.
+    pub actions: Option<&'a [u8]>,
+    /// The envs it applies to (`None`: all).
+    pub selected: Option<&'a [bool]>,
+    /// Per-env seeds (reset).
+    pub seeds: &'a [Option<u64>],
+    /// Reset options as JSON (empty: none).
+    pub options: &'a [u8],
+}
+
+/// Encodes a request for a hub whose envs have request layout `layout`.
+pub(crate) fn encode_request(
+    layout: &Layout,
+    seq: u64,
+    command: u32,
+    slot: u32,
+    body: &RequestBody<'_>,
+) -> Vec<u8> {
+    let n = layout.num_envs;
+    let header = RequestHeader {
+        seq,
+        command,
+        num_envs: n as u32,
+        options_len: body.options.len() as u32,
+        slot,
+    };
+    let mut out = vec![0u8; REQUEST_HEADER + layout.req_options + body.options.len()];
+    out[..REQUEST_HEADER].copy_from_slice(bytemuck::bytes_of(&header));
+    let p = &mut out[REQUEST_HEADER..];
+    if let Some(actions) = body.actions {
+        p[layout.req_actions..layout.req_actions + actions.len()].copy_from_slice(actions);
+    }
+    for i in 0..n {
+        let mut flag = 0;
+        if body.selected.is_none_or(|s| s[i]) {
+            flag |= env_flag::SELECTED;
+        }
+        if let Some(seed) = body.seeds.get(i).copied().flatten() {
+            p[layout.req_seeds + 8 * i..layout.req_seeds + 8 * (i + 1)]
+                .copy_from_slice(&seed.to_le_bytes());
+            flag |= env_flag::SEEDED;
+        }
+        p[layout.req_flags + i] = flag;
+    }
+    p[layout.req_options..].copy_from_slice(body.options);
+    out
+}
+
+/// A request as the hub reads it.
+#[derive(Debug)]
+pub(crate) struct ParsedRequest<'a> {
+    pub header: RequestHeader,
+    /// Actions of every env, back to back.
+    pub actions: &'a [u8],
+    pub seeds: Vec<Option<u64>>,
+    pub selected: Vec<bool>,
+    pub options: &'a str,
+}
+
+/// Reads a request for a hub session of `layout`; the error says what is wrong with it.
+pub(crate) fn parse_request<'a>(
+    bytes: &'a [u8],
+    layout: &Layout,
+) -> Result<ParsedRequest<'a>, String> {
+    let n = layout.num_envs;
+    let header: RequestHeader =
+        bytemuck::pod_read_unaligned(bytes.get(..REQUEST_HEADER).ok_or(format!(
+            "a request of {} bytes is shorter than its {REQUEST_HEADER}-byte header",
+            bytes.len()
+        ))?);
+    if !matches!(
+        header.command,
+        command::RESET | command::STEP | command::RENDER | command::CLOSE
+    ) {
+        return Err(format!(
+            "unknown command {}; valid: reset {}, step {}, close {}, render {}",
+            header.command,
+            command::RESET,
+            command::STEP,
+            command::CLOSE,
+            command::RENDER
+        ));
+    }
+    let body = &bytes[REQUEST_HEADER..];
+    let want = layout.req_options + header.options_len as usize;
+    if header.num_envs as usize != n || body.len() != want {
+        return Err(format!(
+            "a request for {} envs with {} bytes after the header; this session has {n} envs and takes {want} bytes",
+            header.num_envs,
+            body.len()
+        ));
+    }
+    let flags = &body[layout.req_flags..layout.req_flags + n];
+    let seeds = (0..n)
+        .map(|i| {
+            (flags[i] & env_flag::SEEDED != 0).then(|| {
+                let at = layout.req_seeds + 8 * i;
+                u64::from_le_bytes(body[at..at + 8].try_into().expect("8 bytes"))
+            })
+        })
+        .collect();
+    let options = std::str::from_utf8(&body[layout.req_options..])
+        .map_err(|e| format!("reset options are not UTF-8: {e}"))?;
+    Ok(ParsedRequest {
+        header,
+        actions: &body[layout.req_actions..layout.req_actions + n * layout.act_bytes],
+        seeds,
+        selected: flags.iter().map(|f| f & env_flag::SELECTED != 0).collect(),
+        options,
+    })
+}
+
+/// Encodes a response: header, result rows (empty when there are none) and info section.
+pub(crate) fn encode_response(
+    seq: u64,
+    status: u32,
+    num_envs: usize,
+    rows: &[u8],
+    info: &[u8],
+) -> Vec<u8> {
+    let header = ResponseHeader {
+        seq,
+        status,
+        num_envs: num_envs as u32,
+        info_len: info.len() as u32,
+        reserved: rows.len() as u32,
+    };
+    let mut out = Vec::with_capacity(RESPONSE_HEADER + rows.len() + info.len());
+    out.extend_from_slice(bytemuck::bytes_of(&header));
+    out.extend_from_slice(rows);
+    out.extend_from_slice(info);
+    out
+}
+
+/// A response as the client received it.
+pub(crate) struct RemoteAnswer {
+    header: ResponseHeader,
+    bytes: Vec<u8>,
+}
+
+impl RemoteAnswer {
+    /// Reads a response; `None` when it is too short for what its header says.
+    pub fn parse(bytes: Vec<u8>) -> Option<RemoteAnswer> {
+        let header: ResponseHeader = bytemuck::pod_read_unaligned(bytes.get(..RESPONSE_HEADER)?);
+        let need = RESPONSE_HEADER + header.reserved as usize + header.info_len as usize;
+        (bytes.len() == need).then_some(RemoteAnswer { header, bytes })
+    }
+
+    pub fn header(&self) -> &ResponseHeader {
+        &self.header
+    }
+
+    /// The result rows: a [`BatchLayout`] of the hub's envs (empty: none).
+    pub fn rows(&self) -> &[u8] {
+        &self.bytes[RESPONSE_HEADER..RESPONSE_HEADER + self.header.reserved as usize]
+    }
+
+    pub fn info_bytes(&self) -> &[u8] {
+        &self.bytes[RESPONSE_HEADER + self.header.reserved as usize..]
+    }
+}
+
+/// Copies rows `envs` (indices within the hub's slice) of a hub's result block `from`
+/// (laid out by `layout`) into `to`, the same envs' rows of a batch slot.
+pub(crate) fn land_rows(
+    layout: &BatchLayout,
+    from: &[u8],
+    envs: &[usize],
+    to: &mut ResponseBlocksMut<'_>,
+    first: usize,
+) {
+    let ob = layout.obs_bytes;
+    let rewards: &mut [u8] = bytemuck::cast_slice_mut(to.rewards);
+    for &e in envs {
+        let k = e - first;
+        to.obs[k * ob..(k + 1) * ob].copy_from_slice(&from[layout.obs + e * ob..][..ob]);
+        rewards[k * 8..(k + 1) * 8].copy_from_slice(&from[layout.rewards + e * 8..][..8]);
+        to.terminated[k] = from[layout.terminated + e];
+        to.truncated[k] = from[layout.truncated + e];
+        to.final_mask[k] = from[layout.final_mask + e];
+        if layout.with_final_obs {
+            to.final_obs[k * ob..(k + 1) * ob]
+                .copy_from_slice(&from[layout.final_obs + e * ob..][..ob]);
+        }
+    }
+}
+
+/// Writes results into a hub's result block (laid out by `layout`): the rows of `envs`
+/// (indices within the slice), in order, from the blocks given.
+pub(crate) struct RowsOut<'a> {
+    pub obs: &'a [u8],
+    pub rewards: &'a [f64],
+    pub terminated: &'a [bool],
+    pub truncated: &'a [bool],
+    pub final_mask: &'a [u8],
+    pub final_obs: &'a [u8],
+}
+
+pub(crate) fn write_rows(layout: &BatchLayout, to: &mut [u8], envs: &[usize], rows: &RowsOut<'_>) {
+    let ob = layout.obs_bytes;
+    let contiguous = envs.windows(2).all(|p| p[1] == p[0] + 1);
+    if let (true, Some(&first)) = (contiguous, envs.first()) {
+        // The usual case (a whole batch): one copy per block.
+        let n = envs.len();
+        to[layout.obs + first * ob..][..n * ob].copy_from_slice(&rows.obs[..n * ob]);
+        to[layout.rewards + first * 8..][..n * 8]
+            .copy_from_slice(bytemuck::cast_slice(&rows.rewards[..n]));
+        for k in 0..n {
+            to[layout.terminated + first + k] = u8::from(rows.terminated[k]);
+            to[layout.truncated + first + k] = u8::from(rows.truncated[k]);
+        }
+        if !rows.final_mask.is_empty() {
+            to[layout.final_mask + first..][..n].copy_from_slice(&rows.final_mask[..n]);
+        }
+        if layout.with_final_obs && !rows.final_obs.is_empty() {
+            to[layout.final_obs + first * ob..][..n * ob]
+                .copy_from_slice(&rows.final_obs[..n * ob]);
+        }
+        return;
+    }
+    for (k, &e) in envs.iter().enumerate() {
+        to[layout.obs + e * ob..][..ob].copy_from_slice(&rows.obs[k * ob..(k + 1) * ob]);
+        to[layout.rewards + e * 8..][..8].copy_from_slice(&rows.rewards[k].to_le_bytes());
+        to[layout.terminated + e] = u8::from(rows.terminated[k]);
+        to[layout.truncated + e] = u8::from(rows.truncated[k]);
+        if let Some(&m) = rows.final_mask.get(k) {
+            to[layout.final_mask + e] = m;
+        }
+        if layout.with_final_obs && !rows.final_obs.is_empty() {
+            to[layout.final_obs + e * ob..][..ob]
+                .copy_from_slice(&rows.final_obs[k * ob..(k + 1) * ob]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_request_survives_the_wire_at_any_alignment() {
+        let layout = Layout::new(3, 4);
+        let actions: Vec<u8> = (0..12).collect();
+        let bytes = encode_request(
+            &layout,
+            7,
+            command::RESET,
+            2,
+            &RequestBody {
+                actions: Some(&actions),
+                selected: Some(&[true, false, true]),
+                seeds: &[Some(5), None, Some(u64::MAX)],
+                options: b"{\"a\":1}",
+            },
+        );
+        // Shifted by one byte: nothing may rely on the buffer's alignment.
+        let mut shifted = vec![0u8];
+        shifted.extend_from_slice(&bytes);
+        let r = parse_request(&shifted[1..], &layout).unwrap();
+        assert_eq!((r.header.seq, r.header.slot), (7, 2));
+        assert_eq!(r.actions, &actions[..]);
+        assert_eq!(r.seeds, vec![Some(5), None, Some(u64::MAX)]);
+        assert_eq!(r.selected, vec![true, false, true]);
+        assert_eq!(r.options, "{\"a\":1}");
+    }
+
+    #[test]
+    fn garbage_is_an_error_that_says_what_is_wrong() {
+        let layout = Layout::new(2, 8);
+        let e = parse_request(&[1, 2, 3], &layout).unwrap_err();
+        assert!(e.contains("shorter than"), "{e}");
+        let mut bytes = encode_request(
+            &layout,
+            1,
+            command::STEP,
+            0,
+            &RequestBody {
+                actions: None,
+                selected: None,
+                seeds: &[],
+                options: b"",
+            },
+        );
+        bytes[8] = 99; // the command
+        let e = parse_request(&bytes, &layout).unwrap_err();
+        assert!(e.contains("unknown command 99"), "{e}");
+        let e = parse_request(&bytes[..bytes.len() - 1], &Layout::new(3, 8)).unwrap_err();
+        assert!(e.contains("this session has 3 envs"), "{e}");
+        assert!(RemoteAnswer::parse(vec![0; 10]).is_none());
+        let mut answer = encode_response(1, 0, 2, &[0; 16], b"[]");
+        answer.pop();
+        assert!(RemoteAnswer::parse(answer).is_none());
+    }
+}
