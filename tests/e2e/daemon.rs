@@ -28,7 +28,12 @@ impl Daemon {
         let socket = dir.join("hub.sock");
         let namespace = format!("e2e_daemon_{name}_{}_", std::process::id());
         let mut child = Command::new(binary("envhub"))
-            .args(["serve", "--socket", socket.to_str().unwrap()])
+            .args([
+                "serve",
+                "--local-only",
+                "--socket",
+                socket.to_str().unwrap(),
+            ])
             .env("ENVHUB_NAMESPACE", &namespace)
             .envs(vars.iter().cloned())
             .env_remove(ENVHUB_ADAPTERS)

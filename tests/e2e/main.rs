@@ -10,5 +10,6 @@ mod daemon;
 mod failures;
 mod python_worker;
 mod rapier_rollouts;
+mod remote_hubs;
 mod rendering;
 mod worker_lifetime;

@@ -54,7 +54,7 @@ def daemon(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[subproce
     env = {k: v for k, v in os.environ.items() if k not in ("ENVHUB_ADAPTERS", "PYTHONPATH")}
     env["ENVHUB_REGISTRY"] = f"@default:{registry}"
     proc = subprocess.Popen(
-        [str(ENVHUB_BIN), "serve", "--socket", str(socket)],
+        [str(ENVHUB_BIN), "serve", "--local-only", "--socket", str(socket)],
         env=env,
         cwd=REPO_ROOT,
         stdout=subprocess.PIPE,

@@ -1,5 +1,7 @@
 //! Helpers for envhub's end-to-end tests: an isolated hub per test and the built binaries.
 
+pub mod remote;
+
 use envhub::{Hub, HubError, Registry, SessionOptions};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

@@ -39,6 +39,9 @@ struct Entry {
 #[derive(Default)]
 pub(crate) struct Sessions {
     entries: Mutex<HashMap<String, Entry>>,
+    /// Clients whose token went away (the latest few): a session still starting for one of
+    /// them when it went is ended as soon as it is registered.
+    gone: Mutex<std::collections::VecDeque<String>>,
     /// Envs and workers reserved by sessions still starting.
     starting: Mutex<(usize, usize)>,
 }
@@ -120,7 +123,16 @@ impl Sessions {
 
     /// Ends the sessions of a client whose token went away.
     pub fn client_gone(&self, client_key: &str) {
-        for (id, s) in self.lock().iter_mut() {
+        const REMEMBERED: usize = 1024;
+        let mut entries = self.lock();
+        {
+            let mut gone = self.gone.lock().unwrap_or_else(|e| e.into_inner());
+            if gone.len() == REMEMBERED {
+                gone.pop_front();
+            }
+            gone.push_back(client_key.to_string());
+        }
+        for (id, s) in entries.iter_mut() {
             if keys::client_token(&s.client) == client_key {
                 tracing::info!(session = %id, client = %s.client, "client gone: closing its session");
                 s.stop.store(true, Ordering::Relaxed);
@@ -172,8 +184,15 @@ pub(crate) fn start(
             hint: "the hub's Zenoh session is failing; see its log".into(),
         })?;
     let (tx, rx) = std::sync::mpsc::channel();
-    let stop = Arc::new(AtomicBool::new(false));
-    sessions.lock().insert(
+    let mut entries = sessions.lock();
+    // The client may have gone while the workers started (it was killed, or gave up).
+    let client_gone = sessions
+        .gone
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .contains(&keys::client_token(client));
+    let stop = Arc::new(AtomicBool::new(client_gone));
+    entries.insert(
         id.clone(),
         Entry {
             client: client.to_string(),
@@ -183,6 +202,7 @@ pub(crate) fn start(
             stop: stop.clone(),
         },
     );
+    drop(entries);
     drop(reservation);
     let (sessions, thread_id) = (sessions.clone(), id.clone());
     std::thread::Builder::new()
@@ -246,16 +266,23 @@ fn run(
             Err(RecvTimeoutError::Disconnected) => break,
         };
         let seq = seq_of(&bytes);
-        if let Some((last_seq, answer)) = &last {
-            if seq == *last_seq {
-                // Sent again: answer again, do not step again.
-                let _ = publisher.put(answer.clone()).wait();
-                continue;
-            }
-            if seq < *last_seq {
-                tracing::debug!(seq, last_seq, "stale request ignored");
-                continue;
-            }
+        if let Some((last_seq, answer)) = &last
+            && seq == *last_seq
+        {
+            // Sent again: answer again, do not step again.
+            let _ = publisher.put(answer.clone()).wait();
+            continue;
+        }
+        let expected = last.as_ref().map_or(1, |(s, _)| s + 1);
+        if seq != expected {
+            // Not the next request: stale, forged or garbage. Answered, never run, and the
+            // session's sequence is left as it was.
+            tracing::warn!(seq, expected, "out-of-sequence request");
+            let text = format!("request {seq} is out of sequence; the session expects {expected}");
+            let answer =
+                wire::encode_response(seq, status::ERROR, layout.num_envs, &[], text.as_bytes());
+            let _ = publisher.put(answer).wait();
+            continue;
         }
         let (answer, closing) = match wire::parse_request(&bytes, &layout) {
             Ok(request) => {

@@ -308,6 +308,7 @@ mod tests {
         bytes[8] = 99; // the command
         let e = parse_request(&bytes, &layout).unwrap_err();
         assert!(e.contains("unknown command 99"), "{e}");
+        bytes[8] = command::STEP as u8;
         let e = parse_request(&bytes[..bytes.len() - 1], &Layout::new(3, 8)).unwrap_err();
         assert!(e.contains("this session has 3 envs"), "{e}");
         assert!(RemoteAnswer::parse(vec![0; 10]).is_none());
