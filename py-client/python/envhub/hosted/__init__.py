@@ -15,6 +15,7 @@ import os
 from typing import Any
 
 from .base import EnvAdapter, missing_modules
+from .env_fns import EnvFnsAdapter
 from .gymnasium_adapter import GymnasiumAdapter
 from .isaac_lab import IsaacLabAdapter
 from .libero import LiberoAdapter
@@ -23,7 +24,13 @@ from .maniskill import ManiSkillAdapter
 __all__ = ["BUILTIN", "EnvAdapter", "all_adapters", "load_adapter_class", "missing_modules"]
 
 #: The adapters shipped with envhub, in one explicit list.
-BUILTIN: list[type[EnvAdapter]] = [GymnasiumAdapter, ManiSkillAdapter, LiberoAdapter, IsaacLabAdapter]
+BUILTIN: list[type[EnvAdapter]] = [
+    GymnasiumAdapter,
+    ManiSkillAdapter,
+    LiberoAdapter,
+    IsaacLabAdapter,
+    EnvFnsAdapter,
+]
 
 ADAPTERS_VAR = "ENVHUB_ADAPTERS"
 
