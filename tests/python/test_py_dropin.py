@@ -18,7 +18,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from conftest import REPO_ROOT, import_envhub
+from conftest import import_envhub
+from test_py_daemon import daemon  # noqa: F401 - the `envhub serve` fixture
 
 envhub = import_envhub()
 
@@ -270,3 +271,11 @@ def test_temporary_files_are_removed():
     with pytest.raises(envhub.MakeError):
         envhub.AsyncVectorEnv([CounterEnv, _raises_in_worker], step_timeout=STEP_TIMEOUT)
     assert set(glob.glob(pattern)) == before
+
+
+def test_through_a_hub_daemon(daemon):
+    # The daemon's workers load the factories from the same temporary file.
+    assert os.environ.get("ENVHUB_HUB")
+    rng = np.random.default_rng(2)
+    acts = rng.integers(0, 3, size=(60, 3))
+    assert run_both(_counter_fns(3), 60, 4, lambda t: acts[t], num_workers=2) > 5

@@ -3,8 +3,9 @@
 Same constructor and results as `gymnasium.vector.AsyncVectorEnv(env_fns, ...)`, so changing
 one import moves a training script onto envhub's worker processes and shared-memory data
 plane. The factories are cloudpickled into a private temporary file that the built-in
-`env_fns` adapter (`envhub.hosted.env_fns`) loads in each worker; env `i` is built by
-factory `i`. The file is removed once the workers have built their envs.
+`env_fns` adapter (`envhub.hosted.env_fns`) loads in each worker, a session of that adapter
+whose env id is the file (no registry entry, so a hub daemon serves it as well); env `i` is
+built by factory `i`. The file is removed once the workers have built their envs.
 """
 
 from __future__ import annotations
@@ -28,25 +29,6 @@ from .hosted.env_fns import FRAMEWORK, write_payload
 from .vector import VectorEnv, _autoreset_mode
 
 __all__ = ["AsyncVectorEnv"]
-
-_ENTRY_ID = "env-fns"
-
-
-def _registry_yaml(payload: str) -> str:
-    # JSON strings are valid YAML scalars, whatever the temporary path holds.
-    import json
-
-    return (
-        "environments:\n"
-        f"  - id: {_ENTRY_ID}\n"
-        "    name: envhub.AsyncVectorEnv factories\n"
-        f"    framework: {FRAMEWORK}\n"
-        f"    adapter: {FRAMEWORK}\n"
-        f"    env_id: {json.dumps(payload)}\n"
-        "    robot_type: custom\n"
-        "    env_type: custom\n"
-    )
-
 
 def _pickle_factories(env_fns: Sequence[Callable[[], Any]]) -> bytes:
     import cloudpickle
@@ -165,18 +147,15 @@ class AsyncVectorEnv(VectorEnv):
         try:
             payload = os.path.join(folder, "env_fns.pkl")
             write_payload(payload, _pickle_factories(env_fns))
-            registry = os.path.join(folder, "registry.yaml")
-            with open(registry, "w") as f:
-                f.write(_registry_yaml(payload))
             super().__init__(
-                _ENTRY_ID,
+                payload,  # the `env_fns` adapter's env id: no registry entry, so a daemon serves it too
                 len(env_fns),
                 num_workers,
                 mode,
                 # Only rgb_array frames travel; other modes draw in the worker, if anywhere.
                 render_mode=render_mode if render_mode == "rgb_array" else None,
-                registry=registry,
                 step_timeout=step_timeout,
+                _adapter=FRAMEWORK,
             )
         finally:
             shutil.rmtree(folder, ignore_errors=True)  # the workers have loaded it
