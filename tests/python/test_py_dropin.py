@@ -45,7 +45,8 @@ class CounterEnv(gym.Env):
         self.t = 0
         start = float((options or {}).get("start", 0.0))
         self.state = (self.np_random.standard_normal(3) + start).astype(np.float32)
-        return self.state.copy(), {"start": start, "options_seen": options is not None, "noise": self.np_random.random()}
+        info = {"start": start, "options_seen": options is not None, "noise": self.np_random.random()}
+        return self.state.copy(), info
 
     def step(self, action: Any) -> Any:
         assert self.action_space.contains(action), action
@@ -127,7 +128,8 @@ def test_reset_options_masks_and_seed_lists_match_gymnasium():
     ours = envhub.AsyncVectorEnv(fns, num_workers=2, autoreset_mode="Disabled", step_timeout=STEP_TIMEOUT)
     ref = gym.vector.AsyncVectorEnv(fns, autoreset_mode="Disabled")
     try:
-        assert_same(ours.reset(seed=[3, 9, 5, 6], options={"start": 2.5}), ref.reset(seed=[3, 9, 5, 6], options={"start": 2.5}), "reset")
+        seeds, options = [3, 9, 5, 6], {"start": 2.5}
+        assert_same(ours.reset(seed=seeds, options=options), ref.reset(seed=seeds, options=options), "reset")
         for t in range(40):
             a = np.full(4, t % 3)
             got, want = ours.step(a), ref.step(a)
@@ -152,6 +154,20 @@ def test_lambda_mujoco_env_matches_gymnasium():
     acts = [np.stack([space.sample() for _ in range(3)]) for _ in range(150)]
     ended = run_both(fns, 150, 0, lambda t: acts[t])
     assert ended > 0
+
+
+def test_rgb_frames_match_gymnasium():
+    fns = [lambda: gym.make("CartPole-v1", render_mode="rgb_array") for _ in range(2)]
+    ours = envhub.AsyncVectorEnv(fns, step_timeout=STEP_TIMEOUT)
+    ref = gym.vector.AsyncVectorEnv(fns)
+    try:
+        assert ours.render_mode == ref.render_mode == "rgb_array"
+        ours.reset(seed=1), ref.reset(seed=1)
+        ours.step(np.array([0, 1])), ref.step(np.array([0, 1]))
+        assert_same(ours.render(), ref.render(), "render")
+    finally:
+        ours.close()
+        ref.close()
 
 
 def test_step_async_and_wait_as_gymnasium():
@@ -262,7 +278,9 @@ def test_options_that_cannot_apply_are_refused():
 def test_temporary_files_are_removed():
     pattern = os.path.join(tempfile.gettempdir(), "envhub-env-fns-*")
     before = set(glob.glob(pattern))
-    envs = envhub.AsyncVectorEnv(_counter_fns(2), shared_memory=False, copy=False, daemon=False, step_timeout=STEP_TIMEOUT)
+    envs = envhub.AsyncVectorEnv(
+        _counter_fns(2), shared_memory=False, copy=False, daemon=False, step_timeout=STEP_TIMEOUT
+    )
     try:
         assert set(glob.glob(pattern)) == before
         envs.reset(seed=0)

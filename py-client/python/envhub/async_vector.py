@@ -46,7 +46,9 @@ def _pickle_factories(env_fns: Sequence[Callable[[], Any]]) -> bytes:
                     "hint: build unpicklable objects (locks, open files, sockets, simulators) inside the "
                     "factory rather than capturing them"
                 ) from e_i
-        raise InvalidConfigError(f"the env factories cannot be pickled with cloudpickle: {type(e).__name__}: {e}") from e
+        raise InvalidConfigError(
+            f"the env factories cannot be pickled with cloudpickle: {type(e).__name__}: {e}"
+        ) from e
 
 
 class _Batch:
@@ -110,7 +112,9 @@ class AsyncVectorEnv(VectorEnv):
             raise InvalidConfigError("`env_fns` is empty; pass one env factory per env")
         for i, fn in enumerate(env_fns):
             if not callable(fn):
-                raise InvalidConfigError(f"env factory {i} is a {type(fn).__name__}, not a callable that returns an env")
+                raise InvalidConfigError(
+                    f"env factory {i} is a {type(fn).__name__}, not a callable that returns an env"
+                )
         if max_concurrency is not None:
             if isinstance(max_concurrency, bool) or not isinstance(max_concurrency, int | np.integer):
                 raise InvalidConfigError(f"`max_concurrency` must be an integer or None, got {max_concurrency!r}")
@@ -275,7 +279,8 @@ class AsyncVectorEnv(VectorEnv):
             return tuple(single for _ in range(self.num_envs))
         raise AttributeError(
             f"`get_attr({name!r})`: envhub's envs live in worker processes, which exchange only reset, "
-            f"step and render with this process; known here: {', '.join([*self._first, 'observation_space', 'action_space'])}"
+            "step and render with this process; known here: "
+            + ", ".join([*self._first, "observation_space", "action_space"])
         )
 
     def set_attr(self, name: str, values: Any) -> None:
