@@ -42,8 +42,18 @@ class DummyVecEnvReference:
         return np.stack(obs), np.array(rews, np.float32), np.array(dones), infos
 
 
-def test_step_reset_and_infos_match_sb3s_dummy_vec_env():
-    venv = envhub.sb3.make_vec("gym-cartpole", N, 2, max_episode_steps=LIMIT, step_timeout=60)
+def _registry_envs():
+    return envhub.sb3.make_vec("gym-cartpole", N, 2, max_episode_steps=LIMIT, step_timeout=60)
+
+
+def _factory_envs():
+    fns = [lambda: gym.make("CartPole-v1", max_episode_steps=LIMIT) for _ in range(N)]
+    return envhub.sb3.wrap(envhub.AsyncVectorEnv(fns, autoreset_mode="SameStep", num_workers=2, step_timeout=60))
+
+
+@pytest.mark.parametrize("make", [_registry_envs, _factory_envs], ids=["make_vec", "AsyncVectorEnv"])
+def test_step_reset_and_infos_match_sb3s_dummy_vec_env(make):
+    venv = make()
     ref = DummyVecEnvReference()
     try:
         assert venv.num_envs == N and venv.observation_space == ref.envs[0].observation_space
