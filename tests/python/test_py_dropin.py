@@ -57,10 +57,13 @@ class CounterEnv(gym.Env):
         info = {
             "t": self.t,
             "energy": np.float32(np.square(self.state).sum()),
-            "counts": np.array([self.t, 2 * self.t], np.int16),
+            "small": np.int16(self.t),
+            "flag": np.bool_(terminated),
             "label": f"step-{self.t}",
-            "nested": {"x": float(self.state[0]), "flag": terminated},
         }
+        if self.t % 3 == 0:  # values JSON cannot carry: the whole info travels pickled
+            info["counts"] = np.array([self.t, 2 * self.t], np.int16)
+            info["nested"] = {"x": float(self.state[0]), "flag": terminated}
         if self.t % 2:
             info["odd"] = np.int64(self.t)  # only some envs report it: its `_odd` mask differs
         return self.state.copy(), float(self.state.sum()), terminated, truncated, info
@@ -146,13 +149,14 @@ def test_reset_options_masks_and_seed_lists_match_gymnasium():
         ref.close()
 
 
-def test_lambda_mujoco_env_matches_gymnasium():
-    # MuJoCo's infos are numpy float64s; Box actions drawn from the action space (float32).
+@pytest.mark.parametrize("mode", [gym.vector.AutoresetMode.NEXT_STEP, gym.vector.AutoresetMode.SAME_STEP])
+def test_lambda_mujoco_env_matches_gymnasium(mode):
+    # MuJoCo's infos are numpy float64s and float32s; Box actions drawn from the action space.
     fns = [lambda: gym.make("Hopper-v5") for _ in range(3)]
     space = gym.make("Hopper-v5").action_space
     space.seed(0)
     acts = [np.stack([space.sample() for _ in range(3)]) for _ in range(150)]
-    ended = run_both(fns, 150, 0, lambda t: acts[t])
+    ended = run_both(fns, 150, 0, lambda t: acts[t], autoreset_mode=mode)
     assert ended > 0
 
 

@@ -10,6 +10,7 @@ built by factory `i`. The file is removed once the workers have built their envs
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import shutil
@@ -23,7 +24,7 @@ from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
-from ._pickled import unwrap, wrap
+from ._pickled import decode_info, wrap
 from .errors import InvalidConfigError, InvalidStateError
 from .hosted.env_fns import FRAMEWORK, write_payload
 from .vector import VectorEnv, _autoreset_mode
@@ -239,16 +240,14 @@ class AsyncVectorEnv(VectorEnv):
         out: dict[str, Any] = {}
         batch = _Batch(n)
         for k in range(n):
-            raw = infos[k] if infos is not None else {}
-            env_info = dict(unwrap(raw) or {}) if raw else {}
+            raw = dict(infos[k]) if infos is not None and infos[k] else {}
+            final_info = raw.pop("final_info", None)  # the serve loop's, as JSON text
+            env_info = decode_info(raw)
             if final is not None and final[k] is not None:
-                final_info = raw.get("final_info") if raw else None
                 if isinstance(final_info, str):
-                    import json
-
                     final_info = json.loads(final_info)
                 env_info = {
-                    "final_info": dict(unwrap(final_info) or {}) if final_info else {},
+                    "final_info": decode_info(final_info),
                     "final_obs": self._codec.obs_from_bytes(final[k]),
                     **env_info,
                 }

@@ -4,7 +4,8 @@ The client cloudpickles its list of env factories (lambdas, closures, classes of
 included, as Gymnasium's `AsyncVectorEnv` does) into a payload file and names that file as
 the env id; each worker loads it once and builds env `i` of the session with factory `i`
 (`config.env_index`). Each env is wrapped so that infos and reset options travel whole
-(`envhub._pickled`) and actions reach it as Gymnasium's `AsyncVectorEnv` hands them over;
+(`envhub._pickled`, or plain JSON where that is exact) and actions reach it as Gymnasium's
+`AsyncVectorEnv` hands them over;
 autoreset is the serve loop's, which follows Gymnasium 1.x's.
 """
 
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .._pickled import unwrap, wrap
+from .._pickled import encode_info, unwrap
 from .base import EnvAdapter
 
 #: Registry framework (and adapter name) of a drop-in session.
@@ -101,13 +102,13 @@ class DropInEnv:
 
     def reset(self, seed: int | None = None, options: Any = None) -> Any:
         obs, info = self.env.reset(seed=seed, options=unwrap(options))
-        return obs, wrap(info) if info else None
+        return obs, encode_info(info)
 
     def step(self, action: Any) -> Any:
         if isinstance(action, np.ndarray) and action.ndim == 0:
             action = action[()]
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, terminated, truncated, wrap(info) if info else None
+        return obs, reward, terminated, truncated, encode_info(info)
 
     def render(self) -> Any:
         return self.env.render()
