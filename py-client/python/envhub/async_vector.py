@@ -2,10 +2,10 @@
 
 Same constructor and results as `gymnasium.vector.AsyncVectorEnv(env_fns, ...)`, so changing
 one import moves a training script onto envhub's worker processes and shared-memory data
-plane. The factories are cloudpickled into a private temporary file that the built-in
-`env_fns` adapter (`envhub.hosted.env_fns`) loads in each worker, a session of that adapter
-whose env id is the file (no registry entry, so a hub daemon serves it as well); env `i` is
-built by factory `i`. The file is removed once the workers have built their envs.
+plane. The factories are cloudpickled into a private temporary file, and the session is one
+of the built-in `env_fns` adapter (`envhub.hosted.env_fns`) with that file as its env id (no
+registry entry, so a hub daemon serves it as well); each worker loads the file and builds env
+`i` with factory `i`. The file is removed once the workers have built their envs.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from .hosted.env_fns import FRAMEWORK, write_payload
 from .vector import VectorEnv, _autoreset_mode
 
 __all__ = ["AsyncVectorEnv"]
+
 
 def _pickle_factories(env_fns: Sequence[Callable[[], Any]]) -> bytes:
     import cloudpickle
