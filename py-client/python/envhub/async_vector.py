@@ -25,7 +25,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
 from ._pickled import decode_info, wrap
-from .errors import InvalidConfigError, InvalidStateError
+from .errors import InvalidConfigError, InvalidStateError, MakeError
 from .hosted.env_fns import FRAMEWORK, write_payload
 from .vector import VectorEnv, _autoreset_mode
 
@@ -163,6 +163,10 @@ class AsyncVectorEnv(VectorEnv):
                 step_timeout=step_timeout,
                 _adapter=FRAMEWORK,
             )
+        except MakeError as e:  # name the drop-in rather than its temporary file
+            raise MakeError(
+                str(e).replace(f"cannot make `{payload}` with adapter `{FRAMEWORK}`", "a worker cannot build its envs")
+            ) from None
         finally:
             shutil.rmtree(folder, ignore_errors=True)  # the workers have loaded it
 
