@@ -5,6 +5,7 @@
     envs = envhub.make_vec("gym-cartpole", num_envs=64)   # a gymnasium.vector.VectorEnv
     env = gymnasium.make("envhub/gym-cartpole")           # after `import envhub`
     envs = envhub.AsyncVectorEnv([lambda: MyEnv()] * 8)   # gymnasium's AsyncVectorEnv, on envhub
+    venv = envhub.sb3.make_vec("mujoco-ant", 8)           # Stable-Baselines3's VecEnv (import envhub.sb3)
 
 Observations are read-only numpy arrays that view the worker's shared memory; the simulator
 runs in an `envhub-worker` process, so a crash there raises `WorkerDiedError` here instead of
