@@ -5,7 +5,6 @@ errors a drop-in can meet (a factory that raises or cannot be pickled, a custom 
 
 from __future__ import annotations
 
-import glob
 import os
 import subprocess
 import sys
@@ -47,6 +46,9 @@ class CounterEnv(gym.Env):
         self.state = (self.np_random.standard_normal(3) + start).astype(np.float32)
         info = {"start": start, "options_seen": options is not None, "noise": self.np_random.random()}
         return self.state.copy(), info
+
+    def scaled(self, k: float, offset: float = 0.0) -> float:
+        return self.gain * k + offset
 
     def step(self, action: Any) -> Any:
         assert self.action_space.contains(action), action
@@ -185,13 +187,37 @@ def test_step_async_and_wait_as_gymnasium():
         assert obs.shape == (2, 3)
         with pytest.raises(envhub.InvalidStateError, match="without a prior"):
             envs.step_wait()
-        assert envs.get_attr("render_mode") == (None, None)
-        with pytest.raises(AttributeError, match="known here"):
-            envs.get_attr("limit")
-        with pytest.raises(envhub.InvalidStateError, match="cannot reach the envs"):
-            envs.call("foo")
     finally:
         envs.close()
+
+
+def test_call_get_attr_and_set_attr_reach_the_envs_as_in_gymnasium():
+    fns = _counter_fns(3)
+    ours = envhub.AsyncVectorEnv(fns, num_workers=2, step_timeout=STEP_TIMEOUT)
+    ref = gym.vector.AsyncVectorEnv(fns)
+    try:
+        for envs in (ours, ref):
+            envs.reset(seed=0)
+            envs.set_attr("gain", [0.0, 1.0, 2.0])
+            envs.set_attr("label", "same for all")
+        assert ours.get_attr("limit") == ref.get_attr("limit") == (5, 6, 7)
+        assert ours.get_attr("gain") == ref.get_attr("gain") == (0.0, 1.0, 2.0)
+        assert ours.get_attr("label") == ("same for all",) * 3
+        assert_same(ours.step(np.array([2, 2, 2])), ref.step(np.array([2, 2, 2])), "step after set_attr")
+        assert ours.call("action_space") == ref.call("action_space")
+        assert ours.call("scaled", 3.0, offset=1.0) == ref.call("scaled", 3.0, offset=1.0) == (1.0, 4.0, 7.0)
+        with pytest.raises(ValueError, match="use `reset` directly"):
+            ours.call("reset")
+        with pytest.raises(AttributeError):
+            ours.get_attr("no_such_attribute")
+        ours.send(np.array([0]), [0])
+        with pytest.raises(envhub.InvalidStateError, match="await their `recv`"):
+            ours.call("limit")
+        ours.recv()
+        assert ours.call("limit") == (5, 6, 7)  # the channel still works after an error
+    finally:
+        ours.close()
+        ref.close()
 
 
 MAIN_SCRIPT = textwrap.dedent(
@@ -279,20 +305,24 @@ def test_options_that_cannot_apply_are_refused():
         envhub.AsyncVectorEnv([])
 
 
-def test_temporary_files_are_removed():
-    pattern = os.path.join(tempfile.gettempdir(), "envhub-env-fns-*")
-    before = set(glob.glob(pattern))
+def test_temporary_files_are_removed(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # this test's own temporary folder
     envs = envhub.AsyncVectorEnv(
         _counter_fns(2), shared_memory=False, copy=False, daemon=False, step_timeout=STEP_TIMEOUT
     )
     try:
-        assert set(glob.glob(pattern)) == before
+        # The factories' file is gone once the workers are up; the call sockets stay.
+        assert [p.name.startswith("envhub-calls-") for p in tmp_path.iterdir()] == [True]
         envs.reset(seed=0)
     finally:
         envs.close()
+    assert list(tmp_path.iterdir()) == []
     with pytest.raises(envhub.MakeError):
         envhub.AsyncVectorEnv([CounterEnv, _raises_in_worker], step_timeout=STEP_TIMEOUT)
-    assert set(glob.glob(pattern)) == before
+    lock = threading.Lock()
+    with pytest.raises(envhub.InvalidConfigError):
+        envhub.AsyncVectorEnv([CounterEnv, lambda: (lock, CounterEnv())[1]])
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_through_a_hub_daemon(daemon):

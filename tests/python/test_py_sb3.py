@@ -142,3 +142,16 @@ def test_sb3_ppo_learns_on_mujoco_ant():
         assert model.num_timesteps >= 512
     finally:
         venv.close()
+
+
+def test_attributes_and_methods_reach_the_envs_of_an_async_vector_env():
+    fns = [lambda: gym.make("CartPole-v1") for _ in range(3)]
+    venv = envhub.sb3.wrap(envhub.AsyncVectorEnv(fns, autoreset_mode="SameStep", step_timeout=60))
+    try:
+        venv.reset()
+        assert venv.get_attr("gravity") == [9.8, 9.8, 9.8]
+        venv.set_attr("gravity", 1.5, indices=[1])
+        assert venv.get_attr("gravity") == [9.8, 1.5, 9.8]
+        assert venv.env_method("get_wrapper_attr", "gravity", indices=[1, 2]) == [1.5, 9.8]
+    finally:
+        venv.close()

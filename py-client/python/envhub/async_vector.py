@@ -24,6 +24,7 @@ from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
+from ._calls import Calls
 from ._pickled import decode_info, wrap
 from .errors import InvalidConfigError, InvalidStateError, MakeError
 from .hosted.env_fns import FRAMEWORK, write_payload
@@ -77,9 +78,8 @@ class AsyncVectorEnv(VectorEnv):
     exit with this process; a custom `worker` cannot apply and is refused; `max_concurrency`
     caps the default number of workers.
 
-    `call`, `get_attr` and `set_attr` reach only what the first env told the parent when it
-    was built (`render_mode`, `metadata`, `spec`, spaces); the envs themselves are reached
-    only through reset, step and render.
+    `call`, `get_attr`, `set_attr` and `render` reach the envs in their workers as in
+    Gymnasium (through a side channel: the data plane carries only reset and step).
     """
 
     def __init__(
@@ -150,9 +150,12 @@ class AsyncVectorEnv(VectorEnv):
             dummy.close()
 
         folder = tempfile.mkdtemp(prefix="envhub-env-fns-")  # private (mode 0700)
+        # The workers' sockets for `call`, `get_attr` and `set_attr`: kept until `close`.
+        self._calls_folder = tempfile.mkdtemp(prefix="envhub-calls-")
+        authkey = os.urandom(32)
         try:
             payload = os.path.join(folder, "env_fns.pkl")
-            write_payload(payload, _pickle_factories(env_fns))
+            write_payload(payload, _pickle_factories(env_fns), (self._calls_folder, authkey))
             super().__init__(
                 payload,  # the `env_fns` adapter's env id: no registry entry, so a daemon serves it too
                 len(env_fns),
@@ -164,9 +167,13 @@ class AsyncVectorEnv(VectorEnv):
                 _adapter=FRAMEWORK,
             )
         except MakeError as e:  # name the drop-in rather than its temporary file
+            shutil.rmtree(self._calls_folder, ignore_errors=True)
             raise MakeError(
                 str(e).replace(f"cannot make `{payload}` with adapter `{FRAMEWORK}`", "a worker cannot build its envs")
             ) from None
+        except BaseException:
+            shutil.rmtree(self._calls_folder, ignore_errors=True)
+            raise
         finally:
             shutil.rmtree(folder, ignore_errors=True)  # the workers have loaded it
 
@@ -186,7 +193,7 @@ class AsyncVectorEnv(VectorEnv):
         self.single_observation_space = single_observation_space
         self.observation_space = observation_space
         self._pending: Any = None
-        self._first = {"render_mode": render_mode, "metadata": metadata, "spec": getattr(dummy, "spec", None)}
+        self._calls = Calls(self._calls_folder, authkey, self.num_envs, step_timeout)
 
     # Gymnasium's reset and step, with options and infos carried whole --------------------
 
@@ -260,39 +267,46 @@ class AsyncVectorEnv(VectorEnv):
                 out = batch._add_info(out, env_info, k)
         return out
 
-    # What the parent knows of the envs -----------------------------------------------------
+    # Calls to the envs, through the workers' side channel (`envhub._calls`) -----------------
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
-        """`render` only (`call("render")`); envhub reaches the envs only through reset,
-        step and render."""
-        if name == "render":
-            return self.render() or tuple(None for _ in range(self.num_envs))
-        raise InvalidStateError(
-            f"`call({name!r})` cannot reach the envs: envhub's workers exchange only reset, step and "
-            "render with this process\nhint: do the work inside the env (in `step` or `reset`, "
-            "reporting through `info`), or use gymnasium.vector.AsyncVectorEnv for this call"
-        )
+        """Calls method `name` of every env with the arguments (or reads attribute `name`),
+        as Gymnasium's: one result per env. An exception in an env is raised here."""
+        return self._calls_of_idle("call").call(name, args, kwargs)
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
-        """`render_mode`, `metadata` or `spec` of the first env, for each env (what the
-        parent learnt when it built it); other attributes raise `AttributeError`."""
-        if name in self._first:
-            return tuple(self._first[name] for _ in range(self.num_envs))
-        if name in ("observation_space", "action_space"):
-            single = getattr(self, f"single_{name}")
-            return tuple(single for _ in range(self.num_envs))
-        raise AttributeError(
-            f"`get_attr({name!r})`: envhub's envs live in worker processes, which exchange only reset, "
-            "step and render with this process; known here: "
-            + ", ".join([*self._first, "observation_space", "action_space"])
-        )
+        """Attribute `name` of every env."""
+        return self.call(name)
 
-    def set_attr(self, name: str, values: Any) -> None:
-        """Refused: the envs live in worker processes."""
-        raise InvalidStateError(
-            f"`set_attr({name!r})` cannot reach the envs: envhub's workers exchange only reset, step and "
-            "render with this process\nhint: pass the value to the env factories instead"
-        )
+    def set_attr(self, name: str, values: list[Any] | tuple[Any, ...] | Any) -> None:
+        """Sets attribute `name` of every env: to `values[i]` for env `i` given a list or
+        tuple (one per env), else to `values` for all."""
+        if not isinstance(values, list | tuple):
+            values = [values] * self.num_envs
+        if len(values) != self.num_envs:
+            raise ValueError(f"values must be a list of length {self.num_envs}, got {len(values)}")
+        self._calls_of_idle("set_attr").set(name, list(values))
+
+    def render(self) -> tuple[Any, ...] | None:
+        """Every env's `render()`, as Gymnasium's (`call("render")`)."""
+        return self.call("render")
+
+    def _calls_of_idle(self, what: str) -> Calls:
+        if self.closed:
+            raise InvalidStateError(f"`{what}` on a closed envhub.AsyncVectorEnv")
+        if self._sent.any():
+            raise InvalidStateError(f"`{what}` while envs stepped by `send` await their `recv`")
+        return self._calls
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Stops the workers and removes their call sockets."""
+        calls = getattr(self, "_calls", None)
+        if calls is not None:
+            calls.close()
+        super().close_extras(**kwargs)
+        folder = getattr(self, "_calls_folder", None)
+        if folder is not None:  # after the workers, which remove their own sockets as they exit
+            shutil.rmtree(folder, ignore_errors=True)
 
     def __repr__(self) -> str:
         return f"envhub.AsyncVectorEnv(num_envs={self.num_envs}, num_workers={self.num_workers})"

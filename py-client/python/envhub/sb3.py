@@ -158,9 +158,13 @@ class VecAdapter:
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        """`render_mode`, `metadata`, `observation_space`, `action_space` (known to this
-        process) for each env of `indices`; others raise `AttributeError`, as SB3 expects
-        of an attribute the envs lack."""
+        """The attribute of each env of `indices`: any attribute over
+        `envhub.AsyncVectorEnv`; else `render_mode`, `metadata`, `observation_space`,
+        `action_space` (known to this process), others raising `AttributeError`, as SB3
+        expects of an attribute the envs lack."""
+        if hasattr(self.venv, "call"):  # envhub.AsyncVectorEnv reaches its envs
+            values = self.venv.get_attr(attr_name)
+            return [values[i] for i in self._indices(indices)]
         known = {
             "render_mode": self.venv.render_mode,
             "metadata": self.venv.metadata,
@@ -175,14 +179,24 @@ class VecAdapter:
         return [known[attr_name] for _ in self._indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        """Refused: the envs live in worker processes."""
+        """Sets the attribute of the envs of `indices` (over `envhub.AsyncVectorEnv`;
+        refused otherwise: the envs live in worker processes)."""
+        if hasattr(self.venv, "call"):
+            chosen = set(self._indices(indices))
+            current = self.venv.get_attr(attr_name) if len(chosen) < self.num_envs else [None] * self.num_envs
+            self.venv.set_attr(attr_name, [value if i in chosen else current[i] for i in range(self.num_envs)])
+            return
         raise InvalidStateError(
             f"`set_attr({attr_name!r})` cannot reach envhub's envs (they live in worker processes)\n"
             "hint: pass the value as an env option when making the vector env"
         )
 
     def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list[Any]:
-        """`render` only (the frames of the envs of `indices`)."""
+        """Calls the method of the envs of `indices` (over `envhub.AsyncVectorEnv`; else
+        `render` only)."""
+        if hasattr(self.venv, "call"):
+            values = self.venv.call(method_name, *args, **kwargs)
+            return [values[i] for i in self._indices(indices)]
         if method_name == "render":
             frames = self.venv.render() or (None,) * self.num_envs
             return [frames[i] for i in self._indices(indices)]

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _calls
 from .._pickled import encode_info, unwrap
 from .base import EnvAdapter
 
@@ -26,13 +27,19 @@ FRAMEWORK = "env_fns"
 
 # Payloads already loaded by this worker, by path: a worker's envs share one load.
 _LOADED: dict[str, list[Any]] = {}
+_CALLS: dict[str, tuple[str, bytes] | None] = {}
 
 
-def write_payload(path: str, env_fns_pickle: bytes) -> None:
+def write_payload(path: str, env_fns_pickle: bytes, calls: tuple[str, bytes] | None = None) -> None:
     """Writes the payload a worker reads: the client's `sys.path` (so factories pickled by
     reference, such as classes of the training script's own modules, import in the worker as
-    in the client, like multiprocessing's spawn does) and the cloudpickled factories."""
-    payload = {"sys_path": [p for p in sys.path if isinstance(p, str)], "env_fns": env_fns_pickle}
+    in the client, like multiprocessing's spawn does), the cloudpickled factories, and where
+    to answer `call`s (`envhub._calls`: a folder and an auth key)."""
+    payload = {
+        "sys_path": [p for p in sys.path if isinstance(p, str)],
+        "env_fns": env_fns_pickle,
+        "calls": calls,
+    }
     with open(path, "wb") as f:
         pickle.dump(payload, f, protocol=pickle.HIGHEST_PROTOCOL)
 
@@ -48,6 +55,7 @@ def load_factories(path: str) -> list[Any]:
             )
         with open(path, "rb") as f:
             payload = pickle.load(f)
+        _CALLS[path] = payload.get("calls")
         for p in payload["sys_path"]:
             if p not in sys.path:
                 sys.path.append(p)
@@ -81,6 +89,9 @@ class EnvFnsAdapter(EnvAdapter):
             env = factories[i]()
         except Exception as e:
             raise RuntimeError(f"env factory {i} ({_describe(factories[i])}) raised {type(e).__name__}: {e}") from e
+        calls = _CALLS.get(env_id)
+        if calls is not None:
+            _calls.serve(*calls, i, env)
         return DropInEnv(env)
 
 
