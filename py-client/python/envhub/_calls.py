@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import threading
+from multiprocessing import AuthenticationError
 from multiprocessing.connection import Client, Connection, Listener
 from typing import Any
 
@@ -37,8 +38,10 @@ def _accept(listener: Listener) -> None:
     while True:
         try:
             conn = listener.accept()
-        except Exception:  # noqa: BLE001 - a client that failed authentication, or shutdown
+        except AuthenticationError:  # not our client: keep serving ours
             continue
+        except OSError:  # the socket is gone: nothing more to serve
+            return
         threading.Thread(target=_answer, args=(conn,), daemon=True).start()
 
 
