@@ -37,8 +37,9 @@ pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 /// `make py-test` set it.
 pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
 
-/// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
-/// in addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
+/// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`)
+/// or `pickle:/path` (a class pickled by value, for one defined in a script's `__main__`), in
+/// addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.
 pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
 
 /// `1` lists the test adapters (`null`: `Null-v0`, an env that does no work and fails on

@@ -160,6 +160,7 @@ pub(crate) const BUILTIN: &[(&str, &str)] = &[
     ("maniskill", "maniskill"),
     ("libero", "libero"),
     ("isaac_lab", "isaac_lab"),
+    ("env_fns", "env_fns"),
 ];
 
 #[cfg(test)]

@@ -245,9 +245,10 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 
 /// Starts a session of `num_envs` envs of registry entry `id`. `config_json` is an
 /// `EnvConfig` as JSON (unknown fields are an error); `registry` replaces the one found the
-/// usual way.
+/// usual way. With `adapter`, `id` is that adapter's env id and no registry is involved
+/// (`envhub.AsyncVectorEnv`'s factories, which no daemon's registry could know).
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
@@ -258,6 +259,7 @@ pub(crate) fn make_session(
     step_timeout: Option<f64>,
     restart_on_crash: bool,
     pool_bytes: Option<usize>,
+    adapter: Option<String>,
 ) -> PyResult<Session> {
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
@@ -291,7 +293,15 @@ pub(crate) fn make_session(
             if let Some(bytes) = pool_bytes {
                 options.pool_bytes = bytes;
             }
-            let vec = hub.with_options(options).make_vec(&id, num_envs, &config)?;
+            let hub = hub.with_options(options);
+            let vec = match adapter {
+                Some(adapter) => {
+                    let mut config = config;
+                    config.num_envs = num_envs;
+                    hub.make_vec_direct(&adapter, &id, &config)?
+                }
+                None => hub.make_vec(&id, num_envs, &config)?,
+            };
             Ok(State {
                 vec: std::mem::ManuallyDrop::new(vec),
                 pid: std::process::id(),

@@ -4,6 +4,8 @@
     env = envhub.make("gym-cartpole")                     # a gymnasium.Env
     envs = envhub.make_vec("gym-cartpole", num_envs=64)   # a gymnasium.vector.VectorEnv
     env = gymnasium.make("envhub/gym-cartpole")           # after `import envhub`
+    envs = envhub.AsyncVectorEnv([lambda: MyEnv()] * 8)   # gymnasium's AsyncVectorEnv, on envhub
+    venv = envhub.sb3.make_vec("mujoco-ant", 8)           # Stable-Baselines3's VecEnv (import envhub.sb3)
 
 Observations are read-only numpy arrays that view the worker's shared memory; the simulator
 runs in an `envhub-worker` process, so a crash there raises `WorkerDiedError` here instead of
@@ -20,6 +22,7 @@ from pathlib import Path
 from . import _envhub
 from ._factory import make, make_env, make_vec
 from .adapters import AdapterRegistry, EnvAdapter
+from .async_vector import AsyncVectorEnv
 from .config import EnvConfig
 from .env import Env
 from .errors import (
@@ -67,6 +70,7 @@ except EnvHubError as _e:  # a broken registry file must not make `import envhub
 __all__ = [
     "AdapterRegistry",
     "AdapterUnavailableError",
+    "AsyncVectorEnv",
     "DataPlaneError",
     "Env",
     "EnvAdapter",

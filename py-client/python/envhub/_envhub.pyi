@@ -40,6 +40,7 @@ def make_session(
     step_timeout: float | None = None,
     restart_on_crash: bool = False,
     pool_bytes: int | None = None,
+    adapter: str | None = None,
 ) -> Session: ...
 
 class Registry:

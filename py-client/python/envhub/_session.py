@@ -32,8 +32,10 @@ def start(
     step_timeout: float | None,
     restart_on_crash: bool,
     pool_bytes: int | None = None,
+    adapter: str | None = None,
 ) -> Any:
-    """Starts the workers of `config.num_envs` envs of entry `registry_id`."""
+    """Starts the workers of `config.num_envs` envs of entry `registry_id` (with `adapter`:
+    of that adapter's env id `registry_id`, no registry involved)."""
     if not isinstance(registry_id, str):
         raise InvalidConfigError(f"the env id must be a string, got {type(registry_id).__name__}")
     if isinstance(config.num_envs, bool) or not isinstance(config.num_envs, int) or config.num_envs < 1:
@@ -47,6 +49,7 @@ def start(
         step_timeout=step_timeout,
         restart_on_crash=restart_on_crash,
         pool_bytes=pool_bytes,
+        adapter=adapter,
     )
 
 

@@ -33,6 +33,10 @@ class EnvConfig:
     `workers` and `autoreset_mode` shape a vector env's session. `strict_actions` refuses
     continuous actions outside the action space's bounds, which otherwise reach the env as
     Gymnasium passes them (NaN and infinite actions are refused either way).
+
+    `env_index` is set by a worker before each `EnvAdapter.make`: the env's index in its
+    session (so an adapter can build env `i` differently); None elsewhere. It is not sent to
+    the Rust side.
     """
 
     render_mode: str | None = None
@@ -44,6 +48,7 @@ class EnvConfig:
     workers: int | None = None
     autoreset_mode: str = "next_step"
     strict_actions: bool = False
+    env_index: int | None = None
 
     def to_json(self) -> str:
         """The config as the Rust `EnvConfig` reads it."""

@@ -96,8 +96,10 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         restart_on_crash: bool = False,
         pool_bytes: int | None = None,
         strict_actions: bool = False,
+        _adapter: str | None = None,
         **extra: Any,
     ) -> None:
+        # `_adapter` (private): `registry_id` is that adapter's env id, no registry entry.
         mode = _autoreset_mode(autoreset_mode)
         config = EnvConfig(
             render_mode=render_mode,
@@ -110,7 +112,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             autoreset_mode=_RUST_MODES[mode],
             strict_actions=strict_actions,
         )
-        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes)
+        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter)
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)

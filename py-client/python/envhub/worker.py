@@ -378,7 +378,8 @@ def make_batch(
         hosted = HostedVectorEnv(vector, env_id, obs_desc, act_desc)
         return hosted, obs_desc, act_desc, limit
     raw = []
-    for _ in range(num_envs):
+    for i in range(num_envs):
+        config.env_index = int(job.get("env_offset", 0)) + i
         env = adapter.make(env_id, config)
         if config.max_episode_steps and not _has_time_limit(env):
             import gymnasium as gym

@@ -3,8 +3,9 @@ processes behind the same shared-memory data plane as the native ones.
 
 An adapter is an `EnvAdapter` subclass. The built-in ones are listed in `BUILTIN` (adding one
 is one file plus one line there); user adapters come from `ENVHUB_ADAPTERS` (import paths
-`module:Class`, comma-separated), which the hub fills from its config's `adapters:` and which
-`envhub.AdapterRegistry().register` extends for the current process and its workers.
+`module:Class`, or `pickle:/path` for a class `register` pickled, comma-separated), which
+the hub fills from its config's `adapters:` and which `envhub.AdapterRegistry().register`
+extends for the current process and its workers.
 """
 
 from __future__ import annotations
@@ -15,21 +16,42 @@ import os
 from typing import Any
 
 from .base import EnvAdapter, missing_modules
+from .env_fns import EnvFnsAdapter
 from .gymnasium_adapter import GymnasiumAdapter
 from .isaac_lab import IsaacLabAdapter
 from .libero import LiberoAdapter
 from .maniskill import ManiSkillAdapter
 
-__all__ = ["BUILTIN", "EnvAdapter", "all_adapters", "load_adapter_class", "missing_modules"]
+__all__ = ["BUILTIN", "PICKLED", "EnvAdapter", "all_adapters", "load_adapter_class", "missing_modules"]
 
 #: The adapters shipped with envhub, in one explicit list.
-BUILTIN: list[type[EnvAdapter]] = [GymnasiumAdapter, ManiSkillAdapter, LiberoAdapter, IsaacLabAdapter]
+BUILTIN: list[type[EnvAdapter]] = [
+    GymnasiumAdapter,
+    ManiSkillAdapter,
+    LiberoAdapter,
+    IsaacLabAdapter,
+    EnvFnsAdapter,
+]
 
 ADAPTERS_VAR = "ENVHUB_ADAPTERS"
 
 
+#: Prefix of an `ENVHUB_ADAPTERS` entry that names a file holding a pickled adapter class (a
+#: class of `__main__` or of a function, which workers cannot import by path).
+PICKLED = "pickle:"
+
+
 def load_adapter_class(path: str) -> type[EnvAdapter]:
-    """The class an import path (`package.module:Class`) names."""
+    """The class an import path (`package.module:Class`) names, or the one pickled in the
+    file a `pickle:/path` entry names."""
+    if path.startswith(PICKLED):
+        import pickle
+
+        with open(path[len(PICKLED) :], "rb") as f:
+            obj = pickle.load(f)
+        if not (isinstance(obj, type) and issubclass(obj, EnvAdapter)):
+            raise TypeError(f"`{path}` does not hold an `envhub.EnvAdapter` subclass")
+        return obj
     module_name, sep, attr = path.partition(":")
     if not sep or not module_name or not attr:
         raise ValueError(f"invalid adapter import path `{path}`; expected `package.module:ClassName`")
