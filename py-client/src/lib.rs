@@ -56,6 +56,16 @@ fn adapters_json(py: Python<'_>) -> PyResult<String> {
     Ok(serde_json::to_string(&adapters).expect("adapters serialize"))
 }
 
+/// The live hubs on the network (the settings of `envhub.yaml` and `ENVHUB_CONNECT`), as
+/// JSON.
+#[pyfunction]
+fn hubs_json(py: Python<'_>) -> PyResult<String> {
+    let hubs = py
+        .detach(|| envhub::Hub::from_env().and_then(|hub| hub.hubs()))
+        .map_err(|e| errors::hub_error(py, e))?;
+    Ok(serde_json::to_string(&hubs).expect("hub infos serialize"))
+}
+
 /// Logs go to stderr, filtered by `ENVHUB_LOG` or `RUST_LOG` (default: warnings), as the
 /// CLI does.
 fn init_logging() {
@@ -76,6 +86,7 @@ fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(set_worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(adapters_json, m)?)?;
+    m.add_function(wrap_pyfunction!(hubs_json, m)?)?;
     m.add_function(wrap_pyfunction!(set_python, m)?)?;
     m.add_function(wrap_pyfunction!(refresh_adapters, m)?)?;
     m.add_function(wrap_pyfunction!(session::make_session, m)?)?;

@@ -194,9 +194,12 @@ pub(crate) struct Session {
     /// Number of worker processes.
     #[pyo3(get)]
     num_workers: usize,
-    /// Worker pids, in env order.
+    /// Worker pids, in env order (on its hub's machine for a remote slice).
     #[pyo3(get)]
     worker_pids: Vec<u32>,
+    /// Where the envs run: `(hub, first env, end)` runs, `local` for this machine.
+    #[pyo3(get)]
+    placement: Vec<(String, usize, usize)>,
     /// The episode limit applied, if any.
     #[pyo3(get)]
     max_episode_steps: Option<u32>,
@@ -248,7 +251,7 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 /// usual way. With `adapter`, `id` is that adapter's env id and no registry is involved
 /// (`envhub.AsyncVectorEnv`'s factories, which no daemon's registry could know).
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
@@ -260,6 +263,7 @@ pub(crate) fn make_session(
     restart_on_crash: bool,
     pool_bytes: Option<usize>,
     adapter: Option<String>,
+    hubs: Option<String>,
 ) -> PyResult<Session> {
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
@@ -274,6 +278,16 @@ pub(crate) fn make_session(
         }
     };
     let registry = registry.map(|r| r.inner.clone());
+    let placement: envhub::Placement = match hubs.as_deref().map(str::parse).transpose() {
+        Ok(p) => p.unwrap_or_default(),
+        Err(e) => return Err(hub_error(py, e)),
+    };
+    if adapter.is_some() && !placement.is_local() {
+        return Err(invalid_config(
+            py,
+            "env factories run on this machine only: `hubs=` takes registry ids".into(),
+        ));
+    }
     let made = py
         .detach(move || -> Result<State, HubError> {
             let hub = match registry {
@@ -283,6 +297,7 @@ pub(crate) fn make_session(
                         Some(socket) => Hub::connect(std::path::Path::new(&socket), registry)?,
                         None => Hub::new(registry),
                     }
+                    .with_network(Hub::from_env()?.network_config().clone())
                 }
             };
             let mut options = hub.options().clone();
@@ -300,7 +315,7 @@ pub(crate) fn make_session(
                     config.num_envs = num_envs;
                     hub.make_vec_direct(&adapter, &id, &config)?
                 }
-                None => hub.make_vec(&id, num_envs, &config)?,
+                None => hub.make_vec_on(&id, num_envs, &config, &placement)?,
             };
             Ok(State {
                 vec: std::mem::ManuallyDrop::new(vec),
@@ -320,6 +335,11 @@ pub(crate) fn make_session(
         num_envs: v.num_envs(),
         num_workers: v.num_workers(),
         worker_pids: v.worker_pids(),
+        placement: v
+            .placement()
+            .into_iter()
+            .map(|(place, r)| (place, r.start, r.end))
+            .collect(),
         max_episode_steps: v.max_episode_steps(),
         render_fps: v.render_fps(),
         autoreset_mode: serde_json::to_value(v.autoreset_mode())

@@ -32,14 +32,18 @@ from .errors import (
     EnvHubError,
     ForkError,
     HubDaemonError,
+    HubLostError,
+    HubRefusedError,
     InvalidActionError,
     InvalidConfigError,
     InvalidStateError,
     MakeError,
+    NetworkError,
     NoAdapterError,
     NoMatchError,
     RegistryError,
     UnknownEnvError,
+    UnknownHubError,
     WorkerBinaryError,
     WorkerDiedError,
 )
@@ -53,6 +57,17 @@ __version__: str = _envhub.__version__
 _envhub.set_worker_binary(str(Path(__file__).resolve().parent / "bin" / "envhub-worker"))
 # Python-hosted adapters run in this interpreter unless ENVHUB_PYTHON or the config names one.
 _envhub.set_python(sys.executable)
+
+
+def hubs() -> list[dict]:
+    """The live hubs on the network (`envhub serve` on other machines), each a dict with
+    `name`, `host`, `cores`, `version`, `adapters`, `catalog`, `envs`, `workers`,
+    `sessions`, `load`. The network is reached as `envhub.yaml`'s `zenoh:` section and
+    `ENVHUB_CONNECT` say (multicast scouting by default); waits briefly for discovery on
+    first use."""
+    import json
+
+    return json.loads(_envhub.hubs_json())
 
 
 def worker_binary() -> str:
@@ -81,6 +96,10 @@ __all__ = [
     "EnvRegistry",
     "ForkError",
     "HubDaemonError",
+    "HubLostError",
+    "HubRefusedError",
+    "NetworkError",
+    "UnknownHubError",
     "InvalidActionError",
     "InvalidConfigError",
     "InvalidStateError",
@@ -96,6 +115,7 @@ __all__ = [
     "WorkerDiedError",
     "make",
     "make_env",
+    "hubs",
     "make_vec",
     "match_task_to_env",
     "register_envs",

@@ -8,7 +8,7 @@ from typing import Any
 import gymnasium
 from gymnasium.vector import AutoresetMode
 
-from ._session import RegistryArg
+from ._session import HubsArg, RegistryArg
 from .env import Env
 from .registration import NAMESPACE
 from .registry import EnvEntry
@@ -92,13 +92,19 @@ def make_vec(
     restart_on_crash: bool = False,
     pool_bytes: int | None = None,
     strict_actions: bool = False,
+    hubs: HubsArg = None,
     **extra: Any,
 ) -> VectorEnv:
     """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
     `gymnasium.vector.VectorEnv`; default: one worker per core, at most one per env).
     `pool_bytes` caps the shared memory that results kept alive by arrays may hold (512 MiB
     by default); past it, results are copies. `strict_actions=True` refuses continuous
-    actions outside the action space's bounds."""
+    actions outside the action space's bounds.
+
+    `hubs` places the envs on other machines' hubs (`envhub serve`, reached as
+    `envhub.yaml`'s `zenoh:` and `ENVHUB_CONNECT` say): `"all"` live hubs, a list of names
+    (`"local"` is this machine; envs spread in proportion to cores) or a dict of counts
+    (`{"box1": 48, "local": 16}`). `num_workers` then applies per machine."""
     return VectorEnv(
         id,
         num_envs,
@@ -113,6 +119,7 @@ def make_vec(
         restart_on_crash=restart_on_crash,
         pool_bytes=pool_bytes,
         strict_actions=strict_actions,
+        hubs=hubs,
         **extra,
     )
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from . import _envhub
@@ -33,6 +33,7 @@ def start(
     restart_on_crash: bool,
     pool_bytes: int | None = None,
     adapter: str | None = None,
+    hubs: HubsArg = None,
 ) -> Any:
     """Starts the workers of `config.num_envs` envs of entry `registry_id` (with `adapter`:
     of that adapter's env id `registry_id`, no registry involved)."""
@@ -50,7 +51,32 @@ def start(
         restart_on_crash=restart_on_crash,
         pool_bytes=pool_bytes,
         adapter=adapter,
+        hubs=placement(hubs),
     )
+
+
+HubsArg = str | Sequence[str] | Mapping[str, int] | None
+
+
+def placement(hubs: HubsArg) -> str | None:
+    """A `hubs=` argument as the placement string the hub parses: `None`/`"local"` (this
+    machine), `"all"` (every live hub), names (`["box1", "box2", "local"]`: spread by cores)
+    or counts (`{"box1": 48, "local": 16}`)."""
+    if hubs is None or isinstance(hubs, str):
+        return hubs
+    if isinstance(hubs, Mapping):
+        for name, count in hubs.items():
+            if not isinstance(name, str) or isinstance(count, bool) or not isinstance(count, int) or count < 0:
+                raise InvalidConfigError(
+                    f"invalid hubs entry {name!r}: {count!r}; map hub names to env counts, e.g. {{'box1': 48, 'local': 16}}"
+                )
+        return ",".join(f"{name}:{count}" for name, count in hubs.items())
+    names = list(hubs)
+    if not names or not all(isinstance(n, str) for n in names):
+        raise InvalidConfigError(
+            f"invalid hubs: {hubs!r}; use 'local', 'all', a list of hub names, or a dict of hub names to env counts"
+        )
+    return ",".join(names)
 
 
 def check_seed(seed: Any) -> int | None:

@@ -11,7 +11,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _spaces
-from ._session import RegistryArg, check_seed, fps_metadata, start
+from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
 
@@ -96,6 +96,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         restart_on_crash: bool = False,
         pool_bytes: int | None = None,
         strict_actions: bool = False,
+        hubs: HubsArg = None,
         _adapter: str | None = None,
         **extra: Any,
     ) -> None:
@@ -112,10 +113,14 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             autoreset_mode=_RUST_MODES[mode],
             strict_actions=strict_actions,
         )
-        self._session = start(registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter)
+        self._session = start(
+            registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs
+        )
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)
+        #: Where the envs run: `(hub, first env, end)` per run; `"local"` is this machine.
+        self.placement: list[tuple[str, int, int]] = [tuple(p) for p in s.placement]
         self._codec = _spaces.Codec(
             s.observation_space_json, s.obs_leaves_json, s.action_space_json, s.action_leaves_json, self.num_envs
         )

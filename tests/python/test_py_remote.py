@@ -1,0 +1,144 @@
+"""Envs on other machines' hubs, from Python: `envhub.hubs()` and `make_vec(..., hubs=...)`.
+
+Hubs are `envhub serve` processes on loopback, each with its own iceoryx2 namespace, multicast
+off and explicit endpoints, so nothing shortcuts through this machine's shared memory.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import REPO_ROOT, import_envhub
+
+envhub = import_envhub()
+
+ENVHUB_BIN = REPO_ROOT / "target" / "release" / "envhub"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Hub:
+    def __init__(self, name: str, tmp: Path) -> None:
+        self.name = name
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.namespace = f"pyhub_{name}_{os.getpid()}_"
+        env = {k: v for k, v in os.environ.items() if k not in ("ENVHUB_ADAPTERS", "ENVHUB_CONNECT")}
+        env.update(ENVHUB_NAMESPACE=self.namespace, ENVHUB_MULTICAST="0")
+        self.proc = subprocess.Popen(
+            [str(ENVHUB_BIN), "serve", "--socket", str(tmp / f"{name}.sock"), "--name", name]
+            + ["--listen", self.endpoint],
+            env=env,
+            cwd=REPO_ROOT,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        # The hub prints three lines once it is up (or exits: end of file).
+        said = ""
+        for _ in range(3):
+            said += self.proc.stdout.readline()
+        assert "on the network" in said, f"hub {name} said {said!r} (exit status {self.proc.poll()})"
+
+    def stop(self) -> None:
+        self.proc.kill()
+        self.proc.wait(timeout=10)
+        for path in Path("/dev/shm").glob(f"*{self.namespace}*"):
+            path.unlink(missing_ok=True)
+
+
+@pytest.fixture
+def two_hubs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Hub, Hub]]:
+    if not ENVHUB_BIN.is_file():
+        message = f"{ENVHUB_BIN} is not built; run `make py-install`"
+        if os.environ.get("ENVHUB_PY_REQUIRED"):
+            pytest.fail(message)
+        pytest.skip(message)
+    a = Hub("pya", tmp_path)
+    b = Hub("pyb", tmp_path)
+    monkeypatch.setenv("ENVHUB_CONNECT", f"{a.endpoint},{b.endpoint}")
+    monkeypatch.setenv("ENVHUB_MULTICAST", "0")
+    try:
+        yield a, b
+    finally:
+        a.stop()
+        b.stop()
+
+
+def test_hubs_lists_the_live_hubs(two_hubs):
+    infos = envhub.hubs()
+    assert [h["name"] for h in infos] == ["pya", "pyb"]
+    assert all(h["cores"] >= 1 and "classic_control" in h["adapters"] for h in infos)
+
+
+def test_a_vector_env_over_two_hubs_equals_local_stepping(two_hubs):
+    remote = envhub.make_vec("gym-cartpole", 8, hubs=["pya", "pyb"])
+    local = envhub.make_vec("gym-cartpole", 8)
+    try:
+        assert remote.placement == [("pya", 0, 4), ("pyb", 4, 8)]
+        assert remote.single_observation_space == local.single_observation_space
+        a, _ = remote.reset(seed=3)
+        b, _ = local.reset(seed=3)
+        np.testing.assert_array_equal(a, b)
+        rng = np.random.default_rng(0)
+        dones = 0
+        for _ in range(300):
+            actions = rng.integers(0, 2, size=8)
+            ra = remote.step(actions)
+            lb = local.step(actions)
+            for x, y in zip(ra[:4], lb[:4], strict=True):
+                np.testing.assert_array_equal(x, y)
+            dones += int(lb[2].sum() + lb[3].sum())
+        assert dones > 0
+    finally:
+        remote.close()
+        local.close()
+
+
+def test_send_and_recv_across_hubs_return_every_env_once(two_hubs):
+    env = envhub.make_vec("gym-cartpole", 4, hubs={"pya": 2, "local": 2})
+    try:
+        env.reset(seed=0)
+        env.send(np.zeros(4, dtype=np.int64))
+        seen: list[int] = []
+        while len(seen) < 4:
+            *_, info = env.recv()
+            seen.extend(int(i) for i in info["env_id"])
+        assert sorted(seen) == [0, 1, 2, 3]
+    finally:
+        env.close()
+
+
+def test_a_killed_hub_raises_hub_lost_naming_it(two_hubs):
+    a, b = two_hubs
+    env = envhub.make_vec("gym-cartpole", 4, hubs=["pya", "pyb"])
+    try:
+        env.reset(seed=0)
+        os.kill(b.proc.pid, signal.SIGKILL)
+        start = time.monotonic()
+        with pytest.raises(envhub.HubLostError) as caught:
+            while time.monotonic() - start < 5:
+                env.step(np.zeros(4, dtype=np.int64))
+        assert time.monotonic() - start < 1.0
+        assert caught.value.hub == "pyb" and caught.value.envs == "2..4"
+    finally:
+        env.close()
+
+
+def test_unknown_hubs_and_bad_placements_are_named(two_hubs):
+    with pytest.raises(envhub.UnknownHubError, match="closest: pya"):
+        envhub.make_vec("gym-cartpole", 2, hubs=["pyaa"])
+    with pytest.raises(envhub.InvalidConfigError, match="add up to 3"):
+        envhub.make_vec("gym-cartpole", 2, hubs={"pya": 3})
+    with pytest.raises(envhub.InvalidConfigError, match="hub names"):
+        envhub.make_vec("gym-cartpole", 2, hubs=[1, 2])
