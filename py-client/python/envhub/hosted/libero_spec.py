@@ -43,7 +43,7 @@ def task_index(suite: str, task: int | str, task_map: dict[str, list[str]]) -> i
     """The index in `task_map[suite]` (LIBERO's task order) of `task`, an index or a name; a
     wrong suite or task is an error that lists the valid ones, closest first."""
     if suite not in task_map:
-        close = get_close_matches(suite, list(task_map), n=2, cutoff=0.5)
+        close = get_close_matches(suite, list(task_map), n=2, cutoff=0.75)
         guess = f"; did you mean {' or '.join(f'`{c}`' for c in close)}?" if close else ""
         raise LookupError(f"LIBERO has no suite `{suite}`{guess}\nhint: suites: {', '.join(task_map)}")
     names = task_map[suite]
