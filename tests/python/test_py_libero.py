@@ -37,6 +37,9 @@ from envhub.hosted.libero_spec import action_space, observation_space, outside, 
 # LIBERO's five suites (`libero_task_map`), 10 tasks each but libero_90's 90.
 SUITES = {"libero_spatial": 10, "libero_object": 10, "libero_goal": 10, "libero_10": 10, "libero_90": 90}
 REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED"))
+# robosuite renders offscreen through EGL (Mesa's or a GPU's), as the adapter sets in its workers.
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 HAS_LIBERO_CODE = importlib.util.find_spec("libero") is not None and importlib.util.find_spec("robosuite") is not None
 
 
@@ -201,6 +204,11 @@ def test_action_space_is_robosuites_limits_as_float32():
     assert action_space(-np.ones(7), np.ones(7)) == gym.spaces.Box(-1.0, 1.0, (7,), np.float32)
 
 
+def test_render_mode_is_refused_with_where_the_images_are():
+    with pytest.raises(ValueError, match="render into the observation, `<camera>_image`"):
+        adapter.LiberoAdapter().make("libero_10", envhub.EnvConfig(render_mode="rgb_array"))
+
+
 # This interpreter's verdict ----------------------------------------------------------------
 
 
@@ -268,8 +276,6 @@ def test_first_import_asks_nothing(tmp_path):
 def test_spaces_of_a_real_robosuite_observation():
     """robosuite's own `Lift` (its assets ship with it), rendered offscreen like LIBERO's envs."""
     _libero_code()
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
     import robosuite
 
     env = robosuite.make(

@@ -137,6 +137,12 @@ class LiberoAdapter(EnvAdapter):
         return True, None, None
 
     def make(self, env_id: str, config: Any) -> Any:
+        if config.render_mode is not None:
+            raise ValueError(
+                f"LIBERO envs take no render_mode (got {config.render_mode!r}): their cameras render into "
+                "the observation, `<camera>_image` (uint8, upside down as robosuite renders)\n"
+                "hint: leave render_mode unset; `camera_names`, `camera_heights` and `camera_widths` choose the images"
+            )
         options = dict(config.extra)
         suite, task = split_env_id(env_id, options)
         options.pop("task", None)
