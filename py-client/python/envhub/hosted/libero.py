@@ -1,10 +1,11 @@
 """`libero`: LIBERO's task suites (robosuite 1.4 under the hood), cameras rendered offscreen.
 
 LIBERO needs three things the module check alone does not see, so `availability` checks
-them too: robosuite 1.4 (1.5 changed the API LIBERO uses), its scene assets (meshes,
-textures, scene XMLs: the PyPI packages `hf-libero`/`libero` ship the task files but not the
-assets, which hf-libero downloads from the Hugging Face Hub on first use), and a config file
-(LIBERO asks on stdin where to put it on its first import, which a worker cannot answer).
+them too: robosuite 1.4 (LIBERO is written against its API; hf-libero pins 1.4.0), its scene
+assets (meshes, textures, scene XMLs: the PyPI packages `hf-libero`/`libero` ship the task
+files but not the assets, which hf-libero downloads from the Hugging Face Hub on first use),
+and a config file (LIBERO asks on stdin where to put it on its first import, which a worker
+cannot answer).
 """
 
 from __future__ import annotations
