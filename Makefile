@@ -45,11 +45,13 @@ export VK_ICD_FILENAMES ?= $(abspath $(LAVAPIPE_ICD))
 endif
 # Opt-in LIBERO (`make libero`): an interpreter of its own, since LIBERO needs robosuite 1.4 and
 # mujoco<3.9 while .venv/ pins mujoco 3.17 (requirements-libero.txt says what goes in). Its scene
-# assets come from the Hugging Face Hub (LIBERO's PyPI packages leave them out). Where it is
-# installed, `make py-test` runs tests/python/test_py_libero.py in it as well.
+# assets come from the Hugging Face Hub (LIBERO's PyPI packages leave them out). Once `make
+# libero` succeeded, `make py-test` runs tests/python/test_py_libero.py in it as well.
 LIBERO_VENV := .venv-libero
 LIBERO_VPY := $(LIBERO_VENV)/bin/python
 LIBERO_STAMP := $(LIBERO_VENV)/.installed
+# Written by `make libero` once the adapter is available (assets included).
+LIBERO_READY := $(LIBERO_VENV)/.ready
 LIBERO_PACKAGE := hf-libero==0.1.4
 
 .PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero
@@ -126,6 +128,7 @@ libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
 	echo "$(abspath py-client/python)" > $$($(LIBERO_VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/envhub.pth
 	$(LIBERO_VPY) -c 'from envhub.hosted.libero import main; raise SystemExit(main(download=True))'
 	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
+	touch $(LIBERO_READY)
 
 build: setup
 	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
@@ -171,7 +174,7 @@ py-install: build
 
 py-test: py-install
 	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
-	@if [ -f $(LIBERO_STAMP) ]; then \
+	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \
 	fi

@@ -39,7 +39,7 @@ pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
 
 /// Set (non-empty) to make the LIBERO tests (`tests/python/test_py_libero.py`) fail instead
 /// of skipping when LIBERO or the `libero` adapter is unavailable; `make py-test` sets it
-/// where `make libero` built `.venv-libero/`.
+/// once `make libero` succeeded (LIBERO and its assets in `.venv-libero/`).
 pub const ENVHUB_LIBERO_REQUIRED: &str = "ENVHUB_LIBERO_REQUIRED";
 
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`),
