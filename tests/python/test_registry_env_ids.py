@@ -19,6 +19,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import inspect
+import os
 import re
 from pathlib import Path
 
@@ -236,12 +237,14 @@ def test_maniskill_env_id_exists(entry):
 
 
 @pytest.mark.parametrize("entry", _entries("libero"))
-def test_libero_suite_exists(entry):
+def test_libero_suite_exists(entry, tmp_path, monkeypatch):
     if importlib.util.find_spec("libero") is None:
         pytest.skip("LIBERO is not installed here (`make libero` builds .venv-libero)")
-    from envhub.hosted.libero import ensure_config
+    from envhub.hosted import libero
 
-    ensure_config()  # else LIBERO's first import asks on stdin where its files go
+    if not os.path.isfile(libero._config_file()):
+        monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))  # not the home folder's
+    libero.ensure_config()  # else LIBERO's first import asks on stdin where its files go
     task_map = _import_or_skip("libero.libero.benchmark.libero_suite_task_map", "LIBERO").libero_task_map
     suite = entry["env_id"].partition("/")[0]
     # LIBERO's benchmark dict also lists `libero_100`, which has no tasks: the map is what runs.
