@@ -43,8 +43,18 @@ MANISKILL_STAMP := $(VENV)/.maniskill-installed
 ifneq ($(wildcard $(LAVAPIPE_ICD)),)
 export VK_ICD_FILENAMES ?= $(abspath $(LAVAPIPE_ICD))
 endif
+# Opt-in LIBERO (`make libero`): an interpreter of its own, since LIBERO needs robosuite 1.4 and
+# mujoco<3.9 while .venv/ pins mujoco 3.17 (requirements-libero.txt says what goes in). Its scene
+# assets come from the Hugging Face Hub (LIBERO's PyPI packages leave them out). Once `make
+# libero` succeeded, `make py-test` runs tests/python/test_py_libero.py in it as well.
+LIBERO_VENV := .venv-libero
+LIBERO_VPY := $(LIBERO_VENV)/bin/python
+LIBERO_STAMP := $(LIBERO_VENV)/.installed
+# Written by `make libero` once the adapter is available (assets included).
+LIBERO_READY := $(LIBERO_VENV)/.ready
+LIBERO_PACKAGE := hf-libero==0.1.4
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -53,6 +63,7 @@ help:
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
+	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
 
 $(VENV_STAMP): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -102,6 +113,23 @@ $(LAVAPIPE_ICD):
 maniskill: $(MANISKILL_STAMP) $(LAVAPIPE_ICD)
 	VK_ICD_FILENAMES=$(abspath $(LAVAPIPE_ICD)) $(VPY) -c 'import gymnasium as gym, mani_skill.envs; e = gym.make("PickCube-v1", obs_mode="state", sim_backend="cpu", num_envs=1); e.reset(seed=0); e.close(); print("ManiSkill runs: PickCube-v1 on the CPU simulator")'
 
+# hf-libero without its declared dependencies: they add its training stack (wandb,
+# transformers, robomimic), which the envs never import.
+$(LIBERO_STAMP): requirements-libero.txt
+	$(PYTHON) -m venv $(LIBERO_VENV)
+	$(LIBERO_VPY) -m pip install --quiet --upgrade pip
+	$(LIBERO_VPY) -m pip install --quiet -r requirements-libero.txt
+	$(LIBERO_VPY) -m pip install --quiet --no-deps $(LIBERO_PACKAGE)
+	touch $@
+
+# The `envhub` package (the one `make py-install` built, same Python version) on its path, the
+# assets, then the adapter's verdict as the hub sees it (through ENVHUB_PYTHON).
+libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
+	echo "$(abspath py-client/python)" > $$($(LIBERO_VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/envhub.pth
+	$(LIBERO_VPY) -c 'from envhub.hosted.libero import main; raise SystemExit(main(download=True))'
+	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
+	touch $(LIBERO_READY)
+
 build: setup
 	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
 
@@ -146,12 +174,16 @@ py-install: build
 
 py-test: py-install
 	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	@if [ -f $(LIBERO_READY) ]; then \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
+			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \
+	fi
 
 test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) .build
+	rm -rf $(VENV) $(LIBERO_VENV) .build
 
 # Data-plane figures, each line one `envhub bench` run (hub vs in-process in the same run).
 BENCH_SECONDS ?= 2

@@ -37,6 +37,11 @@ pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 /// `make py-test` set it.
 pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
 
+/// Set (non-empty) to make the LIBERO tests (`tests/python/test_py_libero.py`) fail instead
+/// of skipping when LIBERO or the `libero` adapter is unavailable; `make py-test` sets it
+/// once `make libero` succeeded (LIBERO and its assets in `.venv-libero/`).
+pub const ENVHUB_LIBERO_REQUIRED: &str = "ENVHUB_LIBERO_REQUIRED";
+
 /// User adapter classes for Python workers, comma-separated import paths (`my_pkg.sim:MyAdapter`)
 /// or `pickle:/path` (a class pickled by value, for one defined in a script's `__main__`), in
 /// addition to the config's `adapters:`. `envhub.AdapterRegistry().register` sets it.

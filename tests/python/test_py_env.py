@@ -330,6 +330,52 @@ def test_gymnasium_specs_carry_the_episode_limit():
     assert spec.nondeterministic == ref.nondeterministic
 
 
+RAPIER_LIMITS = {"rapier-arm-reach": 50, "rapier-arm-push": 100, "rapier-ant-run": 1000, "rapier-rover-terrain": 500}
+
+
+@pytest.mark.parametrize(("entry_id", "limit"), RAPIER_LIMITS.items())
+def test_gymnasium_specs_carry_the_rapier_tasks_limits(entry_id, limit):
+    """The registry's limit for a rapier task is the adapter's own (the worker reports it),
+    and the Gymnasium spec carries it."""
+    assert gymnasium.spec(f"envhub/{entry_id}").max_episode_steps == limit
+    env = envhub.make(entry_id, max_episode_steps=0)  # 0: the env's own default, as the worker has it
+    try:
+        assert env.max_episode_steps == limit
+    finally:
+        env.close()
+
+
+ROBOTICS_IDS = [
+    ("fetch-reach", "FetchReach-v4"),
+    ("hand-manipulate-pen", "HandManipulatePen-v1"),
+    ("adroit-door", "AdroitHandDoor-v1"),
+    ("point-maze-medium", "PointMaze_Medium-v3"),
+    ("ant-maze-umaze", "AntMaze_UMaze-v5"),
+    ("franka-kitchen", "FrankaKitchen-v1"),
+]
+
+
+@pytest.mark.parametrize(("entry_id", "gym_id"), ROBOTICS_IDS)
+def test_gymnasium_specs_carry_gymnasium_robotics_limits(entry_id, gym_id):
+    """Gymnasium-Robotics ids are not in Gymnasium's registry when `envhub` registers its ids;
+    their entries carry the limits Gymnasium-Robotics registers."""
+    spec = gymnasium.spec(f"envhub/{entry_id}")
+    assert spec.max_episode_steps is not None
+    robotics = pytest.importorskip("gymnasium_robotics")
+    gymnasium.register_envs(robotics)
+    assert spec.max_episode_steps == gymnasium.spec(gym_id).max_episode_steps
+
+
+def test_every_catalog_spec_has_a_limit_but_libero_isaac_and_maniskill():
+    """Only frameworks whose limits envhub cannot know without their packages (and that the
+    entries do not state) leave `max_episode_steps` out of the spec."""
+    unlimited = sorted(
+        e.id for e in envhub.EnvRegistry() if gymnasium.spec(f"envhub/{e.id}").max_episode_steps is None
+    )
+    frameworks = {envhub.EnvRegistry().get(i).framework for i in unlimited}
+    assert frameworks <= {"maniskill", "isaac_lab"}, unlimited
+
+
 def _truncation_step(env, steps=600):
     """The step (1-based) at which an episode of `env` truncates, pushing the pole upright
     so that it does not terminate first; None if it does not within `steps`."""
