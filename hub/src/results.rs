@@ -166,13 +166,22 @@ impl VecEnv {
     /// Handles a worker failure: restarts it if allowed (its envs reset into the same slot),
     /// else ends the session and returns the error.
     pub(crate) fn recover(&mut self, i: usize, err: HubError) -> Result<(), HubError> {
-        if !matches!(err, HubError::WorkerDied { .. }) || !self.options.restart_on_crash {
+        let recoverable = matches!(err, HubError::WorkerDied { .. } | HubError::HubLost { .. });
+        if !recoverable || !self.options.restart_on_crash {
             return Err(self.give_up(err));
         }
-        tracing::warn!(worker = i, error = %err, "restarting worker");
-        let policy = self.options.wait_policy(self.workers.len());
         let (slot, sent) = (self.workers[i].slot, self.workers[i].sent.clone());
-        self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
+        if self.workers[i].remote_conn().is_some() {
+            tracing::warn!(worker = i, error = %err, "placing a lost hub's envs again");
+            if let Err(e) = self.place_again(i) {
+                tracing::warn!(error = %e, "could not place them again");
+                return Err(self.give_up(err));
+            }
+        } else {
+            tracing::warn!(worker = i, error = %err, "restarting worker");
+            let policy = self.options.wait_policy(self.workers.len());
+            self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
+        }
         let n = self.workers[i].job.num_envs;
         self.workers[i].send_reset(slot, &vec![None; n], None, "")?;
         self.workers[i].sent(slot, sent);
@@ -268,6 +277,7 @@ impl VecEnv {
             for (i, parsed) in infos {
                 let w = &mut self.workers[i];
                 let restarted = std::mem::take(&mut w.restarted);
+                let lost_hub = w.lost_hub.take();
                 for (k, _) in w.sent.iter().enumerate() {
                     let env_in_worker = w.sent[k] - w.job.env_offset;
                     let mut info = parsed
@@ -278,6 +288,9 @@ impl VecEnv {
                         let mut map = info.as_object().cloned().unwrap_or_default();
                         map.insert("worker_restarted".into(), true.into());
                         map.insert("worker_restarts".into(), w.restarts.into());
+                        if let Some(hub) = &lost_hub {
+                            map.insert("hub_lost".into(), hub.clone().into());
+                        }
                         info = serde_json::Value::Object(map);
                     }
                     self.results.infos.push(info);

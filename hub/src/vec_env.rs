@@ -382,6 +382,72 @@ impl VecEnv {
         })
     }
 
+    /// Opens a lost remote slice's envs again on another live hub of this session (the one
+    /// hosting the fewest of its envs), connected as the same link.
+    pub(crate) fn place_again(&mut self, i: usize) -> Result<(), HubError> {
+        let w = &self.workers[i];
+        let remote = w.remote_conn().expect("a remote link");
+        let (lost, network, inbox) = (
+            remote.hub.clone(),
+            remote.network().clone(),
+            remote.inbox().clone(),
+        );
+        let mut load: Vec<(String, usize)> = Vec::new();
+        for other in &self.workers {
+            if let Some(r) = other.remote_conn()
+                && r.hub != lost
+                && network.is_alive(&r.hub)
+            {
+                match load.iter_mut().find(|(h, _)| *h == r.hub) {
+                    Some((_, n)) => *n += other.job.num_envs,
+                    None => load.push((r.hub.clone(), other.job.num_envs)),
+                }
+            }
+        }
+        let Some((target, _)) = load.into_iter().min_by_key(|(_, n)| *n) else {
+            return Err(HubError::HubLost {
+                hub: lost,
+                envs: crate::worker_link::env_range(&w.job),
+                why: "no other hub of the session is live to take its envs".into(),
+            });
+        };
+        let n = w.job.num_envs;
+        let request = OpenRequest {
+            id: self.id.clone(),
+            config: w.job.config.clone(),
+            client: network.client_id().to_string(),
+            restart_on_crash: true,
+            step_timeout_ms: self.options.step_timeout.as_millis() as u64,
+        };
+        let reply = network.open_session(&target, &request, self.options.start_timeout)?;
+        if reply.spec.observation_space != self.observation_space
+            || reply.spec.action_space != self.action_space
+        {
+            return Err(HubError::InvalidState(format!(
+                "hub `{target}` runs `{}` with other spaces than the session's",
+                self.id
+            )));
+        }
+        let rows_layout = BatchLayout::new(
+            n,
+            self.observation_space.byte_len(),
+            self.autoreset_mode() == AutoresetMode::SameStep,
+        );
+        let conn = RemoteConn::connect(
+            network,
+            inbox,
+            i,
+            &target,
+            &reply.session,
+            n,
+            self.action_space.byte_len(),
+            rows_layout,
+        )?;
+        tracing::warn!(lost = %lost, to = %target, envs = n, "envs placed again");
+        self.workers[i].replace_remote(reply.spec, conn, lost);
+        Ok(())
+    }
+
     /// The hubs this session runs on, with the env range each hosts (`local`: this machine).
     pub fn placement(&self) -> Vec<(String, std::ops::Range<usize>)> {
         let mut out: Vec<(String, std::ops::Range<usize>)> = Vec::new();
@@ -726,7 +792,10 @@ impl VecEnv {
     /// After a worker died (without restart) or the caller interrupted a wait: the session is
     /// over. Kills what is left, removes its shared memory, and passes the error on.
     pub(crate) fn give_up(&mut self, err: HubError) -> HubError {
-        if matches!(err, HubError::WorkerDied { .. } | HubError::Interrupted) {
+        if matches!(
+            err,
+            HubError::WorkerDied { .. } | HubError::HubLost { .. } | HubError::Interrupted
+        ) {
             self.abort();
         }
         err

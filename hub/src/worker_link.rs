@@ -86,6 +86,9 @@ pub(crate) struct WorkerLink {
     pub restarted: bool,
     /// Restarts so far.
     pub restarts: u32,
+    /// The hub this remote slice was lost on, since the last results were read (its envs
+    /// were placed again elsewhere).
+    pub lost_hub: Option<String>,
 }
 
 impl WorkerLink {
@@ -142,6 +145,7 @@ impl WorkerLink {
             sent_at: Instant::now(),
             restarted: false,
             restarts: 0,
+            lost_hub: None,
         })
     }
 
@@ -159,7 +163,20 @@ impl WorkerLink {
             sent_at: Instant::now(),
             restarted: false,
             restarts: 0,
+            lost_hub: None,
         }
+    }
+
+    /// Replaces a lost remote slice by `conn` (the same envs, opened on another hub): its
+    /// envs come back reset, truncated, with the loss in their info.
+    pub fn replace_remote(&mut self, spec: ReadySpec, conn: RemoteConn, lost: String) {
+        self.conn = Conn::Remote(conn);
+        self.spec = spec;
+        self.pending = false;
+        self.response = None;
+        self.restarts += 1;
+        self.restarted = true;
+        self.lost_hub = Some(lost);
     }
 
     /// The worker's pid (on its hub's machine for a remote slice).

@@ -474,3 +474,62 @@ fn hubs_list_their_info_and_unknown_names_get_the_closest() {
             .any(|x| x.name == "classic_control")
     );
 }
+
+#[test]
+fn with_restart_on_crash_a_lost_hub_s_envs_move_to_the_hubs_that_remain() {
+    let a = RemoteHub::start("ra", &[], &[]);
+    let b = RemoteHub::start("rb", &[], &[]);
+    let hub = client("replace", &[&a, &b]);
+    let options = envhub::SessionOptions {
+        restart_on_crash: true,
+        ..hub.options().clone()
+    };
+    let hub = hub.with_options(options);
+    let mut env = hub
+        .make_vec_on("gym-cartpole", 4, &EnvConfig::default(), &hubs(&[&a, &b]))
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+    let actions = [0u8; 32];
+    env.step(&actions).unwrap();
+    let endpoint = b.endpoint.clone();
+    sigkill(b.pid());
+    let start = Instant::now();
+    // Steps go on; the first one after the loss brings envs 2..4 back reset and truncated.
+    let moved = loop {
+        let batch = env.step(&actions).unwrap();
+        if batch.truncated[2] && batch.truncated[3] {
+            break (0..4).map(|k| batch.info(k).clone()).collect::<Vec<_>>();
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "the envs never moved"
+        );
+    };
+    assert_eq!(moved[2]["hub_lost"], "rb", "{:?}", moved[2]);
+    assert_eq!(moved[3]["worker_restarted"], true, "{:?}", moved[3]);
+    assert!(moved[0].get("hub_lost").is_none(), "{:?}", moved[0]);
+    assert_eq!(
+        env.placement(),
+        vec![("ra".to_string(), 0..4)],
+        "envs 2..4 now run on ra"
+    );
+    for _ in 0..20 {
+        env.step(&actions).unwrap();
+    }
+    drop(b);
+    // A hub that comes back is live again.
+    let _b = RemoteHub::start_at("rb", &endpoint, &[], &[]);
+    let start = Instant::now();
+    loop {
+        let names: Vec<String> = hub.hubs().unwrap().into_iter().map(|h| h.name).collect();
+        if names.contains(&"rb".to_string()) {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "rb is not live again: {names:?}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    eprintln!("rb live again {:?} after it restarted", start.elapsed());
+}

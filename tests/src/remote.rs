@@ -34,15 +34,21 @@ impl RemoteHub {
     /// Starts hub `name` listening on a free loopback port, with `args` added to `serve`
     /// and `vars` to its environment; returns once it is on the network.
     pub fn start(name: &str, args: &[&str], vars: &[(&str, &str)]) -> RemoteHub {
+        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        RemoteHub::start_at(name, &endpoint, args, vars)
+    }
+
+    /// [`RemoteHub::start`] on a given endpoint (a hub that comes back where it was).
+    pub fn start_at(name: &str, endpoint: &str, args: &[&str], vars: &[(&str, &str)]) -> RemoteHub {
         let tag = format!("{name}-{}-{}", std::process::id(), free_port());
         let dir = std::env::temp_dir().join(format!("e2e-hub-{tag}"));
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+        let endpoint = endpoint.to_string();
         let namespace = format!("e2e_hub_{}_", tag.replace('-', "_"));
         let mut child = Command::new(binary("envhub"))
             .args(["serve", "--socket"])
             .arg(dir.join("hub.sock"))
-            .args(["--name", name, "--listen", &endpoint])
+            .args(["--name", name, "--listen", endpoint.as_str()])
             .args(args)
             .env("ENVHUB_NAMESPACE", &namespace)
             .env(envhub::ENVHUB_MULTICAST, "0")

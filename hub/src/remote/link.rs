@@ -73,6 +73,9 @@ impl RemoteConn {
             .wait()
             .map_err(failed)?;
         network.watch(&inbox);
+        // A link placed again keeps its mailbox: what the lost hub sent last must not pass
+        // for an answer of the new one.
+        while inbox.take(link).is_some() {}
         Ok(RemoteConn {
             hub: hub.to_string(),
             session: session.to_string(),
@@ -129,6 +132,16 @@ impl RemoteConn {
             }
         }
         Ok(None)
+    }
+
+    /// The network this slice is reached over.
+    pub fn network(&self) -> &Arc<Network> {
+        &self.network
+    }
+
+    /// The session's inbox.
+    pub fn inbox(&self) -> &Arc<Inbox> {
+        &self.inbox
     }
 
     /// Whether the hub still holds its token.
