@@ -26,6 +26,7 @@ import hashlib
 import io
 import os
 import shutil
+import stat
 import subprocess
 import sys
 import sysconfig
@@ -160,7 +161,8 @@ def build(target: Path, out: Path) -> Path:
             def add(arc: str, data: bytes, executable: bool) -> None:
                 info = zipfile.ZipInfo(arc, date_time=EPOCH)
                 info.compress_type = zipfile.ZIP_DEFLATED
-                info.external_attr = (0o755 if executable else 0o644) << 16
+                # A regular file's mode: pip makes it executable only with S_IFREG set.
+                info.external_attr = (stat.S_IFREG | (0o755 if executable else 0o644)) << 16
                 zf.writestr(info, data)
                 digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=")
                 writer.writerow([arc, f"sha256={digest.decode()}", len(data)])
@@ -170,7 +172,9 @@ def build(target: Path, out: Path) -> Path:
             for arc, text in generated.items():
                 add(arc, text.encode(), False)
             writer.writerow([f"{dist_info}/RECORD", "", ""])
-            zf.writestr(zipfile.ZipInfo(f"{dist_info}/RECORD", date_time=EPOCH), record.getvalue())
+            info = zipfile.ZipInfo(f"{dist_info}/RECORD", date_time=EPOCH)
+            info.external_attr = (stat.S_IFREG | 0o644) << 16
+            zf.writestr(info, record.getvalue())
         partial.replace(wheel)
     return wheel
 
