@@ -154,7 +154,11 @@ impl Registry {
     pub fn builtin() -> Registry {
         let mut registry = Registry::default();
         registry
-            .add_yaml(DEFAULT_REGISTRY, &builtin_name(), &crate::builtin_assets::builtin_dir())
+            .add_yaml(
+                DEFAULT_REGISTRY,
+                &builtin_name(),
+                &crate::builtin_assets::builtin_dir(),
+            )
             .expect("the built-in registry is valid (checked by tests)");
         registry
     }
@@ -168,7 +172,11 @@ impl Registry {
         for path in paths {
             let path = path.as_ref();
             if path == Path::new(DEFAULT_REGISTRY_NAME) {
-                registry.add_yaml(DEFAULT_REGISTRY, &builtin_name(), &crate::builtin_assets::builtin_dir())?;
+                registry.add_yaml(
+                    DEFAULT_REGISTRY,
+                    &builtin_name(),
+                    &crate::builtin_assets::builtin_dir(),
+                )?;
                 continue;
             }
             let text = std::fs::read_to_string(path).map_err(|source| RegistryError::Read {

@@ -48,10 +48,7 @@ pub fn locate() -> Result<PathBuf, Missing> {
             Ok(dir)
         } else {
             Err(Missing {
-                reason: format!(
-                    "{ENVHUB_MUJOCO_LIB}=`{}` has no `{want}`",
-                    dir.display()
-                ),
+                reason: format!("{ENVHUB_MUJOCO_LIB}=`{}` has no `{want}`", dir.display()),
                 hint: HINT.into(),
             })
         };
@@ -136,9 +133,10 @@ pub fn hand_over() -> Missing {
             reason: format!(
                 "this `envhub-worker` was built without the `mujoco` feature (no `{MUJOCO_WORKER}` beside it)"
             ),
-            hint: "run `make build` (it builds with `--features envhub-worker/mujoco`), or install \
+            hint:
+                "run `make build` (it builds with `--features envhub-worker/mujoco`), or install \
                    with `cargo install --path hub --features worker`"
-                .into(),
+                    .into(),
         };
     };
     let dir = match locate() {
@@ -156,6 +154,8 @@ pub fn hand_over() -> Missing {
         .exec();
     Missing {
         reason: format!("cannot start `{}`: {err}", full.display()),
-        hint: format!("reinstall envhub: `{MUJOCO_WORKER}` must be an executable beside `envhub-worker`"),
+        hint: format!(
+            "reinstall envhub: `{MUJOCO_WORKER}` must be an executable beside `envhub-worker`"
+        ),
     }
 }

@@ -74,7 +74,11 @@ impl EnvAdapter for Unlinked {
     }
 
     fn list_envs(&self) -> Vec<String> {
-        self.info.env_ids.iter().map(|(id, _)| id.to_string()).collect()
+        self.info
+            .env_ids
+            .iter()
+            .map(|(id, _)| id.to_string())
+            .collect()
     }
 
     fn supports(&self, env_id: &str) -> bool {
