@@ -172,6 +172,11 @@ def test_python_make_vec_steps_mujoco_ant(venv):
             obs, reward, terminated, truncated, _ = envs.step(envs.action_space.sample())
         assert obs.shape == (8, 105) and np.isfinite(obs).all()
         envs.close()
+        # The built-in catalog's own model file (written out of the binary, no source tree).
+        env = envhub.make("custom-mjcf-planar-walker")
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        env.close()
         print("ok")
         """
         % str(venv)
