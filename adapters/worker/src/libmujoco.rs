@@ -124,21 +124,21 @@ fn mujoco_package(python: &Path) -> Result<PathBuf, Missing> {
 /// with libmujoco's folder first on `LD_LIBRARY_PATH`; returns only when that cannot be done,
 /// saying why.
 pub fn hand_over() -> Missing {
-    let Some(full) = std::env::current_exe()
-        .ok()
-        .and_then(|exe| Some(exe.parent()?.join(MUJOCO_WORKER)))
-        .filter(|p| p.is_file())
-    else {
+    let exe = std::env::current_exe().unwrap_or_default();
+    let full = exe.with_file_name(MUJOCO_WORKER);
+    if !full.is_file() {
         return Missing {
             reason: format!(
-                "this `envhub-worker` was built without the `mujoco` feature (no `{MUJOCO_WORKER}` beside it)"
+                "no `{MUJOCO_WORKER}` beside `{}` (built without the `mujoco` feature, or a worker copied alone)",
+                exe.display()
             ),
             hint:
                 "run `make build` (it builds with `--features envhub-worker/mujoco`), or install \
-                   with `cargo install --path hub --features worker`"
+                   with `cargo install --path hub --features worker`; a worker named by \
+                   ENVHUB_WORKER needs `envhub-worker-mujoco` beside it"
                     .into(),
         };
-    };
+    }
     let dir = match locate() {
         Ok(dir) => dir,
         Err(missing) => return missing,

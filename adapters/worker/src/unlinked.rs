@@ -93,3 +93,34 @@ impl EnvAdapter for Unlinked {
         Err(self.check(env_id))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lists_the_envs_and_says_why_it_cannot_make_them() {
+        let [mujoco, custom] = Unlinked::both("libmujoco 3.17.0 not found", "pip install it");
+        assert_eq!((mujoco.name(), custom.name()), ("mujoco", "custom_mjcf"));
+        assert!(mujoco.list_envs().contains(&"Ant-v5".to_string()));
+        assert!(custom.supports("AnyModel-v0") && !mujoco.supports("AnyModel-v0"));
+        let err = mujoco
+            .make("Ant-v5", &EnvConfig::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("libmujoco 3.17.0 not found") && err.contains("pip install it"),
+            "{err}"
+        );
+        let err = mujoco
+            .spec("Ant-v4", &EnvConfig::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("Ant-v5"),
+            "an unknown id names the closest: {err}"
+        );
+    }
+}
