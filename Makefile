@@ -30,6 +30,13 @@ FEATURES := --features envhub-worker/mujoco
 export PYO3_PYTHON := $(abspath $(VPY))
 export PYO3_BUILD_EXTENSION_MODULE := 1
 PROFILE := --release
+# No path of the build machine in a binary (wheels and `cargo install`ed binaries run
+# elsewhere): panic locations and debug info name the repository's files relative to it and
+# crates.io's as `index.crates.io-*/crate-x.y/...` (cargo's `trim-paths` does this but is
+# unstable in Rust 1.95). Running cargo by hand without the same RUSTFLAGS rebuilds the tree:
+# `eval "$$(make -s env)"` exports what the Makefile does.
+CARGO_HOME_DIR := $(or $(CARGO_HOME),$(HOME)/.cargo)
+export RUSTFLAGS := --remap-path-prefix=$(CURDIR)/= --remap-path-prefix=$(CARGO_HOME_DIR)/registry/src/= --remap-path-prefix=$(CARGO_HOME_DIR)/git/checkouts/=
 # Offscreen rendering without a GPU: Mesa's software EGL (Debian packages).
 MESA_PACKAGES := libegl1 libegl-mesa0 libgl1-mesa-dri
 MESA_STAMP := .build/mesa.installed
@@ -54,7 +61,7 @@ LIBERO_STAMP := $(LIBERO_VENV)/.installed
 LIBERO_READY := $(LIBERO_VENV)/.ready
 LIBERO_PACKAGE := hf-libero==0.1.4
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -62,6 +69,7 @@ help:
 	@echo "make lint   cargo fmt --check and clippy -D warnings"
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
+	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
 
@@ -81,13 +89,19 @@ $(MUJOCO_LIB): $(VENV_STAMP)
 	cp "$$src" $@.tmp && mv $@.tmp $@
 	cp $@ $(MUJOCO_LIB_DIR)/libmujoco.so
 
-# Mesa's software EGL for `render_mode="rgb_array"`, installed only where missing.
+# Mesa's software EGL for `render_mode="rgb_array"`, installed only where missing. Installing
+# needs root (CI runs as root); without it the set-up goes on and says what to install (only
+# offscreen rendering needs it, and its error at run time says so too).
 $(MESA_STAMP):
 	mkdir -p $(dir $@)
-	if ! dpkg -s $(MESA_PACKAGES) >/dev/null 2>&1; then \
-		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(MESA_PACKAGES); \
+	if dpkg -s $(MESA_PACKAGES) >/dev/null 2>&1; then \
+		touch $@; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(MESA_PACKAGES) && touch $@; \
+	else \
+		echo "note: skipped Mesa's software EGL ($(MESA_PACKAGES)): installing it needs root and apt-get;" >&2; \
+		echo "      rgb_array rendering without a GPU needs it: sudo apt-get install $(MESA_PACKAGES)" >&2; \
 	fi
-	touch $@
 
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
 
@@ -159,7 +173,8 @@ rust-test: setup py-install
 
 # The Python package `envhub` into .venv/, editable: the extension module `make build`
 # compiled goes next to the pure-Python sources, which a .pth file puts on the venv's path,
-# and the release worker goes beside them (maturin, through pyproject.toml, builds wheels).
+# and the release binaries go into its bin/, as in the wheel (`make wheel`).
+PY_BINARIES := envhub envhub-worker envhub-worker-mujoco
 PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 PY_EXT_SUFFIX = $(shell $(VPY) -c 'import importlib.machinery as m; print(m.EXTENSION_SUFFIXES[0])')
 py-install: build
@@ -169,8 +184,14 @@ py-install: build
 	$(VPY) -m pip uninstall --quiet --yes envhub 2>/dev/null || true
 	echo "$(abspath py-client/python)" > $(PY_SITE)/envhub.pth
 	mkdir -p py-client/python/envhub/bin
-	cp target/release/envhub-worker py-client/python/envhub/bin/envhub-worker.tmp
-	mv -f py-client/python/envhub/bin/envhub-worker.tmp py-client/python/envhub/bin/envhub-worker
+	for b in $(PY_BINARIES); do \
+		cp target/release/$$b py-client/python/envhub/bin/$$b.tmp && mv -f py-client/python/envhub/bin/$$b.tmp py-client/python/envhub/bin/$$b; \
+	done
+
+# The wheel: the package, the extension module and the binaries of `make build`, zipped by
+# py-client/build_wheel.py (no second compile, unlike `maturin build`; see the script).
+wheel: build
+	$(VPY) py-client/build_wheel.py --out dist
 
 py-test: py-install
 	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
@@ -183,7 +204,12 @@ test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) $(LIBERO_VENV) .build
+	rm -rf $(VENV) $(LIBERO_VENV) .build dist
+
+# The variables cargo sees here, for running it by hand: `eval "$$(make -s env)"`.
+env:
+	@echo "export PYO3_PYTHON='$(PYO3_PYTHON)' PYO3_BUILD_EXTENSION_MODULE=1 ENVHUB_PYTHON='$(ENVHUB_PYTHON)'"
+	@echo "export RUSTFLAGS='$(RUSTFLAGS)'"
 
 # Data-plane figures, each line one `envhub bench` run (hub vs in-process in the same run).
 BENCH_SECONDS ?= 2

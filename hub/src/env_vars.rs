@@ -13,6 +13,10 @@ pub const ENVHUB_LOG: &str = "ENVHUB_LOG";
 /// Path of the `envhub-worker` binary (default: next to `envhub`, then `PATH`).
 pub const ENVHUB_WORKER: &str = "ENVHUB_WORKER";
 
+/// A folder holding `libmujoco.so.3.17.0` for the MuJoCo adapters, instead of the `mujoco`
+/// package of the `ENVHUB_PYTHON` interpreter (read by `envhub-worker`).
+pub const ENVHUB_MUJOCO_LIB: &str = "ENVHUB_MUJOCO_LIB";
+
 /// iceoryx2 namespace (file prefix) for this process's sessions; tests set a unique one.
 pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
 
@@ -20,7 +24,8 @@ pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
 pub const ENVHUB_HUB: &str = "ENVHUB_HUB";
 
 /// Python interpreter that runs Python-hosted adapters (`python -m envhub.worker`) and whose
-/// packages the adapters use (Gymnasium's MuJoCo assets), and that the
+/// packages the adapters use (Gymnasium's MuJoCo assets, the `mujoco` wheel's libmujoco), and
+/// that the
 /// parity tests compare against (default: the project's `.venv/bin/python`).
 pub const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
 

@@ -8,6 +8,7 @@
 mod async_step;
 mod batch;
 mod bounded;
+mod builtin_assets;
 mod catalog;
 mod daemon;
 mod daemon_client;

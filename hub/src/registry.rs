@@ -154,7 +154,11 @@ impl Registry {
     pub fn builtin() -> Registry {
         let mut registry = Registry::default();
         registry
-            .add_yaml(DEFAULT_REGISTRY, &builtin_name(), &builtin_dir())
+            .add_yaml(
+                DEFAULT_REGISTRY,
+                &builtin_name(),
+                &crate::builtin_assets::builtin_dir(),
+            )
             .expect("the built-in registry is valid (checked by tests)");
         registry
     }
@@ -176,7 +180,11 @@ impl Registry {
         for path in paths {
             let path = path.as_ref();
             if path == Path::new(DEFAULT_REGISTRY_NAME) {
-                registry.add_yaml(DEFAULT_REGISTRY, &builtin_name(), &builtin_dir())?;
+                registry.add_yaml(
+                    DEFAULT_REGISTRY,
+                    &builtin_name(),
+                    &crate::builtin_assets::builtin_dir(),
+                )?;
                 continue;
             }
             let text = std::fs::read_to_string(path).map_err(|source| RegistryError::Read {
@@ -320,12 +328,6 @@ impl Registry {
 
 fn builtin_name() -> String {
     format!("configs/env_registry.yaml ({DEFAULT_REGISTRY_NAME})")
-}
-
-/// Where the built-in catalog's relative asset paths point: the `configs` folder of the
-/// source tree the binary was built from.
-fn builtin_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs")
 }
 
 fn contains_ci(haystack: &str, needle: &str) -> bool {

@@ -23,8 +23,10 @@ def test_mujoco_assets_come_from_the_clients_interpreter(tmp_path):
     (fake / "python3").chmod(0o755)
     # The worker away from the repository's .venv (as in an installed package), so that only
     # the hub can tell it which interpreter to use.
+    # (`envhub-worker` hands over to `envhub-worker-mujoco` beside it.)
     worker = tmp_path / "envhub-worker"
-    shutil.copy(Path(envhub.__file__).parent / "bin" / "envhub-worker", worker)
+    for name in ("envhub-worker", "envhub-worker-mujoco"):
+        shutil.copy(Path(envhub.__file__).parent / "bin" / name, tmp_path / name)
     env = {k: v for k, v in os.environ.items() if k != "ENVHUB_PYTHON"}
     env["PATH"] = f"{fake}:{env.get('PATH', '')}"
     env["ENVHUB_WORKER"] = str(worker)

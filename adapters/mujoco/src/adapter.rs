@@ -6,6 +6,9 @@ use envhub_core::{Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec};
 /// The only render mode (both adapters draw it).
 pub(crate) const RGB_ARRAY: &str = "rgb_array";
 
+/// The libmujoco version this crate binds (mujoco-rs 7.0), the `mujoco` wheel's version too.
+pub const LIBMUJOCO_VERSION: &str = "3.17.0";
+
 /// Every env id of the `mujoco` adapter, with Gymnasium's registered episode limit. The same
 /// list as `tasks::ENVS` (a test checks), kept here so that a build without libmujoco can
 /// still say which envs it would run.
@@ -22,6 +25,55 @@ const ENV_IDS: &[(&str, u32)] = &[
     ("InvertedPendulum-v5", 1000),
     ("InvertedDoublePendulum-v5", 1000),
 ];
+
+/// What one of the two adapters says about itself, as a constant. `envhub-worker`, which
+/// links no libmujoco so that it starts where the library is missing, describes the adapters
+/// from these: it may take only constants from this crate (they are copied into the binary),
+/// since calling any of its code would link libmujoco into it.
+pub struct AdapterInfo {
+    /// [`EnvAdapter::name`].
+    pub name: &'static str,
+    /// [`EnvAdapter::frameworks`].
+    pub frameworks: &'static [&'static str],
+    /// [`EnvAdapter::requires`].
+    pub requires: &'static [&'static str],
+    /// [`EnvAdapter::description`].
+    pub description: &'static str,
+    /// [`EnvAdapter::render_modes`].
+    pub render_modes: &'static [&'static str],
+    /// [`EnvAdapter::list_envs`], with each env's episode limit.
+    pub env_ids: &'static [(&'static str, u32)],
+    /// Whether any env id is accepted ([`EnvAdapter::supports`]): the model comes from
+    /// `asset_path`.
+    pub any_env_id: bool,
+}
+
+/// The `mujoco` adapter's self-description.
+pub const MUJOCO_INFO: AdapterInfo = AdapterInfo {
+    name: "mujoco",
+    frameworks: &["gymnasium"],
+    requires: &[
+        "libmujoco 3.17.0 (`pip install 'envhub[mujoco]'`; in the repository `make build`)",
+        "python: gymnasium 1.4 (for its MJCF assets)",
+    ],
+    description: "Gymnasium 1.4 MuJoCo v5 suite (Ant, HalfCheetah, Hopper, Humanoid, ...), native on MuJoCo 3.17",
+    render_modes: &[RGB_ARRAY],
+    env_ids: ENV_IDS,
+    any_env_id: false,
+};
+
+/// The `custom_mjcf` adapter's self-description.
+pub const CUSTOM_MJCF_INFO: AdapterInfo = AdapterInfo {
+    name: "custom_mjcf",
+    frameworks: &["custom_mjcf"],
+    requires: &[
+        "libmujoco 3.17.0 (`pip install 'envhub[mujoco]'`; in the repository `make build`)",
+    ],
+    description: "any MJCF or URDF model (`asset_path`) on MuJoCo 3.17: obs qpos+qvel, action scaled ctrl",
+    render_modes: &[RGB_ARRAY],
+    env_ids: &[],
+    any_env_id: true,
+};
 
 /// Gymnasium 1.4's MuJoCo `-v5` envs, stepped natively on libmujoco 3.17 with Gymnasium's own
 /// model files. Available when the worker links libmujoco and the `gymnasium` package (for its
@@ -76,22 +128,19 @@ impl Mujoco {
 
 impl EnvAdapter for Mujoco {
     fn name(&self) -> &'static str {
-        "mujoco"
+        MUJOCO_INFO.name
     }
 
     fn frameworks(&self) -> &'static [&'static str] {
-        &["gymnasium"]
+        MUJOCO_INFO.frameworks
     }
 
     fn requires(&self) -> &'static [&'static str] {
-        &[
-            "libmujoco 3.17.0 (`make build`)",
-            "python: gymnasium 1.4 (for its MJCF assets)",
-        ]
+        MUJOCO_INFO.requires
     }
 
     fn description(&self) -> &'static str {
-        "Gymnasium 1.4 MuJoCo v5 suite (Ant, HalfCheetah, Hopper, Humanoid, ...), native on MuJoCo 3.17"
+        MUJOCO_INFO.description
     }
 
     fn availability(&self) -> Availability {
@@ -163,19 +212,19 @@ impl CustomMjcf {
 
 impl EnvAdapter for CustomMjcf {
     fn name(&self) -> &'static str {
-        "custom_mjcf"
+        CUSTOM_MJCF_INFO.name
     }
 
     fn frameworks(&self) -> &'static [&'static str] {
-        &["custom_mjcf"]
+        CUSTOM_MJCF_INFO.frameworks
     }
 
     fn requires(&self) -> &'static [&'static str] {
-        &["libmujoco 3.17.0 (`make build`)"]
+        CUSTOM_MJCF_INFO.requires
     }
 
     fn description(&self) -> &'static str {
-        "any MJCF or URDF model (`asset_path`) on MuJoCo 3.17: obs qpos+qvel, action scaled ctrl"
+        CUSTOM_MJCF_INFO.description
     }
 
     fn availability(&self) -> Availability {

@@ -14,9 +14,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
-/// The interpreter variable, shared with the test suites that drive Gymnasium.
-const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";
-
 const HINT: &str = "`make venv` installs gymnasium 1.4 into `.venv/`; or set ENVHUB_PYTHON to a \
                     Python that has it, or give the env an `asset_path`";
 
@@ -24,30 +21,6 @@ const HINT: &str = "`make venv` installs gymnasium 1.4 into `.venv/`; or set ENV
 type Missing = (String, String);
 
 static ASSETS: OnceLock<Result<PathBuf, Missing>> = OnceLock::new();
-
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os(ENVHUB_PYTHON).filter(|p| !p.is_empty()) {
-        return PathBuf::from(p);
-    }
-    let mut starts: Vec<PathBuf> = Vec::new();
-    if let Ok(dir) = std::env::current_dir() {
-        starts.push(dir);
-    }
-    if let Ok(exe) = std::env::current_exe()
-        && let Some(dir) = exe.parent()
-    {
-        starts.push(dir.to_path_buf());
-    }
-    for start in starts {
-        for dir in start.ancestors() {
-            let candidate = dir.join(".venv/bin/python");
-            if candidate.is_file() {
-                return candidate;
-            }
-        }
-    }
-    PathBuf::from("python3")
-}
 
 const PROBE: &str = "\
 import importlib.util, importlib.metadata, os
@@ -61,9 +34,7 @@ print(importlib.metadata.version('gymnasium'))
 /// The assets and version of gymnasium in the `site-packages` of the virtual environment that
 /// `python` belongs to (`<venv>/bin/python`), if it is there.
 fn in_venv(python: &Path) -> Option<(PathBuf, String)> {
-    let venv = python.parent()?.parent()?;
-    for lib in std::fs::read_dir(venv.join("lib")).ok()?.flatten() {
-        let site = lib.path().join("site-packages");
+    for site in envhub_core::venv_site_packages(python) {
         let assets = site.join("gymnasium/envs/mujoco/assets");
         if !assets.join("ant.xml").is_file() {
             continue;
@@ -84,7 +55,7 @@ fn in_venv(python: &Path) -> Option<(PathBuf, String)> {
 }
 
 fn locate() -> Result<PathBuf, Missing> {
-    let python = python();
+    let python = envhub_core::python_interpreter();
     if let Some((dir, version)) = in_venv(&python) {
         warn_version(&version);
         return Ok(dir);

@@ -36,6 +36,8 @@ mod sim;
 #[cfg(feature = "libmujoco")]
 mod tasks;
 
-pub use adapter::{CustomMjcf, Mujoco};
+pub use adapter::{
+    AdapterInfo, CUSTOM_MJCF_INFO, CustomMjcf, LIBMUJOCO_VERSION, MUJOCO_INFO, Mujoco,
+};
 #[cfg(feature = "libmujoco")]
 pub use gym_env::MujocoEnv;

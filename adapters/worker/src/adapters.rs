@@ -1,19 +1,37 @@
 //! Every adapter this worker binary hosts, in one explicit list.
 
 use envhub_core::EnvAdapter;
+use std::sync::OnceLock;
 
 /// Set to `1` to list the test adapters (`null`) in `describe`, hence in the hub's catalog
 /// (`ENVHUB_TEST_ADAPTERS`, declared with the other variables in `envhub::env_vars`).
 const TEST_ADAPTERS_VAR: &str = "ENVHUB_TEST_ADAPTERS";
 
-/// The adapters users see. Adding one is one line here.
-pub fn all() -> Vec<Box<dyn EnvAdapter>> {
+/// The adapters users see, given the two MuJoCo ones (real or [`crate::Unlinked`], as the
+/// binary can host them). Adding one is one line here.
+pub fn native(mujoco: [Box<dyn EnvAdapter>; 2]) -> Vec<Box<dyn EnvAdapter>> {
+    let [mujoco, custom_mjcf] = mujoco;
     vec![
         Box::new(envhub_classic::ClassicControl),
-        Box::new(envhub_mujoco::Mujoco::default()),
-        Box::new(envhub_mujoco::CustomMjcf::default()),
+        mujoco,
+        custom_mjcf,
         Box::new(envhub_rapier::Rapier),
     ]
+}
+
+type AdapterList = Box<dyn Fn() -> Vec<Box<dyn EnvAdapter>> + Send + Sync>;
+
+/// The running binary's list (its `main` sets it before [`crate::run`]).
+static ALL: OnceLock<AdapterList> = OnceLock::new();
+
+/// Sets the adapters this binary hosts, as a function that makes them (each command makes
+/// its own). The first call wins.
+pub fn set_adapters(all: impl Fn() -> Vec<Box<dyn EnvAdapter>> + Send + Sync + 'static) {
+    let _ = ALL.set(Box::new(all));
+}
+
+fn all() -> Vec<Box<dyn EnvAdapter>> {
+    ALL.get().map(|all| all()).unwrap_or_default()
 }
 
 /// Adapters for tests and benches only: served when a job names them, listed only when
