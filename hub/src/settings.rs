@@ -144,3 +144,31 @@ impl Settings {
         Registry::load(&self.registry_paths(explicit))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_zenoh_section_reaches_the_network_settings() {
+        let dir = std::env::temp_dir().join(format!("envhub-settings-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("envhub.yaml");
+        std::fs::write(
+            &path,
+            "zenoh:\n  connect: [tcp/10.0.0.5:7447]\n  config: zenoh.json5\n  multicast: false\n  lease_ms: 1500\n",
+        )
+        .unwrap();
+        let settings = Settings::from_file(&path).unwrap();
+        assert_eq!(settings.zenoh.connect, vec!["tcp/10.0.0.5:7447".to_string()]);
+        assert_eq!(settings.zenoh.config, Some(dir.join("zenoh.json5")));
+        assert_eq!(
+            (settings.zenoh.multicast, settings.zenoh.lease_ms),
+            (Some(false), Some(1500))
+        );
+        std::fs::write(&path, "zenoh:\n  conect: [tcp/10.0.0.5:7447]\n").unwrap();
+        let e = Settings::from_file(&path).unwrap_err().to_string();
+        assert!(e.contains("conect") && e.contains("connect"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

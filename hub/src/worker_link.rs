@@ -16,6 +16,9 @@ use envhub_shm::{
 pub type InterruptCheck = dyn Fn() -> bool + Send + Sync;
 use std::time::{Duration, Instant};
 
+/// Extra wait for a remote slice beyond the step timeout (see [`WorkerLink::wait`]).
+const REMOTE_GRACE: Duration = Duration::from_secs(2);
+
 /// A local worker process and the client's end of its channel.
 pub(crate) struct LocalConn {
     pub channel: ClientChannel,
@@ -303,7 +306,11 @@ impl WorkerLink {
         const TIMED_OUT: &str = "timed out";
         let deadline = self.sent_at + timeout;
         let local = match &mut self.conn {
-            Conn::Remote(_) => return self.wait_remote(deadline, timeout, interrupt),
+            // The hub applies the same step timeout to its own workers and then answers with
+            // what happened: give its answer time to arrive before calling the hub silent.
+            Conn::Remote(_) => {
+                return self.wait_remote(deadline + REMOTE_GRACE, timeout, interrupt);
+            }
             Conn::Local(l) => l,
         };
         let watch = &local.watch;
@@ -342,6 +349,15 @@ impl WorkerLink {
         interrupt: &InterruptCheck,
     ) -> Result<Answer, HubError> {
         const TICK: Duration = Duration::from_millis(5);
+        // A short spin first (yielding the core): an answer a network round trip away is
+        // caught without a sleeping thread's wake-up.
+        let spin_until = Instant::now() + crate::remote::link::SPIN;
+        while Instant::now() < spin_until {
+            if let Some(answer) = self.try_take()? {
+                return Ok(answer);
+            }
+            std::thread::yield_now();
+        }
         loop {
             if let Some(answer) = self.poll()? {
                 return Ok(answer);
@@ -362,7 +378,11 @@ impl WorkerLink {
 
     /// Whether the request in flight has been waited on for longer than `timeout`.
     pub fn overdue(&self, timeout: Duration) -> bool {
-        self.pending && self.sent_at.elapsed() >= timeout
+        let limit = match self.conn {
+            Conn::Local(_) => timeout,
+            Conn::Remote(_) => timeout + REMOTE_GRACE,
+        };
+        self.pending && self.sent_at.elapsed() >= limit
     }
 
     /// The response if it has arrived, without asking whether the worker lives (cheap: for

@@ -27,7 +27,19 @@ pub(crate) struct Args {
     /// Print the figures as JSON.
     #[arg(long)]
     json: bool,
+    /// Measure envs placed on hubs (a name, a list, `all` or counts, as `run --hub`) against
+    /// the same envs here, and the remote round trip against a raw Zenoh one. The round trip
+    /// uses the hub's `null-small` entry (serve it with ENVHUB_TEST_ADAPTERS=1 and
+    /// `--registry @default --registry configs/bench/data_plane.yaml`).
+    #[arg(long, value_name = "HUBS", default_value = "local")]
+    hub: String,
 }
+
+/// The no-op entry a remote round trip is timed with.
+const REMOTE_ROUND_TRIP_ID: &str = "null-small";
+/// Bytes of a one-env `null-small` step request (header 24, action 8, seed 8, flag padded to
+/// 8): the raw Zenoh round trip carries the same.
+const REMOTE_ROUND_TRIP_BYTES: usize = 48;
 
 /// Random action batches cycled through, so sampling is not what is measured.
 const ACTION_POOL: usize = 64;
@@ -131,7 +143,12 @@ fn round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
         workers: Some(1),
         ..EnvConfig::default()
     };
-    let mut env = hub.make_vec_direct("null", "Null-v0", &config)?;
+    let env = hub.make_vec_direct("null", "Null-v0", &config)?;
+    step_latencies(env, n)
+}
+
+/// p50 and p99 of `n` one-env steps of `env`, after a warm-up; closes it.
+fn step_latencies(mut env: VecEnv, n: usize) -> anyhow::Result<(f64, f64)> {
     env.reset(Some(0))?;
     let action = vec![0u8; env.action_space().byte_len()];
     for _ in 0..1000 {
@@ -147,7 +164,134 @@ fn round_trip(hub: &Hub, n: usize) -> anyhow::Result<(f64, f64)> {
     Ok(percentiles(times))
 }
 
+/// `--hub`: the same envs placed on hubs and here, the remote and the raw Zenoh round trip.
+fn run_remote(hub: &Hub, args: &Args, placement: &envhub::Placement) -> anyhow::Result<Outcome> {
+    let config = EnvConfig {
+        workers: Some(args.workers),
+        ..EnvConfig::default()
+    };
+    let mut remote = hub.make_vec_on(&args.id, args.num_envs, &config, placement)?;
+    let places = remote.placement();
+    let (act_bytes, obs_bytes) = (
+        remote.action_space().byte_len(),
+        remote.observation_space().byte_len(),
+    );
+    let mut local = hub.make_vec(&args.id, args.num_envs, &config)?;
+    // Alternated, best of two each: the machine is shared and its load drifts.
+    let mut remote_rate: f64 = 0.0;
+    let mut local_rate: f64 = 0.0;
+    for _ in 0..2 {
+        remote_rate = remote_rate.max(hub_throughput(&mut remote, args.seconds / 2.0)?);
+        local_rate = local_rate.max(hub_throughput(&mut local, args.seconds / 2.0)?);
+    }
+    remote.close();
+    local.close();
+    let first = places
+        .iter()
+        .map(|(p, _)| p.clone())
+        .find(|p| p != envhub::LOCAL)
+        .ok_or_else(|| anyhow::anyhow!("`--hub {}` places no env on a hub", args.hub))?;
+    let one = EnvConfig {
+        workers: Some(1),
+        ..EnvConfig::default()
+    };
+    let rt = hub
+        .make_vec_on(
+            REMOTE_ROUND_TRIP_ID,
+            1,
+            &one,
+            &envhub::Placement::Hubs(vec![first.clone()]),
+        )
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "{e}\nhint: the round trip uses hub `{first}`'s `{REMOTE_ROUND_TRIP_ID}` entry: serve it with ENVHUB_TEST_ADAPTERS=1 envhub --registry @default --registry configs/bench/data_plane.yaml serve ..."
+            )
+        })?;
+    let n = args.round_trips.max(100);
+    let (p50, p99) = step_latencies(rt, n)?;
+    let (raw50, raw99) = percentiles(
+        hub.network()?
+            .echo_round_trips(&first, REMOTE_ROUND_TRIP_BYTES, n)?,
+    );
+    // The model of docs/remote.md: a batch on one hub takes what it takes here plus one
+    // round trip of its request and response bytes (a raw echo of that many bytes, half each
+    // way).
+    let on_first = places
+        .iter()
+        .find(|(p, _)| *p == first)
+        .map_or(0, |(_, r)| r.len());
+    let request = 24 + envhub_shm::Layout::new(on_first, act_bytes).req_options;
+    let response = 24 + envhub_shm::BatchLayout::new(on_first, obs_bytes, false).size();
+    let (bulk50, _) = percentiles(hub.network()?.echo_round_trips(
+        &first,
+        (request + response) / 2,
+        (n / 10).max(100),
+    )?);
+    let predicted = if places.len() == 1 {
+        let batch = args.num_envs as f64 / local_rate;
+        Some(args.num_envs as f64 / (batch + bulk50 * 1e-6))
+    } else {
+        None
+    };
+    let placed: Vec<String> = places
+        .iter()
+        .map(|(p, r)| format!("{p}:{}", r.len()))
+        .collect();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "id": args.id,
+                "num_envs": args.num_envs,
+                "workers": args.workers,
+                "placement": placed,
+                "remote_steps_per_sec": remote_rate,
+                "local_steps_per_sec": local_rate,
+                "remote_over_local": remote_rate / local_rate,
+                "remote_roundtrip_p50_us": p50,
+                "remote_roundtrip_p99_us": p99,
+                "raw_zenoh_p50_us": raw50,
+                "raw_zenoh_p99_us": raw99,
+                "remote_over_raw_p50": p50 / raw50,
+                "request_bytes": request,
+                "response_bytes": response,
+                "raw_zenoh_batch_bytes_p50_us": bulk50,
+                "model_steps_per_sec": predicted,
+            })
+        );
+    } else {
+        println!(
+            "{} with {} envs, {} workers per machine, placed {}",
+            args.id,
+            args.num_envs,
+            args.workers,
+            placed.join(", ")
+        );
+        println!("  on the hubs       {remote_rate:>12.0} steps/s");
+        println!("  here              {local_rate:>12.0} steps/s  (same envs on this machine)");
+        println!("  hubs / here       {:>12.2}", remote_rate / local_rate);
+        println!("  remote round trip p50 {p50:.1} µs, p99 {p99:.1} µs  (no-op env on `{first}`)");
+        println!(
+            "  raw Zenoh         p50 {raw50:.1} µs, p99 {raw99:.1} µs  (echo, {REMOTE_ROUND_TRIP_BYTES} B, same QoS; envhub p50 is {:.2}×)",
+            p50 / raw50
+        );
+        println!(
+            "  one batch's bytes {request} B request, {response} B response: raw Zenoh echo p50 {bulk50:.1} µs"
+        );
+        if let Some(p) = predicted {
+            println!(
+                "  model             {p:>12.0} steps/s  (here + that echo per batch; docs/remote.md)"
+            );
+        }
+    }
+    Ok(Outcome::Done)
+}
+
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
+    let placement: envhub::Placement = args.hub.parse()?;
+    if !placement.is_local() {
+        return run_remote(hub, args, &placement);
+    }
     let config = EnvConfig {
         workers: Some(args.workers),
         ..EnvConfig::default()

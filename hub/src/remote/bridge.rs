@@ -246,6 +246,32 @@ fn seq_of(payload: &[u8]) -> u64 {
         .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
 }
 
+/// How long a session's thread looks for the next request (yielding the core) before it
+/// sleeps: the client's next request usually follows its last answer within a network round
+/// trip, and a thread put to sleep costs tens of µs to wake. `ENVHUB_BRIDGE_SPIN_US`
+/// overrides it (0: always sleep).
+fn spin_budget() -> Duration {
+    let us = std::env::var("ENVHUB_BRIDGE_SPIN_US")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(300);
+    Duration::from_micros(us)
+}
+
+fn next_request(rx: &Receiver<Vec<u8>>, spin: Duration) -> Result<Vec<u8>, RecvTimeoutError> {
+    let start = std::time::Instant::now();
+    while start.elapsed() < spin {
+        match rx.try_recv() {
+            Ok(b) => return Ok(b),
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                return Err(RecvTimeoutError::Disconnected);
+            }
+            Err(std::sync::mpsc::TryRecvError::Empty) => std::thread::yield_now(),
+        }
+    }
+    rx.recv_timeout(IDLE_TICK)
+}
+
 fn run(
     mut vec: VecEnv,
     rx: Receiver<Vec<u8>>,
@@ -258,9 +284,10 @@ fn run(
         vec.observation_space().byte_len(),
         vec.autoreset_mode() == envhub_core::AutoresetMode::SameStep,
     );
-    let mut last: Option<(u64, Vec<u8>)> = None;
+    let mut last: Option<(u64, zenoh::bytes::ZBytes)> = None;
+    let spin = spin_budget();
     while !stop.load(Ordering::Relaxed) {
-        let bytes = match rx.recv_timeout(IDLE_TICK) {
+        let bytes = match next_request(&rx, spin) {
             Ok(b) => b,
             Err(RecvTimeoutError::Timeout) => continue,
             Err(RecvTimeoutError::Disconnected) => break,
@@ -304,6 +331,8 @@ fn run(
                 )
             }
         };
+        // Kept for a repeat of this request: a shared buffer, not a copy.
+        let answer = zenoh::bytes::ZBytes::from(answer);
         if let Err(e) = publisher.put(answer.clone()).wait() {
             tracing::warn!(error = %e, "could not send a response");
         }

@@ -259,6 +259,75 @@ impl Network {
         )
     }
 
+    /// Times `n` raw Zenoh round trips of `bytes`-byte messages to hub `hub`'s echo, with the
+    /// data path's QoS and the same kind of wake-up (a channel) as a session's wait.
+    pub fn echo_round_trips(
+        &self,
+        hub: &str,
+        bytes: usize,
+        n: usize,
+    ) -> Result<Vec<Duration>, HubError> {
+        let failed = |e: zenoh::Error| HubError::Network {
+            reason: format!("echo of hub `{hub}`: {e}"),
+            hint: "the Zenoh session is failing".into(),
+        };
+        let (req, rep) = keys::hub_echo(hub);
+        let (tx, rx) = std::sync::mpsc::channel();
+        let _subscriber = self
+            .session
+            .declare_subscriber(rep)
+            .callback(move |s| {
+                let _ = tx.send(s.payload().len());
+            })
+            .wait()
+            .map_err(failed)?;
+        let publisher = self
+            .session
+            .declare_publisher(req)
+            .express(true)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .priority(zenoh::qos::Priority::DataHigh)
+            .wait()
+            .map_err(failed)?;
+        let payload = vec![0u8; bytes];
+        let lost = || HubError::HubLost {
+            hub: hub.to_string(),
+            envs: "-".into(),
+            why: "no echo within 2 s".into(),
+        };
+        // Until the subscriber's declaration has reached the hub, echoes can be missed.
+        let ready = Instant::now();
+        loop {
+            publisher.put(payload.clone()).wait().map_err(failed)?;
+            if rx.recv_timeout(Duration::from_millis(100)).is_ok() {
+                break;
+            }
+            if ready.elapsed() > Duration::from_secs(2) {
+                return Err(lost());
+            }
+        }
+        while rx.try_recv().is_ok() {}
+        let mut times = Vec::with_capacity(n);
+        for _ in 0..n {
+            let t = Instant::now();
+            publisher.put(payload.clone()).wait().map_err(failed)?;
+            // The same wait as a session's: a short spin, then sleep.
+            let mut got = false;
+            while t.elapsed() < super::link::SPIN {
+                if rx.try_recv().is_ok() {
+                    got = true;
+                    break;
+                }
+                std::thread::yield_now();
+            }
+            if !got {
+                rx.recv_timeout(Duration::from_secs(2)).map_err(|_| lost())?;
+            }
+            times.push(t.elapsed());
+        }
+        Ok(times)
+    }
+
     pub(crate) fn zenoh(&self) -> &zenoh::Session {
         &self.session
     }

@@ -2,6 +2,7 @@
 //!
 //! - `envhub/hub/<name>`: a hub's liveliness token (alive while the hub is).
 //! - `envhub/hub/<name>/{info,catalog,adapters,open}`: its queryables.
+//! - `envhub/hub/<name>/echo/{req,rep}`: its echo (raw Zenoh round trips for benchmarks).
 //! - `envhub/client/<id>`: a client's liveliness token; its sessions end when it goes.
 //! - `envhub/session/<hub>/<session>/{req,rep}`: a session's requests and responses.
 
@@ -30,6 +31,15 @@ pub(crate) fn hub_adapters(name: &str) -> String {
 
 pub(crate) fn hub_open(name: &str) -> String {
     format!("envhub/hub/{name}/open")
+}
+
+/// A hub's echo: what is put on `.../echo/req` comes back on `.../echo/rep`, untouched (the raw
+/// Zenoh round trip `envhub bench --hub` compares with).
+pub(crate) fn hub_echo(name: &str) -> (String, String) {
+    (
+        format!("envhub/hub/{name}/echo/req"),
+        format!("envhub/hub/{name}/echo/rep"),
+    )
 }
 
 pub(crate) fn client_token(id: &str) -> String {

@@ -16,6 +16,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
+/// How long a wait for a remote answer spins (yielding the core) before it sleeps.
+pub(crate) const SPIN: Duration = Duration::from_micros(300);
+
 /// Silence after which a request is sent again.
 pub(crate) const RESEND: Duration = Duration::from_secs(1);
 
@@ -34,7 +37,8 @@ pub(crate) struct RemoteConn {
     /// Layout of the hub's result rows (its envs only).
     pub rows_layout: BatchLayout,
     seq: u64,
-    last_request: Vec<u8>,
+    /// The request in flight, kept for sending again (a shared buffer, not a copy).
+    last_request: zenoh::bytes::ZBytes,
     last_sent: Instant,
     closed: bool,
 }
@@ -87,7 +91,7 @@ impl RemoteConn {
             layout: Layout::new(num_envs, act_bytes),
             rows_layout,
             seq: 0,
-            last_request: Vec::new(),
+            last_request: zenoh::bytes::ZBytes::default(),
             last_sent: Instant::now(),
             closed: false,
         })
@@ -101,7 +105,7 @@ impl RemoteConn {
         body: &RequestBody<'_>,
     ) -> Result<(), HubError> {
         self.seq += 1;
-        self.last_request = wire::encode_request(&self.layout, self.seq, command, slot, body);
+        self.last_request = wire::encode_request(&self.layout, self.seq, command, slot, body).into();
         self.put()
     }
 
@@ -151,7 +155,7 @@ impl RemoteConn {
 
     /// Sends the request in flight again if it has gone unanswered for [`RESEND`].
     pub fn resend_if_silent(&mut self) -> Result<(), HubError> {
-        if !self.last_request.is_empty() && self.last_sent.elapsed() >= RESEND {
+        if self.last_request.len() > 0 && self.last_sent.elapsed() >= RESEND {
             tracing::debug!(hub = %self.hub, session = %self.session, seq = self.seq, "no answer yet: sending again");
             self.put()?;
         }

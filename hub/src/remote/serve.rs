@@ -92,6 +92,7 @@ pub struct HubNode {
     _queryables: Vec<zenoh::query::Queryable<()>>,
     _requests: zenoh::pubsub::Subscriber<()>,
     _clients: zenoh::pubsub::Subscriber<()>,
+    _echo: zenoh::pubsub::Subscriber<()>,
     sessions: Arc<Sessions>,
 }
 
@@ -210,6 +211,25 @@ pub fn join(
             .wait()
             .map_err(zerr("declare client watch"))?
     };
+    // The echo answers on Zenoh's own thread, with the data path's QoS: the floor under a
+    // remote round trip.
+    let echo = {
+        let (req, rep) = keys::hub_echo(name);
+        let publisher = session
+            .declare_publisher(rep)
+            .express(true)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .priority(zenoh::qos::Priority::DataHigh)
+            .wait()
+            .map_err(zerr("declare echo"))?;
+        session
+            .declare_subscriber(req)
+            .callback(move |sample| {
+                let _ = publisher.put(sample.payload().clone()).wait();
+            })
+            .wait()
+            .map_err(zerr("declare echo"))?
+    };
     let token = session
         .liveliness()
         .declare_token(keys::hub_token(name))
@@ -222,6 +242,7 @@ pub fn join(
         _queryables: queryables,
         _requests: requests,
         _clients: clients,
+        _echo: echo,
         sessions,
     })
 }

@@ -195,6 +195,21 @@ pub(crate) fn land_rows(
 ) {
     let ob = layout.obs_bytes;
     let rewards: &mut [u8] = bytemuck::cast_slice_mut(to.rewards);
+    let contiguous = envs.windows(2).all(|p| p[1] == p[0] + 1);
+    if let (true, Some(&lo)) = (contiguous, envs.first()) {
+        // The usual case (every env of the hub): one copy per block.
+        let (n, k) = (envs.len(), lo - first);
+        to.obs[k * ob..(k + n) * ob].copy_from_slice(&from[layout.obs + lo * ob..][..n * ob]);
+        rewards[k * 8..(k + n) * 8].copy_from_slice(&from[layout.rewards + lo * 8..][..n * 8]);
+        to.terminated[k..k + n].copy_from_slice(&from[layout.terminated + lo..][..n]);
+        to.truncated[k..k + n].copy_from_slice(&from[layout.truncated + lo..][..n]);
+        to.final_mask[k..k + n].copy_from_slice(&from[layout.final_mask + lo..][..n]);
+        if layout.with_final_obs {
+            to.final_obs[k * ob..(k + n) * ob]
+                .copy_from_slice(&from[layout.final_obs + lo * ob..][..n * ob]);
+        }
+        return;
+    }
     for &e in envs {
         let k = e - first;
         to.obs[k * ob..(k + 1) * ob].copy_from_slice(&from[layout.obs + e * ob..][..ob]);
@@ -286,6 +301,40 @@ mod tests {
         assert_eq!(r.seeds, vec![Some(5), None, Some(u64::MAX)]);
         assert_eq!(r.selected, vec![true, false, true]);
         assert_eq!(r.options, "{\"a\":1}");
+    }
+
+    #[test]
+    fn rows_land_where_they_belong_whole_or_picked() {
+        let layout = BatchLayout::new(3, 4, true);
+        let obs: Vec<u8> = (0..12).collect();
+        let mut block = vec![0u8; layout.size()];
+        let rows = RowsOut {
+            obs: &obs,
+            rewards: &[1.0, 2.0, 3.0],
+            terminated: &[false, true, false],
+            truncated: &[true, false, false],
+            final_mask: &[0, 1, 0],
+            final_obs: &obs,
+        };
+        write_rows(&layout, &mut block, &[0, 1, 2], &rows);
+        for envs in [vec![0, 1, 2], vec![0, 2]] {
+            let mut slot = vec![0u64; layout.size().div_ceil(8)];
+            let base: &mut [u8] = bytemuck::cast_slice_mut(&mut slot);
+            // SAFETY: `base` is `size()` bytes, 8-byte aligned, used only here.
+            let mut to = unsafe { layout.rows_mut(base.as_mut_ptr(), 0, 3) };
+            land_rows(&layout, &block, &envs, &mut to, 0);
+            for &e in &envs {
+                assert_eq!(to.obs[e * 4..(e + 1) * 4], obs[e * 4..(e + 1) * 4]);
+                assert_eq!(to.rewards[e], rows.rewards[e]);
+                assert_eq!(to.terminated[e], u8::from(rows.terminated[e]));
+                assert_eq!(to.truncated[e], u8::from(rows.truncated[e]));
+                assert_eq!(to.final_mask[e], rows.final_mask[e]);
+                assert_eq!(to.final_obs[e * 4..(e + 1) * 4], obs[e * 4..(e + 1) * 4]);
+            }
+            if envs.len() == 2 {
+                assert_eq!(to.rewards[1], 0.0, "an env not sent is left alone");
+            }
+        }
     }
 
     #[test]
