@@ -160,7 +160,10 @@ mod tests {
         )
         .unwrap();
         let settings = Settings::from_file(&path).unwrap();
-        assert_eq!(settings.zenoh.connect, vec!["tcp/10.0.0.5:7447".to_string()]);
+        assert_eq!(
+            settings.zenoh.connect,
+            vec!["tcp/10.0.0.5:7447".to_string()]
+        );
         assert_eq!(settings.zenoh.config, Some(dir.join("zenoh.json5")));
         assert_eq!(
             (settings.zenoh.multicast, settings.zenoh.lease_ms),

@@ -209,10 +209,11 @@ fn run_remote(hub: &Hub, args: &Args, placement: &envhub::Placement) -> anyhow::
         })?;
     let n = args.round_trips.max(100);
     let (p50, p99) = step_latencies(rt, n)?;
-    let (raw50, raw99) = percentiles(
-        hub.network()?
-            .echo_round_trips(&first, REMOTE_ROUND_TRIP_BYTES, n)?,
-    );
+    let (raw50, raw99) = percentiles(hub.network()?.echo_round_trips(
+        &first,
+        REMOTE_ROUND_TRIP_BYTES,
+        n,
+    )?);
     // The model of docs/remote.md: a batch on one hub takes what it takes here plus one
     // round trip of its request and response bytes (a raw echo of that many bytes, half each
     // way).

@@ -321,7 +321,8 @@ impl Network {
                 std::thread::yield_now();
             }
             if !got {
-                rx.recv_timeout(Duration::from_secs(2)).map_err(|_| lost())?;
+                rx.recv_timeout(Duration::from_secs(2))
+                    .map_err(|_| lost())?;
             }
             times.push(t.elapsed());
         }

@@ -105,7 +105,8 @@ impl RemoteConn {
         body: &RequestBody<'_>,
     ) -> Result<(), HubError> {
         self.seq += 1;
-        self.last_request = wire::encode_request(&self.layout, self.seq, command, slot, body).into();
+        self.last_request =
+            wire::encode_request(&self.layout, self.seq, command, slot, body).into();
         self.put()
     }
 
