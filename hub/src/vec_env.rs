@@ -67,7 +67,7 @@ fn session_name() -> String {
 
 /// One link of a session to start: local worker `job`, or a remote hub's slice.
 enum Planned {
-    Local(WorkerJob),
+    Local(Box<WorkerJob>),
     Remote {
         hub: String,
         env_offset: usize,
@@ -178,7 +178,7 @@ impl VecEnv {
             for (local_offset, count) in split_envs(slice.num_envs, local_workers) {
                 let mut config = route.config.clone();
                 config.num_envs = count;
-                planned.push(Planned::Local(WorkerJob {
+                planned.push(Planned::Local(Box::new(WorkerJob {
                     adapter: route.adapter.clone(),
                     env_id: route.env_id.clone(),
                     config,
@@ -195,7 +195,7 @@ impl VecEnv {
                     owner_pid: std::process::id(),
                     spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
-                }));
+                })));
                 worker_index += 1;
             }
             offset += slice.num_envs;
@@ -225,7 +225,7 @@ impl VecEnv {
                                     .bell(job.worker_index)?;
                                 let link = WorkerLink::start(
                                     index,
-                                    job,
+                                    *job,
                                     session,
                                     0,
                                     policy,

@@ -31,8 +31,10 @@ pub(crate) struct LocalConn {
 
 /// How a link reaches its envs.
 pub(crate) enum Conn {
-    Local(LocalConn),
-    Remote(RemoteConn),
+    /// Both boxed: each is large (iceoryx2 ports; Zenoh handles), and links move around in
+    /// a `Vec`.
+    Local(Box<LocalConn>),
+    Remote(Box<RemoteConn>),
 }
 
 /// A worker's answer: in place in iceoryx2 shared memory, or a remote hub's message (whose
@@ -133,14 +135,14 @@ impl WorkerLink {
             index,
             job,
             spec,
-            conn: Conn::Local(LocalConn {
+            conn: Conn::Local(Box::new(LocalConn {
                 channel,
                 process,
                 launcher: launcher.clone(),
                 watch,
                 generation,
                 bell,
-            }),
+            })),
             pending: false,
             response: None,
             slot: 0,
@@ -158,7 +160,7 @@ impl WorkerLink {
             index,
             job,
             spec,
-            conn: Conn::Remote(conn),
+            conn: Conn::Remote(Box::new(conn)),
             pending: false,
             response: None,
             slot: 0,
@@ -173,7 +175,7 @@ impl WorkerLink {
     /// Replaces a lost remote slice by `conn` (the same envs, opened on another hub): its
     /// envs come back reset, truncated, with the loss in their info.
     pub fn replace_remote(&mut self, spec: ReadySpec, conn: RemoteConn, lost: String) {
-        self.conn = Conn::Remote(conn);
+        self.conn = Conn::Remote(Box::new(conn));
         self.spec = spec;
         self.pending = false;
         self.response = None;

@@ -77,6 +77,7 @@ impl RemoteHub {
             }
         }
         let _ = child.kill();
+        let _ = child.wait();
         panic!("hub `{name}` did not join the network; it said {said:?}");
     }
 

@@ -156,7 +156,7 @@ impl RemoteConn {
 
     /// Sends the request in flight again if it has gone unanswered for [`RESEND`].
     pub fn resend_if_silent(&mut self) -> Result<(), HubError> {
-        if self.last_request.len() > 0 && self.last_sent.elapsed() >= RESEND {
+        if !self.last_request.is_empty() && self.last_sent.elapsed() >= RESEND {
             tracing::debug!(hub = %self.hub, session = %self.session, seq = self.seq, "no answer yet: sending again");
             self.put()?;
         }
