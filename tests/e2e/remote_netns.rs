@@ -158,6 +158,11 @@ impl TwoHosts {
     /// Starts `envhub ARGS` on host `side`, in its own `/dev/shm` and `/tmp`; `tag` names its
     /// logs.
     fn envhub(&self, side: usize, tag: &str, args: &[&str]) -> Proc {
+        self.envhub_with(side, tag, args, &[])
+    }
+
+    /// [`TwoHosts::envhub`] with `vars` added to its environment.
+    fn envhub_with(&self, side: usize, tag: &str, args: &[&str], vars: &[(&str, &str)]) -> Proc {
         let out = self.dir.join(format!("{tag}.out"));
         let err = self.dir.join(format!("{tag}.err"));
         let mut cmd = Command::new("ip");
@@ -178,6 +183,7 @@ impl TwoHosts {
         for var in SCRUBBED {
             cmd.env_remove(var);
         }
+        cmd.envs(vars.iter().copied());
         let child = cmd.spawn().expect("ip netns exec starts");
         Proc {
             child,
@@ -440,6 +446,18 @@ fn netns_a_cut_link_loses_the_hub_within_two_seconds_and_it_comes_back() {
         "hub `a` reported lost {lost_after:?} after the cut"
     );
     eprintln!("link cut: hub `a` reported lost after {lost_after:?}");
+    // Its side too: the client's token expires there, and the hub ends the session.
+    while hub.children() > 0 {
+        assert!(
+            cut.elapsed() < Duration::from_secs(5),
+            "hub `a` still runs the cut-off client's workers 5 s after the cut"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    eprintln!(
+        "link cut: hub `a` ended the client's session after {:?}",
+        cut.elapsed()
+    );
 
     let restored = Instant::now();
     hosts.link(true);
@@ -494,7 +512,13 @@ fn netns_a_link_flap_shorter_than_the_lease_loses_no_step() {
             "--json",
         ]
     }
-    let mut client = hosts.envhub(1, "run-flap", &rollout("a"));
+    // Debug logs of the remote link: they show whether the client had to resend a request.
+    let mut client = hosts.envhub_with(
+        1,
+        "run-flap",
+        &rollout("a"),
+        &[(envhub::env_vars::ENVHUB_LOG, "warn,envhub::remote=debug")],
+    );
     hub.wait_for_workers(&mut client);
     std::thread::sleep(Duration::from_millis(300));
     assert!(client.ended().is_none(), "{}", client.said());
@@ -513,8 +537,8 @@ fn netns_a_link_flap_shorter_than_the_lease_loses_no_step() {
         flap < Duration::from_millis(700),
         "the flap lasted {flap:?}"
     );
-    let (status, out, err) = client.finish(60);
-    let remote = run_summary(status, &out, &err, "the rollout over the flapping link");
+    let (status, out, log) = client.finish(60);
+    let remote = run_summary(status, &out, &log, "the rollout over the flapping link");
     let (status, out, err) = hosts.envhub(1, "run-local", &rollout("local")).finish(60);
     let local = run_summary(status, &out, &err, "the same rollout on one machine");
     for key in ["steps", "episodes", "mean_return"] {
@@ -523,8 +547,10 @@ fn netns_a_link_flap_shorter_than_the_lease_loses_no_step() {
             "{key}: over the flapping link {remote}, locally {local}"
         );
     }
+    // The TCP link rides out the flap (retransmits): no lease expiry, and at most a resend.
+    let resends = log.matches("sending again").count();
     eprintln!(
-        "link down for {flap:?} mid-rollout: completed in {:.2} s, same as locally ({} episodes, mean return {})",
+        "link down for {flap:?} mid-rollout: completed in {:.2} s with {resends} resent requests, same as locally ({} episodes, mean return {})",
         remote["seconds"], local["episodes"], local["mean_return"]
     );
 }
