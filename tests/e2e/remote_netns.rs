@@ -119,9 +119,8 @@ impl TwoHosts {
             format!("{}/24", hosts.addr[0]),
             format!("{}/24", hosts.addr[1]),
         ];
-        for side in 0..2 {
-            let (ns, veth) = (hosts.ns[side].as_str(), hosts.veth[side].as_str());
-            steps.push(vec!["-n", ns, "addr", "add", &cidr[side], "dev", veth]);
+        for ((ns, veth), cidr) in hosts.ns.iter().zip(&hosts.veth).zip(&cidr) {
+            steps.push(vec!["-n", ns, "addr", "add", cidr, "dev", veth]);
             steps.push(vec!["-n", ns, "link", "set", "lo", "up"]);
             steps.push(vec!["-n", ns, "link", "set", veth, "up"]);
         }
