@@ -133,6 +133,12 @@ impl TwoHosts {
                 panic!("`ip {}` failed: {e}", args.join(" "));
             }
         }
+        // The kernel reports a new link running (carrier) up to a second after `up`; a Zenoh
+        // session opened before that finds no multicast interface ("Will use [::]") and never
+        // scouts over the veth.
+        for (ns, veth) in hosts.ns.iter().zip(&hosts.veth) {
+            hosts.wait_running(ns, veth);
+        }
         // A mount namespace with its own tmpfs needs CAP_SYS_ADMIN, which some containers
         // withhold even from root.
         let probe = Command::new("ip")
@@ -217,6 +223,26 @@ impl TwoHosts {
             );
         }
         hub
+    }
+
+    /// Waits (at most 5 s, else fails) until `veth` in `ns` is up and running.
+    fn wait_running(&self, ns: &str, veth: &str) {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            let out = Command::new("ip")
+                .args(["-n", ns, "-o", "link", "show", "dev", veth])
+                .output()
+                .expect("ip runs");
+            let line = String::from_utf8_lossy(&out.stdout).to_string();
+            if line.contains("LOWER_UP") && line.contains("state UP") {
+                return;
+            }
+            assert!(
+                Instant::now() < deadline,
+                "{veth} in {ns} not running after 5 s: {line}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 
     /// Takes the veth down (`up` false) or up again, from host 0's side.
