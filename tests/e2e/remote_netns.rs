@@ -49,7 +49,7 @@ fn supported(test: &str) -> bool {
             "needs root (CAP_NET_ADMIN) to create network namespaces",
         );
     }
-    for tool in ["ip", "unshare"] {
+    for (tool, package) in [("ip", "iproute2"), ("unshare", "util-linux")] {
         let found = Command::new(tool)
             .arg("-V")
             .stdout(Stdio::null())
@@ -57,7 +57,7 @@ fn supported(test: &str) -> bool {
             .status()
             .is_ok_and(|s| s.success());
         if !found {
-            return skip(test, &format!("`{tool}` is missing (iproute2, util-linux)"));
+            return skip(test, &format!("`{tool}` is missing (package {package})"));
         }
     }
     true
