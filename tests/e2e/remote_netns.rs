@@ -252,15 +252,17 @@ impl TwoHosts {
             .unwrap_or_else(|e| panic!("cannot set the link {state}: {e}"));
     }
 
-    /// `envhub hubs --json` on host 1 (multicast on, no endpoint): the names it lists.
-    fn hubs_seen_from_b(&self, tag: &str) -> Vec<String> {
-        let (_, out, _) = self.envhub(1, tag, &["hubs", "--json"]).finish(20);
+    /// `envhub hubs --json` on host 1 (multicast on, no endpoint): the names it lists, and
+    /// what it said on stderr.
+    fn hubs_seen_from_b(&self, tag: &str) -> (Vec<String>, String) {
+        let (_, out, err) = self.envhub(1, tag, &["hubs", "--json"]).finish(20);
         // No hub found is an empty listing and a non-zero exit: both mean "not yet".
         let listed: Vec<serde_json::Value> = serde_json::from_str(&out).unwrap_or_default();
-        listed
+        let names = listed
             .iter()
             .filter_map(|h| h["name"].as_str().map(String::from))
-            .collect()
+            .collect();
+        (names, err)
     }
 
     /// Polls `envhub hubs` on host 1 until it lists `a`; the time from `since`, or a
@@ -269,14 +271,15 @@ impl TwoHosts {
         let mut tries = 0;
         loop {
             tries += 1;
-            let seen = self.hubs_seen_from_b(&format!("{tag}-{tries}"));
+            let (seen, err) = self.hubs_seen_from_b(&format!("{tag}-{tries}"));
             let took = since.elapsed();
             if seen.iter().any(|n| n == "a") {
                 return took;
             }
             assert!(
                 took < limit,
-                "hub `a` not listed from the other host after {took:?} ({tries} tries, last saw {seen:?})"
+                "hub `a` not listed from the other host after {took:?} ({tries} tries, the last \
+                 saw {seen:?} and said {err:?})"
             );
         }
     }
@@ -486,8 +489,16 @@ fn netns_a_cut_link_loses_the_hub_within_two_seconds_and_it_comes_back() {
 
     let restored = Instant::now();
     hosts.link(true);
+    // A process started before the kernel reports the link running again would find no
+    // multicast interface (see `TwoHosts::new`): wait for it, then ask.
+    for (ns, veth) in hosts.ns.iter().zip(&hosts.veth) {
+        hosts.wait_running(ns, veth);
+    }
+    let running_after = restored.elapsed();
     let back_after = hosts.wait_for_a(restored, Duration::from_secs(5), "hubs-back");
-    eprintln!("link restored: hub `a` listed again after {back_after:?}");
+    eprintln!(
+        "link restored: running again after {running_after:?}, hub `a` listed again after {back_after:?}"
+    );
     let (status, out, err) = hosts
         .envhub(
             1,
