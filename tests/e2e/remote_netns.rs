@@ -93,7 +93,7 @@ impl TwoHosts {
         static COUNT: AtomicU32 = AtomicU32::new(0);
         let pid = std::process::id();
         let k = COUNT.fetch_add(1, Ordering::Relaxed);
-        let tag = format!("{}{k}", pid % 10_000_000);
+        let tag = format!("{}x{k}", pid % 10_000_000);
         let subnet = format!("10.250.{}", (pid + k) % 250 + 1);
         let hosts = TwoHosts {
             ns: [format!("ehnet{tag}a"), format!("ehnet{tag}b")],
@@ -189,6 +189,8 @@ impl TwoHosts {
             cmd.env_remove(var);
         }
         cmd.envs(vars.iter().copied());
+        // `ip netns exec`, `unshare` and `sh` each exec the next: the child is envhub itself
+        // (its workers are its children, its namespaces are the hub's).
         let child = cmd.spawn().expect("ip netns exec starts");
         Proc {
             child,
@@ -199,7 +201,8 @@ impl TwoHosts {
     }
 
     /// Starts hub `a` on host 0 with multicast scouting on, listening on the veth; returns
-    /// once it says it is on the network.
+    /// once it says it is on the network. No multicast route is needed: Zenoh scouts on the
+    /// interface it picks, the veth (the only other one is loopback).
     fn hub_a(&self) -> Proc {
         let listen = format!("tcp/{}:7447", self.addr[0]);
         let hub = self.envhub(0, "hub-a", &["serve", "--name", "a", "--listen", &listen]);
@@ -400,6 +403,15 @@ impl Drop for Proc {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+        // A failing test shows what every process of it said (the hub's log included).
+        if std::thread::panicking() {
+            let said = self.said();
+            let tail = said.len().saturating_sub(4000);
+            let tail = (tail..said.len())
+                .find(|i| said.is_char_boundary(*i))
+                .unwrap_or(0);
+            eprintln!("--- {}", &said[tail..]);
+        }
     }
 }
 
