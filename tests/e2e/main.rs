@@ -11,5 +11,6 @@ mod failures;
 mod python_worker;
 mod rapier_rollouts;
 mod remote_hubs;
+mod remote_netns;
 mod rendering;
 mod worker_lifetime;
