@@ -131,11 +131,11 @@ impl WorkerLink {
         })?;
         channel.set_layout(Layout::new(job.num_envs, spec.action_space.byte_len()))?;
         tracing::debug!(worker = index, pid, envs = %env_range(&job), "worker ready");
-        Ok(WorkerLink {
+        Ok(WorkerLink::new(
             index,
             job,
             spec,
-            conn: Conn::Local(Box::new(LocalConn {
+            Conn::Local(Box::new(LocalConn {
                 channel,
                 process,
                 launcher: launcher.clone(),
@@ -143,24 +143,21 @@ impl WorkerLink {
                 generation,
                 bell,
             })),
-            pending: false,
-            response: None,
-            slot: 0,
-            sent: Vec::new(),
-            sent_at: Instant::now(),
-            restarted: false,
-            restarts: 0,
-            lost_hub: None,
-        })
+        ))
     }
 
     /// A remote hub's slice of the session, connected.
     pub fn remote(index: usize, job: WorkerJob, spec: ReadySpec, conn: RemoteConn) -> WorkerLink {
+        WorkerLink::new(index, job, spec, Conn::Remote(Box::new(conn)))
+    }
+
+    /// A link with nothing sent yet.
+    fn new(index: usize, job: WorkerJob, spec: ReadySpec, conn: Conn) -> WorkerLink {
         WorkerLink {
             index,
             job,
             spec,
-            conn: Conn::Remote(Box::new(conn)),
+            conn,
             pending: false,
             response: None,
             slot: 0,
@@ -270,16 +267,7 @@ impl WorkerLink {
             Conn::Local(l) => {
                 l.channel.send_render(None)?;
             }
-            Conn::Remote(r) => r.send(
-                command::RENDER,
-                envhub_shm::NO_SLOT,
-                &RequestBody {
-                    actions: None,
-                    selected: None,
-                    seeds: &[],
-                    options: b"",
-                },
-            )?,
+            Conn::Remote(r) => r.send(command::RENDER, envhub_shm::NO_SLOT, &RequestBody::NONE)?,
         }
         self.pending = true;
         self.sent_at = Instant::now();

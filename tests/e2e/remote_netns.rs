@@ -16,8 +16,44 @@ use std::time::{Duration, Instant};
 /// Set (non-empty) to turn a skip into a failure, where the tests must run.
 const REQUIRED: &str = "ENVHUB_NETNS_REQUIRED";
 
-/// Run inside each namespace: fresh `/dev/shm` and `/tmp`, then the command (`$@`).
-const ISOLATE: &str = "mount -t tmpfs tmpfs /dev/shm && mount -t tmpfs tmpfs /tmp && exec \"$@\"";
+/// Run inside each namespace: fresh `/dev/shm` and `/tmp`, then the command (`$@`). The
+/// folders under `/tmp` named in `ENVHUB_NETNS_KEEP` (`:`-separated: a checkout or a venv that
+/// lives there, as CI's may) stay visible at their paths: bound aside before the fresh `/tmp`
+/// hides them, then moved back into it.
+const ISOLATE: &str = r#"set -e
+mount -t tmpfs tmpfs /dev/shm
+IFS=:
+i=0
+for d in $ENVHUB_NETNS_KEEP; do mkdir -p /dev/shm/.keep$i; mount --bind "$d" /dev/shm/.keep$i; i=$((i+1)); done
+mount -t tmpfs tmpfs /tmp
+i=0
+for d in $ENVHUB_NETNS_KEEP; do mkdir -p "$d"; mount --move /dev/shm/.keep$i "$d"; rmdir /dev/shm/.keep$i; i=$((i+1)); done
+unset IFS ENVHUB_NETNS_KEEP
+exec "$@""#;
+
+/// The top folders under `/tmp` that hold the binaries or the Python interpreter the hubs use
+/// (`/tmp/ci/checkout/...` → `/tmp/ci`), for `ENVHUB_NETNS_KEEP`.
+fn kept_under_tmp() -> String {
+    let mut keep: Vec<PathBuf> = Vec::new();
+    for path in [envhub_e2e::bin_dir(), envhub::python_interpreter()] {
+        let mut parts = path.components();
+        let top = match (parts.next(), parts.next(), parts.next()) {
+            (Some(std::path::Component::RootDir), Some(tmp), Some(first))
+                if tmp.as_os_str() == "tmp" =>
+            {
+                PathBuf::from("/tmp").join(first)
+            }
+            _ => continue,
+        };
+        if !keep.contains(&top) {
+            keep.push(top);
+        }
+    }
+    keep.iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(":")
+}
 
 /// Envhub settings from the caller's environment that would reach outside the namespaces or
 /// change what runs.
@@ -181,6 +217,7 @@ impl TwoHosts {
         ])
         .args(["sh", "-c", ISOLATE, "isolate"])
         .arg(binary("envhub"))
+        .env("ENVHUB_NETNS_KEEP", kept_under_tmp())
         .args(args)
         .stdin(Stdio::null())
         .stdout(std::fs::File::create(&out).expect("log file"))

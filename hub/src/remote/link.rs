@@ -179,16 +179,7 @@ impl RemoteConn {
         if std::mem::replace(&mut self.closed, true) || !self.hub_alive() {
             return;
         }
-        let _ = self.send(
-            command::CLOSE,
-            envhub_shm::NO_SLOT,
-            &RequestBody {
-                actions: None,
-                selected: None,
-                seeds: &[],
-                options: b"",
-            },
-        );
+        let _ = self.send(command::CLOSE, envhub_shm::NO_SLOT, &RequestBody::NONE);
     }
 }
 

@@ -32,6 +32,16 @@ pub(crate) struct RequestBody<'a> {
     pub options: &'a [u8],
 }
 
+impl RequestBody<'_> {
+    /// A request that carries nothing but its command (render, close).
+    pub const NONE: RequestBody<'static> = RequestBody {
+        actions: None,
+        selected: None,
+        seeds: &[],
+        options: b"",
+    };
+}
+
 /// Encodes a request for a hub whose envs have request layout `layout`.
 pub(crate) fn encode_request(
     layout: &Layout,
@@ -342,18 +352,7 @@ mod tests {
         let layout = Layout::new(2, 8);
         let e = parse_request(&[1, 2, 3], &layout).unwrap_err();
         assert!(e.contains("shorter than"), "{e}");
-        let mut bytes = encode_request(
-            &layout,
-            1,
-            command::STEP,
-            0,
-            &RequestBody {
-                actions: None,
-                selected: None,
-                seeds: &[],
-                options: b"",
-            },
-        );
+        let mut bytes = encode_request(&layout, 1, command::STEP, 0, &RequestBody::NONE);
         bytes[8] = 99; // the command
         let e = parse_request(&bytes, &layout).unwrap_err();
         assert!(e.contains("unknown command 99"), "{e}");
