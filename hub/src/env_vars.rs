@@ -61,3 +61,8 @@ pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";
 /// `python -m envhub.worker describe`) may take before it is killed and reported as hung
 /// (default 30): an adapter module that blocks at import cannot stall the hub.
 pub const ENVHUB_DESCRIBE_TIMEOUT: &str = "ENVHUB_DESCRIBE_TIMEOUT";
+
+/// Microseconds a hub's remote session thread looks for the next request (yielding the core)
+/// before it sleeps (default 300; 0: always sleep). Spinning saves a wake-up per step on
+/// machines with cores to spare.
+pub const ENVHUB_BRIDGE_SPIN_US: &str = "ENVHUB_BRIDGE_SPIN_US";

@@ -251,7 +251,7 @@ fn seq_of(payload: &[u8]) -> u64 {
 /// trip, and a thread put to sleep costs tens of µs to wake. `ENVHUB_BRIDGE_SPIN_US`
 /// overrides it (0: always sleep).
 fn spin_budget() -> Duration {
-    let us = std::env::var("ENVHUB_BRIDGE_SPIN_US")
+    let us = std::env::var(crate::env_vars::ENVHUB_BRIDGE_SPIN_US)
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(300);
