@@ -159,7 +159,7 @@ pub(crate) fn resolve(
     let mut cores = Vec::with_capacity(names.len());
     for name in &names {
         cores.push(if name == LOCAL {
-            std::thread::available_parallelism().map_or(1, |n| n.get())
+            crate::session_options::cores()
         } else {
             let network = need_network()?;
             let info: crate::remote::serve::HubInfo = network.query(

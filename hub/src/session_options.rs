@@ -6,6 +6,17 @@ use std::time::Duration;
 /// A wait this long (on average) pays for a wake-up (tens of µs on a VM) many times over.
 pub(crate) const BLOCK_BEYOND: Duration = Duration::from_micros(200);
 
+/// CPU cores of this machine (1 if unknown).
+pub(crate) fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Worker processes for `num_envs` envs here: the config's, else one per core, at most one
+/// per env. (A hub applies the same rule to the envs placed on it.)
+pub(crate) fn workers_for(config: &envhub_core::EnvConfig, num_envs: usize) -> usize {
+    config.workers.unwrap_or_else(|| cores().min(num_envs))
+}
+
 /// Options of a session (timeouts, restarts, waiting, shared memory).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionOptions {
@@ -53,7 +64,7 @@ impl SessionOptions {
     /// [`BLOCK_BEYOND`] block at once: the workers need every core, and such a wait can afford
     /// a wake-up.
     pub(crate) fn wait_policy(&self, workers: usize) -> WaitPolicy {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let cores = cores();
         WaitPolicy {
             spin: self.spin,
             max_spin: self.max_spin,

@@ -138,11 +138,10 @@ impl VecEnv {
             .filter(|s| s.place == LOCAL)
             .map(|s| s.num_envs)
             .sum();
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let local_workers = if local_envs == 0 {
             0
         } else {
-            let workers = config.workers.unwrap_or_else(|| cores.min(local_envs));
+            let workers = crate::session_options::workers_for(&config, local_envs);
             if workers == 0 || workers > local_envs {
                 return Err(HubError::InvalidConfig {
                     what: "workers",

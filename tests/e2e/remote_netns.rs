@@ -405,20 +405,7 @@ impl Proc {
 
     /// Child processes (a hub's workers).
     fn children(&self) -> usize {
-        let me = self.child.id().to_string();
-        std::fs::read_dir("/proc")
-            .map(|d| {
-                d.filter_map(Result::ok)
-                    .filter_map(|e| std::fs::read_to_string(e.path().join("stat")).ok())
-                    .filter(|stat| {
-                        stat.rfind(')').is_some_and(|at| {
-                            let mut fields = stat[at + 2..].split_whitespace();
-                            fields.next() != Some("Z") && fields.next() == Some(me.as_str())
-                        })
-                    })
-                    .count()
-            })
-            .unwrap_or(0)
+        envhub_e2e::living_children(self.child.id())
     }
 
     /// Waits (at most 30 s) until hub `self` runs workers: a client's session has started.

@@ -74,6 +74,25 @@ impl Drop for TestHub {
     }
 }
 
+/// Living child processes of `pid` (zombies not yet reaped count as gone).
+pub fn living_children(pid: u32) -> usize {
+    let me = pid.to_string();
+    std::fs::read_dir("/proc")
+        .map(|d| {
+            d.filter_map(Result::ok)
+                .filter_map(|e| std::fs::read_to_string(e.path().join("stat")).ok())
+                .filter(|stat| {
+                    // `pid (comm) state ppid ...`; comm may hold spaces, so read after `)`.
+                    stat.rfind(')').is_some_and(|at| {
+                        let mut fields = stat[at + 2..].split_whitespace();
+                        fields.next() != Some("Z") && fields.next() == Some(me.as_str())
+                    })
+                })
+                .count()
+        })
+        .unwrap_or(0)
+}
+
 /// Files in `/dev/shm` whose names contain `needle`.
 pub fn shm_files(needle: &str) -> Vec<String> {
     std::fs::read_dir("/dev/shm")

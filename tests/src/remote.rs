@@ -89,21 +89,7 @@ impl RemoteHub {
     /// Worker processes of this hub (its living children: zombies not yet reaped count as
     /// gone).
     pub fn worker_count(&self) -> usize {
-        let me = self.pid().to_string();
-        std::fs::read_dir("/proc")
-            .map(|d| {
-                d.filter_map(Result::ok)
-                    .filter_map(|e| std::fs::read_to_string(e.path().join("stat")).ok())
-                    .filter(|stat| {
-                        stat.rfind(')').is_some_and(|at| {
-                            let mut fields = stat[at + 2..].split_whitespace();
-                            let state = fields.next();
-                            state != Some("Z") && fields.next() == Some(me.as_str())
-                        })
-                    })
-                    .count()
-            })
-            .unwrap_or(0)
+        crate::living_children(self.pid())
     }
 }
 

@@ -299,7 +299,7 @@ impl State {
         HubInfo {
             name: self.name.clone(),
             host: host_name(),
-            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            cores: crate::session_options::cores(),
             version: env!("CARGO_PKG_VERSION").to_string(),
             adapters: self
                 .hub
@@ -349,8 +349,7 @@ impl State {
             }
         }
         let num_envs = config.num_envs;
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let workers = config.workers.unwrap_or_else(|| cores.min(num_envs.max(1)));
+        let workers = crate::session_options::workers_for(&config, num_envs.max(1));
         let route = self
             .hub
             .route_with(&request.id, &config, &UserAdapters::default())?;
