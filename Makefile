@@ -155,6 +155,7 @@ demo: build py-install
 	$(VPY) py-client/examples/rollout.py
 
 lint: setup
+	$(VPY) scripts/check_layers.py
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy $(PROFILE) --workspace --all-targets $(FEATURES) -- -D warnings
 

@@ -12,10 +12,10 @@
 
 use crate::bounded::{self, RunError, seconds};
 use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT, ENVHUB_TEST_ADAPTERS};
-use crate::error::HubError;
 use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
 use envhub_core::Availability;
+use envhub_protocol::HubError;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

@@ -14,11 +14,11 @@
 //! and `launch` requests as `user_adapters` (absent: none); the daemon routes and starts
 //! Python workers with them beside its own.
 
-use crate::error::HubError;
 use crate::hub::Hub;
 use crate::launcher::launch_local;
 use crate::python_host::UserAdapters;
 use envhub_core::EnvConfig;
+use envhub_protocol::HubError;
 use envhub_shm::WorkerJob;
 use serde_json::{Value, json};
 use std::collections::HashMap;

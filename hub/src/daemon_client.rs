@@ -6,10 +6,10 @@
 //! an adapter registered since is included.
 
 use crate::catalog::AdapterInfo;
-use crate::error::HubError;
 use crate::python_host::UserAdapters;
-use crate::routing::Route;
 use envhub_core::EnvConfig;
+use envhub_protocol::HubError;
+use envhub_protocol::Route;
 use envhub_shm::{ReadySpec, WorkerJob};
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader, Write};

@@ -5,21 +5,21 @@
 
 use crate::catalog::{self, AdapterInfo};
 use crate::daemon_client::DaemonClient;
-use crate::env::Env;
-use crate::error::HubError;
 use crate::launcher::Launcher;
-use crate::placement::{LOCAL, Placement};
+use crate::placement::Placement;
 use crate::python_host::UserAdapters;
-use crate::registry::Registry;
-use crate::remote::client::{DISCOVERY, Network};
-use crate::remote::keys;
-use crate::remote::net::NetConfig;
-use crate::remote::serve::HubInfo;
-use crate::routing::{Route, renders, route};
-use crate::session_options::SessionOptions;
+use crate::routing::{renders, route};
 use crate::settings::Settings;
-use crate::vec_env::{StartPlan, VecEnv};
+use envhub_catalog::Registry;
 use envhub_core::{AutoresetMode, EnvConfig};
+use envhub_net::{DISCOVERY, NetConfig, Network};
+use envhub_protocol::HubError;
+use envhub_protocol::Route;
+use envhub_protocol::{HubInfo, keys};
+use envhub_session::Env;
+use envhub_session::LOCAL;
+use envhub_session::SessionOptions;
+use envhub_session::{StartPlan, VecEnv};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -34,6 +34,11 @@ pub struct Hub {
 }
 
 impl Hub {
+    /// How this hub starts workers, as the engine takes it.
+    fn launch(&self) -> Arc<dyn envhub_session::Launch> {
+        Arc::new(self.launcher.clone())
+    }
+
     /// A hub over `registry` with default session options.
     pub fn new(registry: Registry) -> Hub {
         Hub {
@@ -166,10 +171,10 @@ impl Hub {
                 route,
                 config,
                 slices,
-                network: Some(network),
+                opener: Some(envhub_net::ZenohSlices::new(network)),
             },
             self.options.clone(),
-            &self.launcher,
+            &self.launch(),
         )
     }
 
@@ -241,7 +246,7 @@ impl Hub {
         let mut config = config.clone();
         config.num_envs = num_envs;
         let route = self.route(id, &config)?;
-        VecEnv::start(id, route, self.options.clone(), &self.launcher)
+        VecEnv::start(id, route, self.options.clone(), &self.launch())
     }
 
     /// One env of registry entry `id`, in its own worker.
@@ -255,7 +260,7 @@ impl Hub {
             id,
             route,
             self.options.clone(),
-            &self.launcher,
+            &self.launch(),
         )?))
     }
 
@@ -271,7 +276,7 @@ impl Hub {
             env_id: env_id.to_string(),
             config: config.clone(),
         };
-        VecEnv::start(env_id, route, self.options.clone(), &self.launcher)
+        VecEnv::start(env_id, route, self.options.clone(), &self.launch())
     }
 }
 

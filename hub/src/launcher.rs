@@ -2,9 +2,10 @@
 
 use crate::catalog::Host;
 use crate::daemon_client::DaemonClient;
-use crate::error::HubError;
 use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
+use envhub_protocol::HubError;
+use envhub_session::{Launch, Process};
 use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
 use std::os::unix::process::CommandExt;
@@ -34,32 +35,35 @@ pub(crate) enum WorkerProcess {
     },
 }
 
-impl WorkerProcess {
-    /// Its pid.
-    pub fn pid(&self) -> u32 {
+impl Launcher {
+    /// The launcher of the embedded hub, as the engine takes it.
+    pub fn local() -> Arc<dyn Launch> {
+        Arc::new(Launcher::Local)
+    }
+}
+
+impl Process for WorkerProcess {
+    fn pid(&self) -> u32 {
         match self {
             WorkerProcess::Local(child) => child.id(),
             WorkerProcess::Daemon { pid, .. } => *pid,
         }
     }
 
-    /// Kills it (SIGKILL) and reaps it.
-    pub fn kill(&mut self) {
+    fn kill(&mut self) {
         envhub_shm::kill(self.pid());
         let _ = self.exit_status(Duration::from_secs(2));
     }
 
-    /// Sends SIGKILL without waiting on the daemon for its status (a session being given up);
-    /// our own child is reaped, which takes no time once it is killed.
-    pub fn kill_now(&mut self) {
+    /// Our own child is reaped, which takes no time once it is killed.
+    fn kill_now(&mut self) {
         envhub_shm::kill(self.pid());
         if let WorkerProcess::Local(child) = self {
             let _ = child.wait();
         }
     }
 
-    /// How it ended, waiting up to `timeout` for it to end ("died (signal: 9 (SIGKILL))").
-    pub fn exit_status(&mut self, timeout: Duration) -> Option<String> {
+    fn exit_status(&mut self, timeout: Duration) -> Option<String> {
         let deadline = std::time::Instant::now() + timeout;
         loop {
             let status = match self {
@@ -76,25 +80,24 @@ impl WorkerProcess {
     }
 }
 
-impl Launcher {
-    /// Starts a worker for `job` and waits until it reports ready.
-    pub fn launch(
+impl Launch for Launcher {
+    fn launch(
         &self,
         job: &WorkerJob,
         start_timeout: Duration,
-    ) -> Result<(WorkerProcess, ReadySpec), HubError> {
+    ) -> Result<(Box<dyn Process>, ReadySpec), HubError> {
         match self {
             Launcher::Local => {
                 let (child, spec) = launch_local(job, &UserAdapters::default(), start_timeout)?;
-                Ok((WorkerProcess::Local(child), spec))
+                Ok((Box::new(WorkerProcess::Local(child)), spec))
             }
             Launcher::Daemon(daemon) => {
                 let spec = daemon.launch(job, start_timeout)?;
                 Ok((
-                    WorkerProcess::Daemon {
+                    Box::new(WorkerProcess::Daemon {
                         pid: spec.pid,
                         daemon: daemon.clone(),
-                    },
+                    }),
                     spec,
                 ))
             }

@@ -1,13 +1,10 @@
 //! Where a session's envs run: this machine, some hubs, every hub, or explicit counts.
 
-use crate::error::HubError;
-use crate::remote::client::Network;
+use envhub_net::Network;
+use envhub_protocol::HubError;
+use envhub_session::{LOCAL, Slice};
 use std::sync::Arc;
 use std::time::Duration;
-
-/// The name that stands for this machine in a placement (its envs run on local workers over
-/// iceoryx2, not through a hub on the network).
-pub const LOCAL: &str = "local";
 
 /// How long a session waits for the hubs it names to show up.
 const NAMED_HUBS_WAIT: Duration = Duration::from_secs(3);
@@ -81,14 +78,6 @@ impl Placement {
     }
 }
 
-/// A run of a session's envs on one place.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub(crate) struct Slice {
-    /// A hub's name, or [`LOCAL`].
-    pub place: String,
-    pub num_envs: usize,
-}
-
 /// Turns a placement into slices for `num_envs` envs (hubs asked for their cores).
 pub(crate) fn resolve(
     placement: &Placement,
@@ -145,7 +134,7 @@ pub(crate) fn resolve(
             names.clone()
         }
         Placement::All => {
-            let live = need_network()?.live_hubs(crate::remote::client::DISCOVERY);
+            let live = need_network()?.live_hubs(envhub_net::DISCOVERY);
             if live.is_empty() {
                 return Err(HubError::UnknownHub {
                     name: "all".into(),
@@ -159,12 +148,12 @@ pub(crate) fn resolve(
     let mut cores = Vec::with_capacity(names.len());
     for name in &names {
         cores.push(if name == LOCAL {
-            crate::session_options::cores()
+            envhub_session::cores()
         } else {
             let network = need_network()?;
-            let info: crate::remote::serve::HubInfo = network.query(
+            let info: envhub_protocol::HubInfo = network.query(
                 name,
-                &crate::remote::keys::hub_info(name),
+                &envhub_protocol::keys::hub_info(name),
                 None,
                 Duration::from_secs(3),
             )?;

@@ -1,20 +1,10 @@
 //! Routing: which adapter runs a registry entry, and with which config.
 
 use crate::catalog::AdapterInfo;
-use crate::entry::EnvEntry;
-use crate::error::HubError;
+use envhub_catalog::EnvEntry;
 use envhub_core::{Availability, EnvConfig, FRAMEWORKS, canonical_framework};
-
-/// An entry resolved to an adapter and a complete config.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Route {
-    /// The adapter that runs it.
-    pub adapter: String,
-    /// The framework env id.
-    pub env_id: String,
-    /// The entry's settings merged with the caller's.
-    pub config: EnvConfig,
-}
+use envhub_protocol::HubError;
+use envhub_protocol::Route;
 
 /// Merges the entry's settings under the caller's: the caller's `extra` keys override the
 /// entry's `kwargs`; the caller's `max_episode_steps` and `asset_path` override the entry's.

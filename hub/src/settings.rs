@@ -1,7 +1,7 @@
 //! The hub config file (`envhub.yaml`) and how the registry files are chosen.
 
 use crate::env_vars::{ENVHUB_CONFIG, ENVHUB_REGISTRY};
-use crate::registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError};
+use envhub_catalog::{DEFAULT_REGISTRY_NAME, Registry, RegistryError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -33,7 +33,7 @@ pub struct Settings {
     pub adapters: Vec<String>,
     /// How to reach other hubs over Zenoh (`connect`, `listen`, `config`, `multicast`,
     /// `lease_ms`); the command line and `ENVHUB_CONNECT` add to it.
-    pub zenoh: crate::remote::net::NetConfig,
+    pub zenoh: envhub_net::NetConfig,
     /// Where the settings came from, for messages.
     #[serde(skip)]
     pub source: Option<PathBuf>,

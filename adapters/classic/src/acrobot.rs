@@ -1,7 +1,6 @@
 //! `Acrobot-v1`: swing the tip of a two-link chain above a line by torquing the middle joint.
 
-use crate::adapter::EnvEntry;
-use crate::classic_env::{ClassicEnv, check_render_mode, not_reset, state_array};
+use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
 use crate::layout::{read_discrete, write_f32s};
 use crate::numeric::py_square;
 use crate::reset_options;

@@ -1,21 +1,8 @@
 //! `ClassicControl`: the adapter, and the one list of the envs it provides.
 
-use crate::ClassicEnv;
+use crate::classic_env::{ClassicEnv, EnvEntry};
 use crate::{acrobot, cartpole, mountain_car, mountain_car_continuous, pendulum};
 use envhub_core::{Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec};
-
-/// One env of the adapter: its id, Gymnasium's registered time limit, its `extra` options and
-/// its constructor. Each env file defines one as `ENTRY`.
-pub(crate) struct EnvEntry {
-    /// The Gymnasium id.
-    pub(crate) id: &'static str,
-    /// `max_episode_steps` as Gymnasium registers the id.
-    pub(crate) max_episode_steps: u32,
-    /// The keys the env takes in `extra`.
-    pub(crate) options: &'static [&'static str],
-    /// Creates the env, validating `config`.
-    pub(crate) make: fn(&EnvConfig) -> Result<Box<dyn ClassicEnv>, EnvError>,
-}
 
 /// Every env of the adapter. Adding one is a file with its `ENTRY` and a line here.
 const ENVS: &[EnvEntry] = &[

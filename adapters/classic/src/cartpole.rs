@@ -1,7 +1,6 @@
 //! `CartPole-v1`: balance a pole on a cart pushed left or right (Barto, Sutton & Anderson).
 
-use crate::adapter::EnvEntry;
-use crate::classic_env::{ClassicEnv, check_render_mode, not_reset, state_array};
+use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
 use crate::layout::{read_discrete, write_f32s};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};

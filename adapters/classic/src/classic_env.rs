@@ -57,3 +57,16 @@ pub(crate) fn check_render_mode(env_id: &str, config: &EnvConfig) -> Result<(), 
         }),
     }
 }
+
+/// One env of the adapter: its id, Gymnasium's registered time limit, its `extra` options and
+/// its constructor. Each env file defines one as `ENTRY`.
+pub(crate) struct EnvEntry {
+    /// The Gymnasium id.
+    pub(crate) id: &'static str,
+    /// `max_episode_steps` as Gymnasium registers the id.
+    pub(crate) max_episode_steps: u32,
+    /// The keys the env takes in `extra`.
+    pub(crate) options: &'static [&'static str],
+    /// Creates the env, validating `config`.
+    pub(crate) make: fn(&EnvConfig) -> Result<Box<dyn ClassicEnv>, EnvError>,
+}

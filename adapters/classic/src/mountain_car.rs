@@ -1,7 +1,6 @@
 //! `MountainCar-v0`: drive an underpowered car up a hill by rocking it, with discrete pushes.
 
-use crate::adapter::EnvEntry;
-use crate::classic_env::{ClassicEnv, check_render_mode, not_reset, state_array};
+use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
 use crate::layout::{read_discrete, write_f32s};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};

@@ -1,7 +1,6 @@
 //! `MountainCarContinuous-v0`: the mountain car with a continuous force and an energy penalty.
 
-use crate::adapter::EnvEntry;
-use crate::classic_env::{ClassicEnv, check_render_mode, not_reset, state_array};
+use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
 use crate::layout::{read_f32, write_f32s};
 use crate::mountain_car::{MAX_POSITION, MAX_SPEED, MIN_POSITION, observation_space};
 use crate::numeric::{as_f32, py_square};

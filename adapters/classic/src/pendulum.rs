@@ -1,7 +1,6 @@
 //! `Pendulum-v1`: swing a pendulum up and keep it upright with a bounded torque.
 
-use crate::adapter::EnvEntry;
-use crate::classic_env::{ClassicEnv, check_render_mode, not_reset, state_array};
+use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
 use crate::layout::{read_f32, write_f32s};
 use crate::numeric::{as_f32, py_square, py_square_f32};
 use crate::reset_options;

@@ -13,10 +13,12 @@
 mod adapter;
 mod config;
 mod env;
+pub mod env_vars;
 mod error;
 mod framework;
 mod numpy_rng;
 mod python;
+pub mod serde_text;
 mod space;
 mod suggest;
 mod time_limit;

@@ -1,10 +1,8 @@
 //! The two adapters, `mujoco` (Gymnasium's v5 suite) and `custom_mjcf` (a user's model file),
 //! and what they say about themselves when libmujoco is not linked in.
 
+use crate::modes::RGB_ARRAY;
 use envhub_core::{Availability, Env, EnvAdapter, EnvConfig, EnvError, EnvSpec};
-
-/// The only render mode (both adapters draw it).
-pub(crate) const RGB_ARRAY: &str = "rgb_array";
 
 /// The libmujoco version this crate binds (mujoco-rs 7.0), the `mujoco` wheel's version too.
 pub const LIBMUJOCO_VERSION: &str = "3.17.0";

@@ -25,6 +25,7 @@ mod assets;
 mod custom;
 #[cfg(feature = "libmujoco")]
 mod gym_env;
+mod modes;
 #[cfg(feature = "libmujoco")]
 mod numeric;
 #[cfg(feature = "libmujoco")]

@@ -14,7 +14,7 @@
 //! last, so a `trackbodyid` in a config never makes the free camera track a body; the same
 //! holds here.
 
-use crate::adapter::RGB_ARRAY;
+use crate::modes::RGB_ARRAY;
 use envhub_core::{EnvConfig, EnvError, ExtraKeys};
 use mujoco_rs::prelude::*;
 use mujoco_rs::renderer::MjRenderer;

@@ -1,88 +1,22 @@
 //! A hub on the network: `envhub serve` joins Zenoh, holds its liveliness token, answers
 //! queries (info, catalog, adapters, open a session) and bridges remote sessions to its local
-//! workers (see `bridge.rs`).
+//! workers (`envhub_net`'s bridge).
 //!
 //! Remote clients get what a registry id of this hub's own catalog runs, nothing more: a
 //! request that would reach a file on the hub (`asset_path`, model-file kwargs) is refused
 //! unless the hub's owner allows it, and `--max-envs` / `--max-workers` are checked before
 //! anything starts. Clients' own Python adapters never travel (they would be code run here).
 
-use super::bridge::{self, Sessions};
-use super::keys;
-use super::net::{self, NetConfig};
-use crate::error::HubError;
 use crate::hub::Hub;
+use crate::launcher::Launcher;
 use crate::python_host::UserAdapters;
-use crate::session_options::SessionOptions;
-use envhub_core::EnvConfig;
-use serde::{Deserialize, Serialize};
+use envhub_net::{NetConfig, ServePolicy, Sessions};
+use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
+use envhub_session::{SessionOptions, VecEnv};
 use serde_json::{Value, json};
 use std::sync::Arc;
 use std::time::Duration;
 use zenoh::Wait;
-
-/// What a hub lets remote clients do.
-#[derive(Clone, Debug, Default)]
-pub struct ServePolicy {
-    /// Envs this hub hosts for remote clients at once, over all sessions (`None`: no limit).
-    pub max_envs: Option<usize>,
-    /// Worker processes it runs for remote clients at once (`None`: no limit).
-    pub max_workers: Option<usize>,
-    /// Let remote clients name files on this hub (`asset_path`, `xml_file`, ...).
-    pub allow_remote_files: bool,
-}
-
-/// One hub as `envhub hubs` shows it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HubInfo {
-    /// Its name (`--name`, default the host name).
-    pub name: String,
-    /// The machine's host name.
-    pub host: String,
-    /// CPU cores of the machine.
-    pub cores: usize,
-    /// envhub version.
-    pub version: String,
-    /// Adapters that can run there.
-    pub adapters: Vec<String>,
-    /// Registry entries of its catalog.
-    pub catalog: usize,
-    /// Envs it runs for remote clients now.
-    pub envs: usize,
-    /// Worker processes it runs for remote clients now.
-    pub workers: usize,
-    /// Remote sessions open now.
-    pub sessions: usize,
-    /// One-minute load average of the machine.
-    pub load: f64,
-    /// Its limits, if set.
-    pub max_envs: Option<usize>,
-    /// Its limits, if set.
-    pub max_workers: Option<usize>,
-}
-
-/// A request to open a session, as a client sends it.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct OpenRequest {
-    /// Registry id in the hub's catalog.
-    pub id: String,
-    pub config: EnvConfig,
-    /// The client's liveliness key: the session ends when it goes.
-    pub client: String,
-    pub restart_on_crash: bool,
-    pub step_timeout_ms: u64,
-}
-
-/// The hub's answer to an open request.
-#[derive(Debug, Serialize, Deserialize)]
-pub(crate) struct OpenReply {
-    /// Session key (see [`keys`]).
-    pub session: String,
-    pub spec: envhub_shm::ReadySpec,
-    pub route: crate::routing::Route,
-    pub workers: usize,
-}
 
 /// A hub joined to Zenoh. Dropping it leaves (the token goes, sessions end).
 pub struct HubNode {
@@ -132,7 +66,7 @@ pub fn join(
     policy: ServePolicy,
 ) -> Result<HubNode, HubError> {
     keys::check_name(name)?;
-    let session = net::open(net, true)?;
+    let session = envhub_net::open(net, true)?;
     let zerr = |what: &str| {
         let what = what.to_string();
         move |e: zenoh::Error| HubError::Network {
@@ -186,7 +120,7 @@ pub fn join(
             .declare_subscriber(keys::all_requests(&name))
             .callback(move |sample| {
                 let payload = sample.payload().to_bytes().into_owned();
-                bridge::dispatch(
+                envhub_net::dispatch(
                     &sessions,
                     &zenoh,
                     &name,
@@ -299,7 +233,7 @@ impl State {
         HubInfo {
             name: self.name.clone(),
             host: host_name(),
-            cores: crate::session_options::cores(),
+            cores: envhub_session::cores(),
             version: env!("CARGO_PKG_VERSION").to_string(),
             adapters: self
                 .hub
@@ -349,7 +283,7 @@ impl State {
             }
         }
         let num_envs = config.num_envs;
-        let workers = crate::session_options::workers_for(&config, num_envs.max(1));
+        let workers = envhub_session::workers_for(&config, num_envs.max(1));
         let route = self
             .hub
             .route_with(&request.id, &config, &UserAdapters::default())?;
@@ -362,12 +296,7 @@ impl State {
             .sessions
             .reserve(num_envs, workers, &self.policy)
             .map_err(|(reason, hint)| self.refuse(reason, &hint))?;
-        let vec = crate::vec_env::VecEnv::start(
-            &request.id,
-            route.clone(),
-            options,
-            &crate::launcher::Launcher::Local,
-        )?;
+        let vec = VecEnv::start(&request.id, route.clone(), options, &Launcher::local())?;
         let spec = envhub_shm::ReadySpec {
             observation_space: vec.observation_space().clone(),
             action_space: vec.action_space().clone(),
@@ -376,7 +305,7 @@ impl State {
             pid: vec.worker_pids().first().copied().unwrap_or(0),
         };
         let workers = vec.num_workers();
-        let session = bridge::start(
+        let session = envhub_net::start(
             &self.sessions,
             &self.zenoh,
             &self.name,

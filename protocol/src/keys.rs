@@ -9,58 +9,66 @@
 use crate::error::HubError;
 
 /// Every hub's token.
-pub(crate) const ALL_HUBS: &str = "envhub/hub/*";
+pub const ALL_HUBS: &str = "envhub/hub/*";
 /// Every client's token.
-pub(crate) const ALL_CLIENTS: &str = "envhub/client/*";
+pub const ALL_CLIENTS: &str = "envhub/client/*";
 
-pub(crate) fn hub_token(name: &str) -> String {
+/// A hub's liveliness token.
+pub fn hub_token(name: &str) -> String {
     format!("envhub/hub/{name}")
 }
 
-pub(crate) fn hub_info(name: &str) -> String {
+/// A hub's info queryable.
+pub fn hub_info(name: &str) -> String {
     format!("envhub/hub/{name}/info")
 }
 
-pub(crate) fn hub_catalog(name: &str) -> String {
+/// A hub's catalog queryable.
+pub fn hub_catalog(name: &str) -> String {
     format!("envhub/hub/{name}/catalog")
 }
 
-pub(crate) fn hub_adapters(name: &str) -> String {
+/// A hub's adapters queryable.
+pub fn hub_adapters(name: &str) -> String {
     format!("envhub/hub/{name}/adapters")
 }
 
-pub(crate) fn hub_open(name: &str) -> String {
+/// A hub's queryable that opens sessions.
+pub fn hub_open(name: &str) -> String {
     format!("envhub/hub/{name}/open")
 }
 
 /// A hub's echo: what is put on `.../echo/req` comes back on `.../echo/rep`, untouched (the raw
 /// Zenoh round trip `envhub bench --hub` compares with).
-pub(crate) fn hub_echo(name: &str) -> (String, String) {
+pub fn hub_echo(name: &str) -> (String, String) {
     (
         format!("envhub/hub/{name}/echo/req"),
         format!("envhub/hub/{name}/echo/rep"),
     )
 }
 
-pub(crate) fn client_token(id: &str) -> String {
+/// A client's liveliness token.
+pub fn client_token(id: &str) -> String {
     format!("envhub/client/{id}")
 }
 
-pub(crate) fn requests(hub: &str, session: &str) -> String {
+/// A session's requests (client to hub).
+pub fn requests(hub: &str, session: &str) -> String {
     format!("envhub/session/{hub}/{session}/req")
 }
 
-pub(crate) fn responses(hub: &str, session: &str) -> String {
+/// A session's responses (hub to client).
+pub fn responses(hub: &str, session: &str) -> String {
     format!("envhub/session/{hub}/{session}/rep")
 }
 
 /// Requests of every session of `hub`.
-pub(crate) fn all_requests(hub: &str) -> String {
+pub fn all_requests(hub: &str) -> String {
     format!("envhub/session/{hub}/*/req")
 }
 
 /// The session named by a request key of `hub`, if the key is one.
-pub(crate) fn session_of<'a>(hub: &str, key: &'a str) -> Option<&'a str> {
+pub fn session_of<'a>(hub: &str, key: &'a str) -> Option<&'a str> {
     key.strip_prefix("envhub/session/")?
         .strip_prefix(hub)?
         .strip_prefix('/')?
@@ -69,12 +77,12 @@ pub(crate) fn session_of<'a>(hub: &str, key: &'a str) -> Option<&'a str> {
 }
 
 /// The hub named by a token key.
-pub(crate) fn hub_of_token(key: &str) -> Option<&str> {
+pub fn hub_of_token(key: &str) -> Option<&str> {
     key.strip_prefix("envhub/hub/").filter(|s| !s.contains('/'))
 }
 
 /// A hub name must be one key chunk: no `/`, no wildcards, not empty.
-pub(crate) fn check_name(name: &str) -> Result<(), HubError> {
+pub fn check_name(name: &str) -> Result<(), HubError> {
     let bad = name.is_empty()
         || name
             .chars()

@@ -2,7 +2,7 @@
 //! the clients (`--connect`, `--listen`, `--zenoh-config`, `ENVHUB_CONNECT`, `zenoh:` in
 //! `envhub.yaml`), turned into a Zenoh config.
 
-use crate::error::HubError;
+use envhub_protocol::HubError;
 use serde::Deserialize;
 use std::path::PathBuf;
 
@@ -112,7 +112,7 @@ fn json_list(items: &[String]) -> String {
 }
 
 /// Opens a Zenoh session, naming the endpoints on failure.
-pub(crate) fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
+pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
     use zenoh::Wait;
     let config = net.zenoh_config(listen_default)?;
     zenoh::open(config).wait().map_err(|e| HubError::Network {

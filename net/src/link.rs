@@ -7,17 +7,13 @@
 //! repeat from its last answer without stepping twice, and answers to older requests are
 //! dropped here, so nothing is lost, repeated or reordered.
 
-use super::client::{Inbox, Network};
-use super::keys;
-use super::wire::{self, RemoteAnswer, RequestBody};
-use crate::error::HubError;
+use crate::client::{Inbox, Network};
+use envhub_protocol::wire::{self, RemoteAnswer, RequestBody};
+use envhub_protocol::{HubError, keys};
 use envhub_shm::{BatchLayout, DataPlaneError, Layout, command};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
-
-/// How long a wait for a remote answer spins (yielding the core) before it sleeps.
-pub(crate) const SPIN: Duration = Duration::from_micros(300);
 
 /// Silence after which a request is sent again.
 pub(crate) const RESEND: Duration = Duration::from_secs(1);
@@ -139,16 +135,6 @@ impl RemoteConn {
         Ok(None)
     }
 
-    /// The network this slice is reached over.
-    pub fn network(&self) -> &Arc<Network> {
-        &self.network
-    }
-
-    /// The session's inbox.
-    pub fn inbox(&self) -> &Arc<Inbox> {
-        &self.inbox
-    }
-
     /// Whether the hub still holds its token.
     pub fn hub_alive(&self) -> bool {
         self.network.is_alive(&self.hub)
@@ -166,11 +152,6 @@ impl RemoteConn {
     /// Blocks until something arrives for this link or `timeout`.
     pub fn wait(&self, timeout: Duration) {
         self.inbox.wait(&[self.link], timeout);
-    }
-
-    /// Blocks until something arrives for one of `links` (of this session) or `timeout`.
-    pub fn wait_any(&self, links: &[usize], timeout: Duration) {
-        self.inbox.wait(links, timeout);
     }
 
     /// Asks the hub to close the session (no answer awaited: the hub ends it either way

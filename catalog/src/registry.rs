@@ -25,7 +25,7 @@ pub enum RegistryError {
         path: PathBuf,
         /// The OS error.
         #[source]
-        #[serde(with = "crate::error::io_text")]
+        #[serde(with = "envhub_core::serde_text::io_text")]
         source: std::io::Error,
     },
     /// The YAML is malformed or does not fit the format.
@@ -52,8 +52,8 @@ pub enum RegistryError {
         /// Index of the entry.
         index: usize,
         /// The field.
-        #[serde(deserialize_with = "crate::error::interned")]
-        field: crate::error::StaticName,
+        #[serde(deserialize_with = "envhub_core::serde_text::interned")]
+        field: envhub_core::serde_text::StaticName,
         /// What is wrong.
         message: String,
     },

@@ -4,7 +4,8 @@
 //! A hub daemon sends its errors to clients serialized, variant and fields (`{"kind": ...,
 //! "fields": ...}`), so a client rebuilds the error it would have got from an embedded hub.
 
-use crate::RegistryError;
+use envhub_catalog::RegistryError;
+use envhub_core::serde_text::{StaticName, interned};
 use envhub_shm::DataPlaneError;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -162,42 +163,6 @@ pub enum HubError {
         /// What went wrong.
         reason: String,
     },
-}
-
-/// `&'static str`, named so that serde does not take a field of this type as borrowed from
-/// the input (it reads one through [`interned`]).
-pub type StaticName = &'static str;
-
-/// A name sent by the daemon where the error holds a `&'static str` (an option's or a
-/// field's name: a handful of distinct values), leaked once per distinct value and capped, so
-/// a misbehaving daemon cannot grow the client without bound.
-pub(crate) fn interned<'de, D: Deserializer<'de>>(d: D) -> Result<&'static str, D::Error> {
-    const CAPACITY: usize = 64;
-    static SEEN: std::sync::Mutex<Vec<&'static str>> = std::sync::Mutex::new(Vec::new());
-    let name = String::deserialize(d)?;
-    let mut seen = SEEN.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(known) = seen.iter().find(|known| **known == name) {
-        return Ok(known);
-    }
-    if seen.len() == CAPACITY {
-        return Ok("value");
-    }
-    let leaked: &'static str = Box::leak(name.into_boxed_str());
-    seen.push(leaked);
-    Ok(leaked)
-}
-
-/// An I/O error as its text (rebuilt as an `io::Error` of kind `Other` with that text).
-pub(crate) mod io_text {
-    use super::*;
-
-    pub fn serialize<S: Serializer>(e: &std::io::Error, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(&e.to_string())
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<std::io::Error, D::Error> {
-        Ok(std::io::Error::other(String::deserialize(d)?))
-    }
 }
 
 /// [`DataPlaneError`] (of `envhub-shm`, which has no serde impls for it) on the wire.

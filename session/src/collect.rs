@@ -2,11 +2,11 @@
 //! observations, rewards and flags where the workers wrote them in the batch slot.
 
 use crate::batch::{Batch, as_bools};
-use crate::error::HubError;
-use crate::remote::bridge::HUB_ERROR;
-use crate::remote::wire::{RemoteAnswer, land_rows};
+use crate::results::Place;
 use crate::vec_env::VecEnv;
 use crate::worker_link::{Answer, WorkerLink, env_range};
+use envhub_protocol::HubError;
+use envhub_protocol::wire::{HUB_ERROR, RemoteAnswer, decode_error, land_rows};
 use envhub_shm::{DataPlaneError, SlotPool, status};
 
 /// Copies a remote hub's result rows of the envs it was sent into the batch slot, where a
@@ -19,12 +19,12 @@ fn land_remote_rows(
     let Some(remote) = w.remote_conn() else {
         return Ok(());
     };
-    let layout = &remote.rows_layout;
+    let layout = remote.rows_layout();
     let rows = answer.rows();
     if rows.len() != layout.size() {
         return Err(DataPlaneError::Protocol(format!(
             "hub `{}` sent {} bytes of results; its {} envs take {}",
-            remote.hub,
+            remote.hub(),
             rows.len(),
             layout.num_envs,
             layout.size()
@@ -48,83 +48,15 @@ fn land_remote_rows(
 
 /// The error a remote hub sent for its whole slice (its session there is over).
 fn remote_error(w: &WorkerLink, answer: &RemoteAnswer) -> HubError {
-    let hub = w.remote_conn().map_or("?", |r| r.hub.as_str());
-    match serde_json::from_slice::<HubError>(answer.info_bytes()) {
-        Ok(HubError::WorkerDied { pid, why, .. }) => HubError::WorkerDied {
+    let hub = w.remote_conn().map_or("?", |r| r.hub());
+    match decode_error(hub, answer.info_bytes()) {
+        HubError::WorkerDied { pid, why, .. } => HubError::WorkerDied {
             worker: w.index,
             envs: env_range(&w.job),
             pid,
             why: format!("on hub `{hub}`: {why}"),
         },
-        Ok(e) => e,
-        Err(_) => HubError::Remote(format!(
-            "hub `{hub}`: {}",
-            String::from_utf8_lossy(answer.info_bytes())
-        )),
-    }
-}
-
-/// Where the last results are.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-enum Place {
-    #[default]
-    Nowhere,
-    /// Rows `first..first + env_ids.len()` of batch slot `index`.
-    Slot { index: u32, first: usize },
-    /// Copied into the session's gather buffers.
-    Gathered,
-}
-
-/// Results copied out of the slots because they do not lie contiguously in one.
-#[derive(Default)]
-struct Gathered {
-    obs: Vec<u64>,
-    obs_len: usize,
-    rewards: Vec<f64>,
-    terminated: Vec<bool>,
-    truncated: Vec<bool>,
-    final_mask: Vec<u8>,
-    final_obs: Vec<u8>,
-}
-
-impl Gathered {
-    fn clear(&mut self) {
-        self.obs_len = 0;
-        self.rewards.clear();
-        self.terminated.clear();
-        self.truncated.clear();
-        self.final_mask.clear();
-        self.final_obs.clear();
-    }
-
-    fn push_obs(&mut self, bytes: &[u8]) {
-        let end = self.obs_len + bytes.len();
-        if self.obs.len() * 8 < end {
-            self.obs.resize(end.div_ceil(8), 0);
-        }
-        let all: &mut [u8] = bytemuck::cast_slice_mut(&mut self.obs);
-        all[self.obs_len..end].copy_from_slice(bytes);
-        self.obs_len = end;
-    }
-
-    fn obs_bytes(&self) -> &[u8] {
-        &bytemuck::cast_slice(&self.obs)[..self.obs_len]
-    }
-}
-
-/// The session's last results: which envs, where they lie, and their infos.
-#[derive(Default)]
-pub(crate) struct Results {
-    env_ids: Vec<usize>,
-    place: Place,
-    /// One per env of `env_ids` when any reported info, else empty.
-    infos: Vec<serde_json::Value>,
-    gathered: Gathered,
-}
-
-impl Results {
-    pub fn is_set(&self) -> bool {
-        self.place != Place::Nowhere
+        e => e,
     }
 }
 

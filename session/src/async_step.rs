@@ -8,8 +8,8 @@
 //! picked out of a worker's (a `send` to envs 0 and 2 of a worker hosting 0..3) are gathered.
 
 use crate::batch::Batch;
-use crate::error::HubError;
 use crate::vec_env::{Phase, VecEnv};
+use envhub_protocol::HubError;
 use std::time::Instant;
 
 impl VecEnv {
@@ -166,23 +166,22 @@ impl VecEnv {
             .filter(|w| w.pending)
             .filter_map(|w| w.local_channel())
             .collect();
-        let remote: Vec<&crate::remote::link::RemoteConn> = self
+        let remote: Vec<usize> = self
             .workers
             .iter()
             .filter(|w| w.pending)
-            .filter_map(|w| w.remote_conn())
+            .filter_map(|w| w.remote_conn().map(|r| r.mailbox()))
             .collect();
         const SHARED: std::time::Duration = std::time::Duration::from_micros(200);
-        match (local.is_empty(), remote.first()) {
+        match (
+            local.is_empty(),
+            self.opener.as_ref().filter(|_| !remote.is_empty()),
+        ) {
             (_, None) => envhub_shm::wait_any(&local, tick)?,
-            (true, Some(r)) => {
-                let links: Vec<usize> = remote.iter().map(|r| r.link).collect();
-                r.wait_any(&links, tick);
-            }
-            (false, Some(r)) => {
+            (true, Some(opener)) => opener.wait_any(&remote, tick),
+            (false, Some(opener)) => {
                 envhub_shm::wait_any(&local, SHARED)?;
-                let links: Vec<usize> = remote.iter().map(|r| r.link).collect();
-                r.wait_any(&links, SHARED);
+                opener.wait_any(&remote, SHARED);
             }
         }
         Ok(())

@@ -11,17 +11,18 @@
 //! Messages arrive at any alignment, so every multi-byte value is read and written by copying
 //! bytes; nothing is cast in place.
 
+use crate::HubError;
 use envhub_shm::{
     BatchLayout, Layout, RequestHeader, ResponseBlocksMut, ResponseHeader, command, env_flag,
 };
 
 /// Bytes of a request header.
-pub(crate) const REQUEST_HEADER: usize = std::mem::size_of::<RequestHeader>();
+pub const REQUEST_HEADER: usize = std::mem::size_of::<RequestHeader>();
 /// Bytes of a response header.
-pub(crate) const RESPONSE_HEADER: usize = std::mem::size_of::<ResponseHeader>();
+pub const RESPONSE_HEADER: usize = std::mem::size_of::<ResponseHeader>();
 
 /// What a request asks, besides its header fields.
-pub(crate) struct RequestBody<'a> {
+pub struct RequestBody<'a> {
     /// One action per env of the hub (zeros for envs not selected); `None` for no actions.
     pub actions: Option<&'a [u8]>,
     /// The envs it applies to (`None`: all).
@@ -43,7 +44,7 @@ impl RequestBody<'_> {
 }
 
 /// Encodes a request for a hub whose envs have request layout `layout`.
-pub(crate) fn encode_request(
+pub fn encode_request(
     layout: &Layout,
     seq: u64,
     command: u32,
@@ -82,20 +83,21 @@ pub(crate) fn encode_request(
 
 /// A request as the hub reads it.
 #[derive(Debug)]
-pub(crate) struct ParsedRequest<'a> {
+pub struct ParsedRequest<'a> {
+    /// Its header.
     pub header: RequestHeader,
     /// Actions of every env, back to back.
     pub actions: &'a [u8],
+    /// Per-env seeds (reset).
     pub seeds: Vec<Option<u64>>,
+    /// Which envs it applies to.
     pub selected: Vec<bool>,
+    /// Reset options (JSON; empty: none).
     pub options: &'a str,
 }
 
 /// Reads a request for a hub session of `layout`; the error says what is wrong with it.
-pub(crate) fn parse_request<'a>(
-    bytes: &'a [u8],
-    layout: &Layout,
-) -> Result<ParsedRequest<'a>, String> {
+pub fn parse_request<'a>(bytes: &'a [u8], layout: &Layout) -> Result<ParsedRequest<'a>, String> {
     let n = layout.num_envs;
     let header: RequestHeader =
         bytemuck::pod_read_unaligned(bytes.get(..REQUEST_HEADER).ok_or(format!(
@@ -145,7 +147,7 @@ pub(crate) fn parse_request<'a>(
 }
 
 /// Encodes a response: header, result rows (empty when there are none) and info section.
-pub(crate) fn encode_response(
+pub fn encode_response(
     seq: u64,
     status: u32,
     num_envs: usize,
@@ -166,8 +168,27 @@ pub(crate) fn encode_response(
     out
 }
 
+/// Status of a response that carries an error for the hub's whole slice (its session there
+/// is over): the info section is the [`HubError`] serialized.
+pub const HUB_ERROR: u32 = 16;
+
+/// The response that ends a session with `error`.
+pub fn encode_error(seq: u64, num_envs: usize, error: &HubError) -> Vec<u8> {
+    let json = serde_json::to_vec(error).expect("errors serialize");
+    encode_response(seq, HUB_ERROR, num_envs, &[], &json)
+}
+
+/// The error a [`HUB_ERROR`] response carries, as the hub named `hub` sent it; text that is
+/// not one becomes [`HubError::Remote`] with it.
+pub fn decode_error(hub: &str, info: &[u8]) -> HubError {
+    match serde_json::from_slice::<HubError>(info) {
+        Ok(e) => e,
+        Err(_) => HubError::Remote(format!("hub `{hub}`: {}", String::from_utf8_lossy(info))),
+    }
+}
+
 /// A response as the client received it.
-pub(crate) struct RemoteAnswer {
+pub struct RemoteAnswer {
     header: ResponseHeader,
     bytes: Vec<u8>,
 }
@@ -180,6 +201,7 @@ impl RemoteAnswer {
         (bytes.len() == need).then_some(RemoteAnswer { header, bytes })
     }
 
+    /// Its header.
     pub fn header(&self) -> &ResponseHeader {
         &self.header
     }
@@ -189,6 +211,7 @@ impl RemoteAnswer {
         &self.bytes[RESPONSE_HEADER..RESPONSE_HEADER + self.header.reserved as usize]
     }
 
+    /// Its info section (JSON infos, rendered frames, or the error of [`HUB_ERROR`]).
     pub fn info_bytes(&self) -> &[u8] {
         &self.bytes[RESPONSE_HEADER + self.header.reserved as usize..]
     }
@@ -196,7 +219,7 @@ impl RemoteAnswer {
 
 /// Copies rows `envs` (indices within the hub's slice) of a hub's result block `from`
 /// (laid out by `layout`) into `to`, the same envs' rows of a batch slot.
-pub(crate) fn land_rows(
+pub fn land_rows(
     layout: &BatchLayout,
     from: &[u8],
     envs: &[usize],
@@ -233,19 +256,25 @@ pub(crate) fn land_rows(
         }
     }
 }
-
-/// Writes results into a hub's result block (laid out by `layout`): the rows of `envs`
-/// (indices within the slice), in order, from the blocks given.
-pub(crate) struct RowsOut<'a> {
+/// The result blocks of a hub's session (all its envs), which [`write_rows`] picks rows of.
+pub struct RowsOut<'a> {
+    /// Observations.
     pub obs: &'a [u8],
+    /// Rewards.
     pub rewards: &'a [f64],
+    /// Terminated flags.
     pub terminated: &'a [bool],
+    /// Truncated flags.
     pub truncated: &'a [bool],
+    /// Final-observation mask (`same_step`).
     pub final_mask: &'a [u8],
+    /// Final observations (`same_step`).
     pub final_obs: &'a [u8],
 }
 
-pub(crate) fn write_rows(layout: &BatchLayout, to: &mut [u8], envs: &[usize], rows: &RowsOut<'_>) {
+/// Writes results into a hub's result block (laid out by `layout`): the rows of `envs`
+/// (indices within the slice), in order, from the blocks given.
+pub fn write_rows(layout: &BatchLayout, to: &mut [u8], envs: &[usize], rows: &RowsOut<'_>) {
     let ob = layout.obs_bytes;
     let contiguous = envs.windows(2).all(|p| p[1] == p[0] + 1);
     if let (true, Some(&first)) = (contiguous, envs.first()) {

@@ -41,6 +41,17 @@ impl<'a> Batch<'a> {
         self.infos.get(k).unwrap_or(&NO_INFO)
     }
 
+    /// The infos of the batch's envs, in order (empty when none reported any).
+    pub fn infos(&self) -> &'a [serde_json::Value] {
+        self.infos
+    }
+
+    /// The final-observation mask and final observations of the batch (`same_step`
+    /// autoreset; empty otherwise), as the slot's blocks.
+    pub fn final_blocks(&self) -> (&'a [u8], &'a [u8]) {
+        (self.final_mask, self.final_obs)
+    }
+
     /// Whether any env reported info.
     pub fn has_info(&self) -> bool {
         !self.infos.is_empty()
@@ -68,34 +79,6 @@ impl<'a> Batch<'a> {
         }
         let ob = self.obs.len() / self.env_ids.len().max(1);
         self.final_obs.get(k * ob..(k + 1) * ob)
-    }
-}
-
-/// An RGB frame, row-major, 3 bytes per pixel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Frame {
-    /// Rows.
-    pub height: usize,
-    /// Columns.
-    pub width: usize,
-    /// `height × width × 3` bytes.
-    pub rgb: Vec<u8>,
-}
-
-impl Frame {
-    /// Reads one frame as the worker encodes it (`u32` height, `u32` width, pixels);
-    /// `Some(None)` for an env that rendered nothing.
-    pub(crate) fn parse(bytes: &[u8]) -> Option<(Option<Frame>, &[u8])> {
-        let h = u32::from_le_bytes(bytes.get(..4)?.try_into().ok()?) as usize;
-        let w = u32::from_le_bytes(bytes.get(4..8)?.try_into().ok()?) as usize;
-        let n = h * w * 3;
-        let rgb = bytes.get(8..8 + n)?;
-        let frame = (n > 0).then(|| Frame {
-            height: h,
-            width: w,
-            rgb: rgb.to_vec(),
-        });
-        Some((frame, &bytes[8 + n..]))
     }
 }
 

@@ -5,18 +5,14 @@
 //! in place. Asynchronous stepping (`send`/`recv`) lives in `async_step.rs`, the collection of
 //! responses into results in `results.rs`.
 
-use crate::batch::{Batch, Frame};
-use crate::error::HubError;
-use crate::launcher::Launcher;
-use crate::placement::{LOCAL, Slice};
-use crate::remote::client::{Inbox, Network};
-use crate::remote::link::RemoteConn;
-use crate::remote::serve::OpenRequest;
+use crate::batch::Batch;
+use crate::launch::Launch;
+use crate::remote::{LOCAL, Slice, SliceOpener};
 use crate::results::Results;
-use crate::routing::Route;
 use crate::session_options::SessionOptions;
 use crate::worker_link::{InterruptCheck, WorkerLink, split_envs};
 use envhub_core::{AutoresetMode, DType, Space};
+use envhub_protocol::{Frame, HubError, OpenRequest, Route};
 use envhub_shm::{BatchLayout, ChannelName, Doorbells, SlotPool, SlotsName, WorkerJob};
 use std::sync::Arc;
 
@@ -50,19 +46,8 @@ pub struct VecEnv {
     pub(crate) obs_bytes_copied: u64,
     /// Resets and steps (lock-step or `recv`) completed.
     pub(crate) steps_taken: u64,
-}
-
-fn session_name() -> String {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    format!(
-        "{}-{}-{nanos:x}",
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    )
+    /// Opens and reaches the session's slices on other hubs (none: all envs are local).
+    pub(crate) opener: Option<Arc<dyn SliceOpener>>,
 }
 
 /// One link of a session to start: local worker `job`, or a remote hub's slice.
@@ -76,24 +61,26 @@ enum Planned {
 }
 
 /// What a session is started with besides its options.
-pub(crate) struct StartPlan<'a> {
+pub struct StartPlan<'a> {
     /// The registry id (or env id) — what remote hubs are asked for.
     pub id: &'a str,
     /// The local route, when some envs run here.
     pub route: Option<Route>,
     /// The session's config (`num_envs` is the whole session's).
     pub config: envhub_core::EnvConfig,
+    /// Where its envs run, in env order.
     pub slices: Vec<Slice>,
-    pub network: Option<Arc<Network>>,
+    /// Opens the slices placed on other hubs (needed when any is).
+    pub opener: Option<Arc<dyn SliceOpener>>,
 }
 
 impl VecEnv {
     /// Starts the workers of a routed entry. `id` names the session in errors.
-    pub(crate) fn start(
+    pub fn start(
         id: &str,
         route: Route,
         options: SessionOptions,
-        launcher: &Launcher,
+        launcher: &Arc<dyn Launch>,
     ) -> Result<VecEnv, HubError> {
         let num_envs = route.config.num_envs;
         VecEnv::start_placed(
@@ -105,7 +92,7 @@ impl VecEnv {
                     place: LOCAL.into(),
                     num_envs,
                 }],
-                network: None,
+                opener: None,
             },
             options,
             launcher,
@@ -114,17 +101,17 @@ impl VecEnv {
 
     /// Starts a session over local workers and remote hubs: envs `0..a` on the first slice's
     /// place, `a..b` on the second's, and so on.
-    pub(crate) fn start_placed(
+    pub fn start_placed(
         plan: StartPlan<'_>,
         options: SessionOptions,
-        launcher: &Launcher,
+        launcher: &Arc<dyn Launch>,
     ) -> Result<VecEnv, HubError> {
         let StartPlan {
             id,
             route,
             config,
             slices,
-            network,
+            opener,
         } = plan;
         let num_envs: usize = slices.iter().map(|s| s.num_envs).sum();
         if num_envs == 0 {
@@ -152,7 +139,7 @@ impl VecEnv {
             }
             workers
         };
-        let session = session_name();
+        let session = envhub_protocol::session_id();
         let slots = SlotsName {
             prefix: options.namespace.clone(),
             session: session.clone(),
@@ -204,7 +191,6 @@ impl VecEnv {
         } else {
             None
         };
-        let inbox = Arc::new(Inbox::default());
         let with_final = config.autoreset_mode == AutoresetMode::SameStep;
         // Workers and remote slices start in parallel: a simulator that takes a while to load
         // (MuJoCo, Python) costs its load time once, not once per worker or hub.
@@ -215,7 +201,7 @@ impl VecEnv {
                     .enumerate()
                     .map(|(index, plan)| {
                         let (session, options, config) = (&session, &options, &config);
-                        let (bells, inbox, network, slots) = (&bells, &inbox, &network, &slots);
+                        let (bells, opener, slots) = (&bells, &opener, &slots);
                         scope.spawn(move || match plan {
                             Planned::Local(job) => {
                                 let bell = bells
@@ -239,7 +225,7 @@ impl VecEnv {
                                 env_offset,
                                 num_envs: n,
                             } => {
-                                let network = network.as_ref().ok_or_else(|| {
+                                let opener = opener.as_ref().ok_or_else(|| {
                                     HubError::InvalidState("remote envs without a network".into())
                                 })?;
                                 let mut config = config.clone();
@@ -247,26 +233,16 @@ impl VecEnv {
                                 let request = OpenRequest {
                                     id: id.to_string(),
                                     config,
-                                    client: network.client_id().to_string(),
+                                    client: opener.client_id(),
                                     restart_on_crash: options.restart_on_crash,
                                     step_timeout_ms: options.step_timeout.as_millis() as u64,
                                 };
-                                let reply =
-                                    network.open_session(&hub, &request, options.start_timeout)?;
-                                let rows_layout = BatchLayout::new(
-                                    n,
-                                    reply.spec.observation_space.byte_len(),
-                                    with_final,
-                                );
-                                let conn = RemoteConn::connect(
-                                    network.clone(),
-                                    inbox.clone(),
-                                    index,
+                                let (reply, conn) = opener.open(
                                     &hub,
-                                    &reply.session,
-                                    n,
-                                    reply.spec.action_space.byte_len(),
-                                    rows_layout,
+                                    &request,
+                                    index,
+                                    with_final,
+                                    options.start_timeout,
                                 )?;
                                 let job = WorkerJob {
                                     adapter: reply.route.adapter.clone(),
@@ -334,7 +310,7 @@ impl VecEnv {
             let where_ = |l: &WorkerLink| {
                 l.remote_conn().map_or_else(
                     || "this machine".to_string(),
-                    |r| format!("hub `{}`", r.hub),
+                    |r| format!("hub `{}`", r.hub()),
                 )
             };
             let message = format!(
@@ -378,6 +354,7 @@ impl VecEnv {
             interrupt: Arc::new(|| false),
             obs_bytes_copied: 0,
             steps_taken: 0,
+            opener,
         })
     }
 
@@ -386,20 +363,21 @@ impl VecEnv {
     pub(crate) fn place_again(&mut self, i: usize) -> Result<(), HubError> {
         let w = &self.workers[i];
         let remote = w.remote_conn().expect("a remote link");
-        let (lost, network, inbox) = (
-            remote.hub.clone(),
-            remote.network().clone(),
-            remote.inbox().clone(),
-        );
+        let lost = remote.hub().to_string();
+        let mailbox = remote.mailbox();
+        let opener = self
+            .opener
+            .clone()
+            .ok_or_else(|| HubError::InvalidState("remote envs without a network".into()))?;
         let mut load: Vec<(String, usize)> = Vec::new();
         for other in &self.workers {
             if let Some(r) = other.remote_conn()
-                && r.hub != lost
-                && network.is_alive(&r.hub)
+                && r.hub() != lost
+                && opener.is_alive(r.hub())
             {
-                match load.iter_mut().find(|(h, _)| *h == r.hub) {
+                match load.iter_mut().find(|(h, _)| h == r.hub()) {
                     Some((_, n)) => *n += other.job.num_envs,
-                    None => load.push((r.hub.clone(), other.job.num_envs)),
+                    None => load.push((r.hub().to_string(), other.job.num_envs)),
                 }
             }
         }
@@ -414,11 +392,18 @@ impl VecEnv {
         let request = OpenRequest {
             id: self.id.clone(),
             config: w.job.config.clone(),
-            client: network.client_id().to_string(),
+            client: opener.client_id(),
             restart_on_crash: true,
             step_timeout_ms: self.options.step_timeout.as_millis() as u64,
         };
-        let reply = network.open_session(&target, &request, self.options.start_timeout)?;
+        let with_final = self.autoreset_mode() == AutoresetMode::SameStep;
+        let (reply, conn) = opener.open(
+            &target,
+            &request,
+            mailbox,
+            with_final,
+            self.options.start_timeout,
+        )?;
         if reply.spec.observation_space != self.observation_space
             || reply.spec.action_space != self.action_space
         {
@@ -427,21 +412,6 @@ impl VecEnv {
                 self.id
             )));
         }
-        let rows_layout = BatchLayout::new(
-            n,
-            self.observation_space.byte_len(),
-            self.autoreset_mode() == AutoresetMode::SameStep,
-        );
-        let conn = RemoteConn::connect(
-            network,
-            inbox,
-            i,
-            &target,
-            &reply.session,
-            n,
-            self.action_space.byte_len(),
-            rows_layout,
-        )?;
         tracing::warn!(lost = %lost, to = %target, envs = n, "envs placed again");
         self.workers[i].replace_remote(reply.spec, conn, lost);
         Ok(())
@@ -453,7 +423,7 @@ impl VecEnv {
         for w in &self.workers {
             let place = w
                 .remote_conn()
-                .map_or_else(|| LOCAL.to_string(), |r| r.hub.clone());
+                .map_or_else(|| LOCAL.to_string(), |r| r.hub().to_string());
             let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
             match out.last_mut() {
                 Some((p, r)) if *p == place && r.end == range.start => r.end = range.end,

@@ -2,19 +2,23 @@
 //! restarted) reached over iceoryx2, or a remote hub's slice of the session reached over
 //! Zenoh. Both answer the same requests with the same statuses and result rows.
 
-use crate::error::HubError;
-use crate::launcher::{Launcher, WorkerProcess};
-use crate::remote::link::RemoteConn;
-use crate::remote::wire::{RemoteAnswer, RequestBody};
+use crate::launch::{Launch, Process};
+use crate::remote::RemoteSlice;
+use envhub_protocol::HubError;
+use envhub_protocol::wire::{RemoteAnswer, RequestBody};
 use envhub_shm::{
     Bell, ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, ResponseHeader,
     WaitPolicy, WorkerJob, command, status,
 };
+use std::sync::Arc;
 
 /// Asked while waiting on workers: `true` stops the wait with [`HubError::Interrupted`] (the
 /// Python client checks for Ctrl-C this way).
 pub type InterruptCheck = dyn Fn() -> bool + Send + Sync;
 use std::time::{Duration, Instant};
+
+/// How long a wait for a remote answer spins (yielding the core) before it sleeps.
+const REMOTE_SPIN: Duration = Duration::from_micros(300);
 
 /// Extra wait for a remote slice beyond the step timeout (see [`WorkerLink::wait`]).
 const REMOTE_GRACE: Duration = Duration::from_secs(2);
@@ -22,8 +26,8 @@ const REMOTE_GRACE: Duration = Duration::from_secs(2);
 /// A local worker process and the client's end of its channel.
 pub(crate) struct LocalConn {
     pub channel: ClientChannel,
-    process: WorkerProcess,
-    launcher: Launcher,
+    process: Box<dyn Process>,
+    launcher: Arc<dyn Launch>,
     watch: ProcessWatch,
     generation: u32,
     bell: Bell,
@@ -34,7 +38,7 @@ pub(crate) enum Conn {
     /// Both boxed: each is large (iceoryx2 ports; Zenoh handles), and links move around in
     /// a `Vec`.
     Local(Box<LocalConn>),
-    Remote(Box<RemoteConn>),
+    Remote(Box<dyn RemoteSlice>),
 }
 
 /// A worker's answer: in place in iceoryx2 shared memory, or a remote hub's message (whose
@@ -106,7 +110,7 @@ impl WorkerLink {
         generation: u32,
         policy: WaitPolicy,
         start_timeout: Duration,
-        launcher: &Launcher,
+        launcher: &Arc<dyn Launch>,
         bell: Bell,
     ) -> Result<WorkerLink, HubError> {
         job.channel.service = format!("envhub/{session}/{index}/{generation}");
@@ -147,8 +151,13 @@ impl WorkerLink {
     }
 
     /// A remote hub's slice of the session, connected.
-    pub fn remote(index: usize, job: WorkerJob, spec: ReadySpec, conn: RemoteConn) -> WorkerLink {
-        WorkerLink::new(index, job, spec, Conn::Remote(Box::new(conn)))
+    pub fn remote(
+        index: usize,
+        job: WorkerJob,
+        spec: ReadySpec,
+        conn: Box<dyn RemoteSlice>,
+    ) -> WorkerLink {
+        WorkerLink::new(index, job, spec, Conn::Remote(conn))
     }
 
     /// A link with nothing sent yet.
@@ -171,8 +180,8 @@ impl WorkerLink {
 
     /// Replaces a lost remote slice by `conn` (the same envs, opened on another hub): its
     /// envs come back reset, truncated, with the loss in their info.
-    pub fn replace_remote(&mut self, spec: ReadySpec, conn: RemoteConn, lost: String) {
-        self.conn = Conn::Remote(Box::new(conn));
+    pub fn replace_remote(&mut self, spec: ReadySpec, conn: Box<dyn RemoteSlice>, lost: String) {
+        self.conn = Conn::Remote(conn);
         self.spec = spec;
         self.pending = false;
         self.response = None;
@@ -195,9 +204,9 @@ impl WorkerLink {
     }
 
     /// The remote slice, if this link is one.
-    pub fn remote_conn(&self) -> Option<&RemoteConn> {
+    pub fn remote_conn(&self) -> Option<&dyn RemoteSlice> {
         match &self.conn {
-            Conn::Remote(r) => Some(r),
+            Conn::Remote(r) => Some(r.as_ref()),
             Conn::Local(_) => None,
         }
     }
@@ -341,7 +350,7 @@ impl WorkerLink {
         const TICK: Duration = Duration::from_millis(5);
         // A short spin first (yielding the core): an answer a network round trip away is
         // caught without a sleeping thread's wake-up.
-        let spin_until = Instant::now() + crate::remote::link::SPIN;
+        let spin_until = Instant::now() + REMOTE_SPIN;
         while Instant::now() < spin_until {
             if let Some(answer) = self.try_take()? {
                 return Ok(answer);
@@ -401,7 +410,7 @@ impl WorkerLink {
         }
         let gone = match &self.conn {
             Conn::Local(l) => l.watch.exited(),
-            Conn::Remote(r) => !r.hub_alive(),
+            Conn::Remote(r) => !r.alive(),
         };
         if gone {
             return Err(self.exited());
@@ -417,7 +426,7 @@ impl WorkerLink {
             Conn::Remote(r) => {
                 r.close();
                 return HubError::HubLost {
-                    hub: r.hub.clone(),
+                    hub: r.hub().to_string(),
                     envs: env_range(&self.job),
                     why: format!(
                         "it did not answer within {timeout:?} (step timeout); its session was closed"
@@ -440,7 +449,7 @@ impl WorkerLink {
             Conn::Local(l) => l,
             Conn::Remote(r) => {
                 return HubError::HubLost {
-                    hub: r.hub.clone(),
+                    hub: r.hub().to_string(),
                     envs: env_range(&self.job),
                     why: "its liveliness token went away (the hub exited, froze past its lease, or the network to it was cut)".into(),
                 };

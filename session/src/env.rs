@@ -1,8 +1,8 @@
 //! `Env`: one environment in a worker process, with Gymnasium's single-env contract.
 
-use crate::error::HubError;
 use crate::vec_env::VecEnv;
 use envhub_core::{ResetOptions, Space};
+use envhub_protocol::HubError;
 
 /// What `step` returns; the observation is viewed in place in shared memory.
 #[derive(Debug)]
@@ -33,7 +33,8 @@ pub struct Env {
 }
 
 impl Env {
-    pub(crate) fn new(inner: VecEnv) -> Env {
+    /// A single env over a session of one env.
+    pub fn new(inner: VecEnv) -> Env {
         Env { inner }
     }
 
@@ -92,7 +93,7 @@ impl Env {
     }
 
     /// Renders the env (`render_mode = "rgb_array"`); `None` if it renders nothing.
-    pub fn render(&mut self) -> Result<Option<crate::batch::Frame>, HubError> {
+    pub fn render(&mut self) -> Result<Option<envhub_protocol::Frame>, HubError> {
         Ok(self.inner.render()?.pop().flatten())
     }
 

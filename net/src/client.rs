@@ -4,16 +4,17 @@
 //!
 //! The client holds its own token (`envhub/client/<id>`): hubs end its sessions when it goes.
 
-use super::keys;
-use super::net::{self, NetConfig};
-use super::serve::{HubInfo, OpenReply, OpenRequest};
-use crate::error::HubError;
+use crate::config::{self, NetConfig};
+use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
+
+/// How long a wait for an echo spins (yielding the core) before it sleeps.
+const SPIN: Duration = Duration::from_micros(300);
 
 /// How long `hubs()` waits for hubs to show up when none has yet (discovery, connecting).
 pub const DISCOVERY: Duration = Duration::from_secs(2);
@@ -60,7 +61,7 @@ impl Network {
     }
 
     fn open(net: &NetConfig) -> Result<Network, HubError> {
-        let session = net::open(net, false)?;
+        let session = config::open(net, false)?;
         let failed = |e: zenoh::Error| HubError::Network {
             reason: e.to_string(),
             hint: "the Zenoh session is failing".into(),
@@ -198,7 +199,7 @@ impl Network {
     }
 
     /// Asks hub `hub` a query; its `{"ok": ...}` reply, or the error it sent.
-    pub(crate) fn query<T: DeserializeOwned>(
+    pub fn query<T: DeserializeOwned>(
         &self,
         hub: &str,
         key: &str,
@@ -313,7 +314,7 @@ impl Network {
             publisher.put(payload.clone()).wait().map_err(failed)?;
             // The same wait as a session's: a short spin, then sleep.
             let mut got = false;
-            while t.elapsed() < super::link::SPIN {
+            while t.elapsed() < SPIN {
                 if rx.try_recv().is_ok() {
                     got = true;
                     break;
@@ -346,7 +347,7 @@ impl Network {
 }
 
 /// The error for a hub name that is not live: the live ones and the closest names.
-pub(crate) fn unknown_hub(name: &str, live: &[String]) -> HubError {
+pub fn unknown_hub(name: &str, live: &[String]) -> HubError {
     let mut scored: Vec<(f64, &String)> = live
         .iter()
         .map(|l| (strsim::normalized_levenshtein(name, l), l))

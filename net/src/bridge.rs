@@ -6,12 +6,10 @@
 //! without stepping twice; an older one is ignored. Anything unreadable is answered with an
 //! error naming what was wrong, and the session goes on.
 
-use super::keys;
-use super::serve::ServePolicy;
-use super::wire::{self, RowsOut};
-use crate::batch::Batch;
-use crate::error::HubError;
-use crate::vec_env::VecEnv;
+use crate::policy::ServePolicy;
+use envhub_protocol::wire::{self, RowsOut};
+use envhub_protocol::{HubError, keys};
+use envhub_session::{Batch, VecEnv};
 use envhub_shm::{BatchLayout, Layout, command, frames_section, status};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -19,10 +17,6 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use zenoh::Wait;
-
-/// Response status of a remote session whose info section is a serialized [`HubError`]
-/// (the session's envs are gone: a worker died without restart, ...).
-pub(crate) const HUB_ERROR: u32 = 16;
 
 /// How often an idle session looks at its stop flag.
 const IDLE_TICK: Duration = Duration::from_millis(100);
@@ -37,7 +31,7 @@ struct Entry {
 
 /// A hub's remote sessions, and the envs and workers they hold (for its limits).
 #[derive(Default)]
-pub(crate) struct Sessions {
+pub struct Sessions {
     entries: Mutex<HashMap<String, Entry>>,
     /// Clients whose token went away (the latest few): a session still starting for one of
     /// them when it went is ended as soon as it is registered.
@@ -47,7 +41,7 @@ pub(crate) struct Sessions {
 }
 
 /// Envs and workers set aside for a session being started; given back if it fails.
-pub(crate) struct Reservation<'a> {
+pub struct Reservation<'a> {
     sessions: &'a Sessions,
     envs: usize,
     workers: usize,
@@ -66,8 +60,14 @@ impl Sessions {
         self.entries.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// Sessions open now.
     pub fn len(&self) -> usize {
         self.lock().len()
+    }
+
+    /// Whether none is open.
+    pub fn is_empty(&self) -> bool {
+        self.lock().is_empty()
     }
 
     /// Envs and workers of the open sessions.
@@ -141,6 +141,7 @@ impl Sessions {
         }
     }
 
+    /// Stops every session (the hub is leaving).
     pub fn stop_all(&self) {
         for s in self.lock().values_mut() {
             s.stop.store(true, Ordering::Relaxed);
@@ -149,22 +150,8 @@ impl Sessions {
     }
 }
 
-fn session_id() -> String {
-    use std::sync::atomic::AtomicU64;
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
-    format!(
-        "s{:x}{:x}-{}",
-        std::process::id(),
-        nanos & 0xffff_ffff,
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    )
-}
-
 /// Registers a started session and runs it on its own thread; returns its id.
-pub(crate) fn start(
+pub fn start(
     sessions: &Arc<Sessions>,
     zenoh: &zenoh::Session,
     hub: &str,
@@ -172,7 +159,7 @@ pub(crate) fn start(
     vec: VecEnv,
     reservation: Reservation<'_>,
 ) -> Result<String, HubError> {
-    let id = session_id();
+    let id = envhub_protocol::session_id();
     let publisher = zenoh
         .declare_publisher(keys::responses(hub, &id))
         .express(true)
@@ -217,7 +204,7 @@ pub(crate) fn start(
 }
 
 /// Hands a request to its session, or answers that there is no such session.
-pub(crate) fn dispatch(
+pub fn dispatch(
     sessions: &Sessions,
     zenoh: &zenoh::Session,
     hub: &str,
@@ -251,7 +238,7 @@ fn seq_of(payload: &[u8]) -> u64 {
 /// trip, and a thread put to sleep costs tens of µs to wake. `ENVHUB_BRIDGE_SPIN_US`
 /// overrides it (0: always sleep).
 fn spin_budget() -> Duration {
-    let us = std::env::var(crate::env_vars::ENVHUB_BRIDGE_SPIN_US)
+    let us = std::env::var(envhub_core::env_vars::ENVHUB_BRIDGE_SPIN_US)
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(300);
@@ -366,7 +353,7 @@ fn serve(
                         .collect();
                     wire::encode_response(seq, status::OK, n, &[], &frames_section(frames))
                 }
-                Err(e) => error_response(seq, n, &e),
+                Err(e) => wire::encode_error(seq, n, &e),
             };
         }
         _ => {
@@ -386,13 +373,8 @@ fn serve(
             let report = serde_json::json!({ "failed": failed, "info": info }).to_string();
             wire::encode_response(seq, status::ENV_FAILED, n, &out.rows, report.as_bytes())
         }
-        Err(e) => error_response(seq, n, &e),
+        Err(e) => wire::encode_error(seq, n, &e),
     }
-}
-
-fn error_response(seq: u64, n: usize, e: &HubError) -> Vec<u8> {
-    let json = serde_json::to_vec(e).expect("errors serialize");
-    wire::encode_response(seq, HUB_ERROR, n, &[], &json)
 }
 
 /// Env `e`'s line of a failure message (`env 3: ...`), else the whole message.
@@ -484,17 +466,17 @@ impl Out {
                 rewards: batch.rewards,
                 terminated: batch.terminated,
                 truncated: batch.truncated,
-                final_mask: batch.final_mask,
-                final_obs: batch.final_obs,
+                final_mask: batch.final_blocks().0,
+                final_obs: batch.final_blocks().1,
             },
         );
-        if !batch.infos.is_empty() {
+        if !batch.infos().is_empty() {
             if !self.any_info {
                 self.infos = vec![serde_json::Value::Object(Default::default()); layout.num_envs];
                 self.any_info = true;
             }
             for (k, &e) in batch.env_ids.iter().enumerate() {
-                self.infos[e] = batch.infos[k].clone();
+                self.infos[e] = batch.infos()[k].clone();
             }
         }
     }

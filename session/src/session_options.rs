@@ -7,13 +7,13 @@ use std::time::Duration;
 pub(crate) const BLOCK_BEYOND: Duration = Duration::from_micros(200);
 
 /// CPU cores of this machine (1 if unknown).
-pub(crate) fn cores() -> usize {
+pub fn cores() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 /// Worker processes for `num_envs` envs here: the config's, else one per core, at most one
 /// per env. (A hub applies the same rule to the envs placed on it.)
-pub(crate) fn workers_for(config: &envhub_core::EnvConfig, num_envs: usize) -> usize {
+pub fn workers_for(config: &envhub_core::EnvConfig, num_envs: usize) -> usize {
     config.workers.unwrap_or_else(|| cores().min(num_envs))
 }
 
@@ -47,7 +47,7 @@ impl Default for SessionOptions {
             restart_on_crash: false,
             spin: Duration::from_micros(50),
             max_spin: Duration::from_millis(2),
-            namespace: std::env::var(crate::env_vars::ENVHUB_NAMESPACE)
+            namespace: std::env::var(envhub_core::env_vars::ENVHUB_NAMESPACE)
                 .unwrap_or_else(|_| "envhub_".to_string()),
             pool_bytes: 512 << 20,
         }

@@ -1,0 +1,20 @@
+//! envhub's network: hubs across machines over Zenoh — discovery, the client's presence and
+//! queries, the client's end of a remote session (an engine slice), and a hub's end of it
+//! (a local session driven by messages).
+//!
+//! May depend on: `envhub-core`, `envhub-shm`, `envhub-protocol` (every message it sends),
+//! `envhub-session` (the engine it plugs slices into and drives on the hub's side). Must not
+//! depend on: the facade (the server that answers opens, placement) or Python.
+
+mod bridge;
+mod client;
+mod config;
+mod link;
+mod opener;
+mod policy;
+
+pub use bridge::{Sessions, dispatch, start};
+pub use client::{DISCOVERY, Network, unknown_hub};
+pub use config::{DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, NetConfig, open};
+pub use opener::ZenohSlices;
+pub use policy::ServePolicy;

@@ -1,0 +1,24 @@
+//! envhub's protocol: every message that crosses a process boundary between clients, hub
+//! daemons, remote hubs and workers, with its validation, and the error type they carry.
+//!
+//! No I/O: encoding, decoding and checking bytes only, so both ends of each exchange depend
+//! on this one crate (never one end on the other) and each parser can be tested and fuzzed
+//! alone. The per-step byte layouts themselves (`RequestHeader`, `ResponseHeader`, the batch
+//! blocks) are the data plane's, in `envhub-shm`; this crate frames them for the network.
+//!
+//! May depend on: `envhub-core`, `envhub-catalog` (its errors travel in [`HubError`]),
+//! `envhub-shm` (layouts only). Must not depend on: Zenoh, iceoryx2 services, processes.
+
+mod error;
+mod frame;
+mod ids;
+pub mod keys;
+mod messages;
+mod route;
+pub mod wire;
+
+pub use error::HubError;
+pub use frame::Frame;
+pub use ids::session_id;
+pub use messages::{HubInfo, OpenReply, OpenRequest};
+pub use route::Route;
