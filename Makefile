@@ -156,6 +156,7 @@ demo: build py-install
 
 lint: setup
 	$(VPY) scripts/check_layers.py
+	$(VPY) -m ruff check py-client tests scripts
 	$(CARGO) fmt --all -- --check
 	$(CARGO) clippy $(PROFILE) --workspace --all-targets $(FEATURES) -- -D warnings
 

@@ -18,10 +18,9 @@ import json
 import os
 import time
 
+import envhub
 import gymnasium
 import numpy as np
-
-import envhub
 
 
 def rate(envs, actions: list[np.ndarray], seconds: float) -> float:

@@ -23,10 +23,9 @@ import tempfile
 import textwrap
 import time
 
+import envhub
 import gymnasium
 import numpy as np
-
-import envhub
 
 
 def rate(step, actions, seconds: float, num_envs: int) -> float:

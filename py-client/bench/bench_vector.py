@@ -43,18 +43,18 @@ warnings.filterwarnings("ignore")
 import envhub  # noqa: E402
 
 try:
-    import envpool  # noqa: E402
-except Exception as exc:  # noqa: BLE001 - any failure means "not usable here"
+    import envpool
+except Exception as exc:
     envpool = None
     ENVPOOL_WHY = f"{type(exc).__name__}: {exc}"
 else:
     ENVPOOL_WHY = ""
 
 try:
-    import pufferlib  # noqa: E402
-    import pufferlib.emulation  # noqa: E402
-    import pufferlib.vector  # noqa: E402
-except Exception as exc:  # noqa: BLE001 - any failure means "not usable here"
+    import pufferlib
+    import pufferlib.emulation
+    import pufferlib.vector
+except Exception as exc:
     pufferlib = None
     PUFFERLIB_WHY = f"{type(exc).__name__}: {exc}"
 else:

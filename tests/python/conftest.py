@@ -73,7 +73,7 @@ def null_registry(tmp_path: Path) -> str:
     return str(path)
 
 
-def pytest_sessionfinish(session, exitstatus) -> None:  # noqa: ARG001
+def pytest_sessionfinish(session, exitstatus) -> None:
     """Removes what this process's namespace left in shared memory (killed workers)."""
     if os.environ.get("ENVHUB_NAMESPACE") != NAMESPACE:
         return

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import envhub
 import gymnasium as gym
 import numpy as np
-
-import envhub
 
 #: What the last `make` received, per process (the test reads it back through `info`).
 RECEIVED: dict[str, Any] = {}

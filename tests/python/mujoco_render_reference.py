@@ -21,8 +21,8 @@ import sys
 
 os.environ["MUJOCO_GL"] = "egl"
 
-import gymnasium as gym  # noqa: E402  (after MUJOCO_GL)
-import numpy as np  # noqa: E402
+import gymnasium as gym
+import numpy as np
 
 # (env id, kwargs, seed, steps before each later frame). Hopper's default camera is free (not
 # tracking), so after 80 steps the hopper has moved in the frame; Ant's default camera looks at

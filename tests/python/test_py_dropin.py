@@ -16,7 +16,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-
 from conftest import import_envhub
 from test_py_daemon import daemon  # noqa: F401 - the `envhub serve` fixture
 

@@ -178,7 +178,7 @@ def test_fork_gives_a_clear_error():
             result = "no error"
         except envhub.ForkError as e:
             result = "ForkError: " + str(e)
-        except BaseException as e:  # noqa: BLE001
+        except BaseException as e:
             result = f"{type(e).__name__}: {e}"
         env.close()
         del env
@@ -272,7 +272,7 @@ def test_envs_made_after_a_fork_work():
             fresh.step(0)
             fresh.close()
             result = "stepped"
-        except BaseException as e:  # noqa: BLE001
+        except BaseException as e:
             result = f"{type(e).__name__}: {e}"
         os.write(write, result.encode())
         os._exit(0)

@@ -8,7 +8,6 @@ import textwrap
 
 import numpy as np
 import pytest
-
 from conftest import import_envhub
 
 envhub = import_envhub()

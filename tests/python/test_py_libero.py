@@ -26,7 +26,6 @@ import textwrap
 import numpy as np
 import pytest
 import yaml
-
 from conftest import REPO_ROOT, import_envhub
 
 envhub = import_envhub()

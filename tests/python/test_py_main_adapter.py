@@ -11,7 +11,6 @@ import textwrap
 from pathlib import Path
 
 import pytest
-
 from conftest import import_envhub
 from test_py_daemon import daemon  # noqa: F401 - the `envhub serve` fixture
 

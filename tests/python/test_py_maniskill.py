@@ -15,7 +15,6 @@ import importlib.util
 
 import numpy as np
 import pytest
-
 from conftest import import_envhub
 
 envhub = import_envhub()

@@ -11,7 +11,6 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-
 from conftest import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()

@@ -5,12 +5,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import envhub
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
-
-import envhub
-
 
 #: How many steps back `CounterVectorEnv` reports a kept action from (`info["lagged"]`).
 LAG = 5

@@ -1,6 +1,6 @@
 //! `Acrobot-v1`: swing the tip of a two-link chain above a line by torquing the middle joint.
 
-use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
+use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_discrete, write_f32s};
 use crate::numeric::py_square;
 use crate::reset_options;
@@ -116,19 +116,7 @@ fn wrap(mut x: f64, m: f64, big_m: f64) -> f64 {
     x
 }
 
-impl Env for Acrobot {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn render_fps(&self) -> Option<f64> {
-        Some(RENDER_FPS)
-    }
-
+classic_env!(Acrobot {
     fn reset(
         &mut self,
         seed: Option<u64>,
@@ -168,26 +156,7 @@ impl Env for Acrobot {
             truncated: false,
         })
     }
-}
-
-impl ClassicEnv for Acrobot {
-    fn env_id(&self) -> &'static str {
-        ID
-    }
-
-    fn state_names(&self) -> &'static [&'static str] {
-        STATE_NAMES
-    }
-
-    fn state(&self) -> &[f64] {
-        self.state.as_ref().map_or(&[], |s| s.as_slice())
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError> {
-        self.state = Some(state_array(ID, STATE_NAMES, state)?);
-        Ok(())
-    }
-}
+});
 
 #[cfg(test)]
 mod tests {

@@ -1,6 +1,6 @@
 //! `CartPole-v1`: balance a pole on a cart pushed left or right (Barto, Sutton & Anderson).
 
-use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
+use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_discrete, write_f32s};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
@@ -78,19 +78,7 @@ impl CartPole {
     }
 }
 
-impl Env for CartPole {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn render_fps(&self) -> Option<f64> {
-        Some(RENDER_FPS)
-    }
-
+classic_env!(CartPole {
     fn reset(
         &mut self,
         seed: Option<u64>,
@@ -153,26 +141,7 @@ impl Env for CartPole {
             truncated: false,
         })
     }
-}
-
-impl ClassicEnv for CartPole {
-    fn env_id(&self) -> &'static str {
-        ID
-    }
-
-    fn state_names(&self) -> &'static [&'static str] {
-        STATE_NAMES
-    }
-
-    fn state(&self) -> &[f64] {
-        self.state.as_ref().map_or(&[], |s| s.as_slice())
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError> {
-        self.state = Some(state_array(ID, STATE_NAMES, state)?);
-        Ok(())
-    }
-}
+});
 
 #[cfg(test)]
 mod tests {

@@ -70,3 +70,53 @@ pub(crate) struct EnvEntry {
     /// Creates the env, validating `config`.
     pub(crate) make: fn(&EnvConfig) -> Result<Box<dyn ClassicEnv>, EnvError>,
 }
+
+/// Declares a classic env's trait impls once, from the env file's `ID`, `STATE_NAMES` and
+/// `RENDER_FPS` and its struct's `observation_space`, `action_space` and `state` fields:
+/// `classic_env!(CartPole { fn reset(..) {..} fn step(..) {..} })` emits `impl Env` (the
+/// spaces, the fps and the given `reset`/`step`) and `impl ClassicEnv`. An env whose
+/// `set_state` must also reset something of its own adds `on_set_state(env) { .. }`.
+macro_rules! classic_env {
+    ($ty:ident { $($body:tt)* }) => {
+        classic_env!($ty { $($body)* } on_set_state(_env) {});
+    };
+    ($ty:ident { $($body:tt)* } on_set_state($env:ident) $hook:block) => {
+        impl envhub_core::Env for $ty {
+            fn observation_space(&self) -> &envhub_core::Space {
+                &self.observation_space
+            }
+
+            fn action_space(&self) -> &envhub_core::Space {
+                &self.action_space
+            }
+
+            fn render_fps(&self) -> Option<f64> {
+                Some(RENDER_FPS)
+            }
+
+            $($body)*
+        }
+
+        impl $crate::classic_env::ClassicEnv for $ty {
+            fn env_id(&self) -> &'static str {
+                ID
+            }
+
+            fn state_names(&self) -> &'static [&'static str] {
+                STATE_NAMES
+            }
+
+            fn state(&self) -> &[f64] {
+                self.state.as_ref().map_or(&[], |s| s.as_slice())
+            }
+
+            fn set_state(&mut self, state: &[f64]) -> Result<(), envhub_core::EnvError> {
+                self.state = Some($crate::classic_env::state_array(ID, STATE_NAMES, state)?);
+                let $env = self;
+                $hook
+                Ok(())
+            }
+        }
+    };
+}
+pub(crate) use classic_env;

@@ -1,6 +1,6 @@
 //! `MountainCar-v0`: drive an underpowered car up a hill by rocking it, with discrete pushes.
 
-use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
+use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_discrete, write_f32s};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
@@ -65,19 +65,7 @@ impl MountainCar {
     }
 }
 
-impl Env for MountainCar {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn render_fps(&self) -> Option<f64> {
-        Some(RENDER_FPS)
-    }
-
+classic_env!(MountainCar {
     fn reset(
         &mut self,
         seed: Option<u64>,
@@ -117,26 +105,7 @@ impl Env for MountainCar {
             truncated: false,
         })
     }
-}
-
-impl ClassicEnv for MountainCar {
-    fn env_id(&self) -> &'static str {
-        ID
-    }
-
-    fn state_names(&self) -> &'static [&'static str] {
-        STATE_NAMES
-    }
-
-    fn state(&self) -> &[f64] {
-        self.state.as_ref().map_or(&[], |s| s.as_slice())
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError> {
-        self.state = Some(state_array(ID, STATE_NAMES, state)?);
-        Ok(())
-    }
-}
+});
 
 #[cfg(test)]
 mod tests {

@@ -1,6 +1,6 @@
 //! `MountainCarContinuous-v0`: the mountain car with a continuous force and an energy penalty.
 
-use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
+use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_f32, write_f32s};
 use crate::mountain_car::{MAX_POSITION, MAX_SPEED, MIN_POSITION, observation_space};
 use crate::numeric::{as_f32, py_square};
@@ -156,19 +156,7 @@ impl MountainCarContinuous {
     }
 }
 
-impl Env for MountainCarContinuous {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn render_fps(&self) -> Option<f64> {
-        Some(RENDER_FPS)
-    }
-
+classic_env!(MountainCarContinuous {
     fn reset(
         &mut self,
         seed: Option<u64>,
@@ -212,29 +200,10 @@ impl Env for MountainCarContinuous {
             truncated: false,
         })
     }
-}
-
-impl ClassicEnv for MountainCarContinuous {
-    fn env_id(&self) -> &'static str {
-        ID
-    }
-
-    fn state_names(&self) -> &'static [&'static str] {
-        STATE_NAMES
-    }
-
-    fn state(&self) -> &[f64] {
-        self.state.as_ref().map_or(&[], |s| s.as_slice())
-    }
-
-    /// Sets a float64 state, as `reset` leaves it; see [`MountainCarContinuous::set_state_float32`]
-    /// for a state taken after a step.
-    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError> {
-        self.state = Some(state_array(ID, STATE_NAMES, state)?);
-        self.float32 = false;
-        Ok(())
-    }
-}
+} on_set_state(env) {
+    // A float64 state, as `reset` leaves it; `set_state_float32` takes one after a step.
+    env.float32 = false;
+});
 
 #[cfg(test)]
 mod tests {

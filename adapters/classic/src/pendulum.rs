@@ -1,6 +1,6 @@
 //! `Pendulum-v1`: swing a pendulum up and keep it upright with a bounded torque.
 
-use crate::classic_env::{ClassicEnv, EnvEntry, check_render_mode, not_reset, state_array};
+use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_f32, write_f32s};
 use crate::numeric::{as_f32, py_square, py_square_f32};
 use crate::reset_options;
@@ -79,19 +79,7 @@ fn angle_normalize(x: f64) -> f64 {
     (x + PI).rem_euclid(2.0 * PI) - PI
 }
 
-impl Env for Pendulum {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
-    }
-
-    fn action_space(&self) -> &Space {
-        &self.action_space
-    }
-
-    fn render_fps(&self) -> Option<f64> {
-        Some(RENDER_FPS)
-    }
-
+classic_env!(Pendulum {
     fn reset(
         &mut self,
         seed: Option<u64>,
@@ -135,26 +123,7 @@ impl Env for Pendulum {
             truncated: false,
         })
     }
-}
-
-impl ClassicEnv for Pendulum {
-    fn env_id(&self) -> &'static str {
-        ID
-    }
-
-    fn state_names(&self) -> &'static [&'static str] {
-        STATE_NAMES
-    }
-
-    fn state(&self) -> &[f64] {
-        self.state.as_ref().map_or(&[], |s| s.as_slice())
-    }
-
-    fn set_state(&mut self, state: &[f64]) -> Result<(), EnvError> {
-        self.state = Some(state_array(ID, STATE_NAMES, state)?);
-        Ok(())
-    }
-}
+});
 
 #[cfg(test)]
 mod tests {

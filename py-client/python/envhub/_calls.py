@@ -76,10 +76,10 @@ def _answer(conn: Connection) -> None:
                 else:  # "set": args holds one value per env index
                     result = [_set(_ENVS[i], name, args[i]) for i in ids]
                 conn.send(("ok", result))
-            except Exception as e:  # noqa: BLE001 - raised again in the client
+            except Exception as e:
                 try:
                     conn.send(("error", e))
-                except Exception:  # noqa: BLE001 - an exception that cannot be pickled
+                except Exception:
                     conn.send(("error", RuntimeError(f"{type(e).__name__}: {e}")))
 
 

@@ -8,7 +8,6 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 
-
 from . import _spaces
 from ._session import RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
@@ -111,7 +110,7 @@ class Env(gymnasium.Env[Any, Any]):
     def __del__(self) -> None:
         try:
             self.close()
-        except Exception:  # noqa: BLE001 - never raise from a finalizer (interpreter shutdown)
+        except Exception:
             pass
 
     @property

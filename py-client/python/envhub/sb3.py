@@ -26,33 +26,12 @@ from typing import Any
 
 import numpy as np
 
+from ._batched import env_info as _env_info
+from ._batched import env_value as _env_value
 from .errors import InvalidConfigError, InvalidStateError
 from .vector import VectorEnv
 
 __all__ = ["VecAdapter", "make_vec", "wrap"]
-
-
-def _env_value(batched: Any, i: int) -> Any:
-    """Env `i`'s value of a batched one (an array with a leading env axis, or a dict or
-    tuple of them)."""
-    if isinstance(batched, dict):
-        return {k: _env_value(v, i) for k, v in batched.items()}
-    if isinstance(batched, tuple):
-        return tuple(_env_value(v, i) for v in batched)
-    return batched[i]
-
-
-def _env_info(batched: dict[str, Any], i: int, skip: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Env `i`'s info from Gymnasium's batched vector info (`key` and its `_key` mask)."""
-    out: dict[str, Any] = {}
-    for key, value in batched.items():
-        if key in skip or (key.startswith("_") and key[1:] in batched):
-            continue
-        mask = batched.get(f"_{key}")
-        if mask is not None and not mask[i]:
-            continue
-        out[key] = _env_info(value, i) if isinstance(value, dict) else value[i]
-    return out
 
 
 class VecAdapter:

@@ -259,7 +259,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         try:
             if not getattr(self, "closed", True):
                 self.close()
-        except Exception:  # noqa: BLE001 - never raise from a finalizer (interpreter shutdown)
+        except Exception:
             pass
 
     @property

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import _envhub
+from ._batched import env_value as _env_value
 from ._spaces import _Leaf, _tree, from_gymnasium
 from .config import EnvConfig
 from .hosted import all_adapters
@@ -197,16 +198,6 @@ def _vector_seed(seeds: list[int | None], mask: np.ndarray) -> int | list[int | 
     if first is not None and chosen == [first + i for i in range(len(chosen))]:
         return first
     return chosen
-
-
-def _env_value(batched: Any, i: int) -> Any:
-    """Env `i`'s value from a batched one: an object array of per-env values (Gymnasium's
-    `final_obs`), a batched array, or a dict/tuple of them."""
-    if isinstance(batched, dict):
-        return {k: _env_value(v, i) for k, v in batched.items()}
-    if isinstance(batched, tuple):
-        return tuple(_env_value(v, i) for v in batched)
-    return batched[i]
 
 
 def _info_value(v: Any) -> Any:
@@ -412,7 +403,7 @@ def serve(job_json: str) -> int:
     job = json.loads(job_json)
     try:
         batch, obs_desc, act_desc, limit = make_batch(job)
-    except Exception as e:  # noqa: BLE001 - reported to the client, with the traceback
+    except Exception as e:
         detail = "".join(traceback.format_exception(e)).rstrip()
         message = f"cannot make `{job.get('env_id')}` with adapter `{job.get('adapter')}`: {e}\n{detail}"
         os.write(reply_fd, (json.dumps({"error": message}) + "\n").encode())

@@ -81,6 +81,6 @@ def all_adapters() -> list[tuple[EnvAdapter | None, str, str | None]]:
         try:
             cls = load_adapter_class(path)
             out.append((cls(), cls.name, None))
-        except Exception as e:  # noqa: BLE001 - reported as unavailable, with the cause
+        except Exception as e:
             out.append((None, path, f"{type(e).__name__}: {e}"))
     return out

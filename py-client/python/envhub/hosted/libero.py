@@ -237,7 +237,7 @@ def main(download: bool = False) -> int:
         print(f"LIBERO's assets: downloading `{ASSETS_HUB_REPO}` from the Hugging Face Hub", file=sys.stderr)
         try:
             download_assets()
-        except Exception as e:  # noqa: BLE001 - reported below with the adapter's hint
+        except Exception as e:
             print(f"error: the download failed: {type(e).__name__}: {e}", file=sys.stderr)
     ok, reason, hint = LiberoAdapter().availability()
     if ok:
