@@ -66,23 +66,9 @@ fn hubs_json(py: Python<'_>) -> PyResult<String> {
     Ok(serde_json::to_string(&hubs).expect("hub infos serialize"))
 }
 
-/// Logs go to stderr, filtered by `ENVHUB_LOG` or `RUST_LOG` (default: warnings), as the
-/// CLI does.
-fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = std::env::var(envhub::env_vars::ENVHUB_LOG)
-        .ok()
-        .or_else(|| std::env::var("RUST_LOG").ok())
-        .unwrap_or_else(|| "warn".to_string());
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(EnvFilter::new(filter))
-        .with_writer(std::io::stderr)
-        .try_init();
-}
-
 #[pymodule]
 fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    init_logging();
+    envhub_core::init_logging();
     m.add_function(wrap_pyfunction!(set_worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(adapters_json, m)?)?;

@@ -5,7 +5,7 @@ use crate::layout::{read_discrete, write_f32s};
 use crate::numeric::py_square;
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
-use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
+use envhub_core::{EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 use std::f64::consts::PI;
 
 const ID: &str = "Acrobot-v1";
@@ -161,6 +161,8 @@ classic_env!(Acrobot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ClassicEnv;
+    use envhub_core::Env;
     use serde_json::json;
 
     fn make() -> Acrobot {

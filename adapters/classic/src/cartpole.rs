@@ -4,7 +4,7 @@ use crate::classic_env::{EnvEntry, check_render_mode, classic_env, not_reset};
 use crate::layout::{read_discrete, write_f32s};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
-use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
+use envhub_core::{EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 
 const ID: &str = "CartPole-v1";
 
@@ -146,6 +146,8 @@ classic_env!(CartPole {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ClassicEnv;
+    use envhub_core::Env;
     use serde_json::json;
 
     fn env(extra: &[(&str, serde_json::Value)]) -> CartPole {

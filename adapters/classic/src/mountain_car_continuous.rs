@@ -6,7 +6,7 @@ use crate::mountain_car::{MAX_POSITION, MAX_SPEED, MIN_POSITION, observation_spa
 use crate::numeric::{as_f32, py_square};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
-use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
+use envhub_core::{EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 
 const ID: &str = "MountainCarContinuous-v0";
 
@@ -208,6 +208,8 @@ classic_env!(MountainCarContinuous {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ClassicEnv;
+    use envhub_core::Env;
     use serde_json::json;
 
     fn make() -> MountainCarContinuous {

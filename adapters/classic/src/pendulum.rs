@@ -5,7 +5,7 @@ use crate::layout::{read_f32, write_f32s};
 use crate::numeric::{as_f32, py_square, py_square_f32};
 use crate::reset_options;
 use crate::rng::{NumpyRng, reseed};
-use envhub_core::{Env, EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
+use envhub_core::{EnvConfig, EnvError, Info, ResetOptions, Space, Transition};
 use std::f64::consts::PI;
 
 const ID: &str = "Pendulum-v1";
@@ -128,6 +128,8 @@ classic_env!(Pendulum {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ClassicEnv;
+    use envhub_core::Env;
     use serde_json::json;
 
     fn step(env: &mut Pendulum, torque: f32) -> (Transition, [f32; 3]) {

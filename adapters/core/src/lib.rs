@@ -16,6 +16,8 @@ mod env;
 pub mod env_vars;
 mod error;
 mod framework;
+#[cfg(feature = "logging")]
+mod logging;
 mod numpy_rng;
 mod python;
 pub mod serde_text;
@@ -28,6 +30,8 @@ pub use config::{AutoresetMode, EnvConfig, ExtraKeys};
 pub use env::{Env, Info, InfoValue, ResetOptions, Transition};
 pub use error::{EnvError, did_you_mean};
 pub use framework::{FRAMEWORKS, Framework, canonical_framework};
+#[cfg(feature = "logging")]
+pub use logging::init_logging;
 pub use numpy_rng::NumpyRng;
 pub use python::{python_interpreter, venv_site_packages};
 pub use space::{BoundsCheck, DType, Space, SpaceError};

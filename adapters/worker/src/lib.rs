@@ -71,7 +71,7 @@ enum Command {
 /// Runs the worker's command line (`describe`, `serve`, ...) over the adapters set with
 /// [`set_adapters`].
 pub fn run() -> ExitCode {
-    init_logging();
+    envhub_core::init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Describe => describe(),
@@ -123,16 +123,4 @@ fn describe() -> anyhow::Result<()> {
         .collect();
     println!("{}", serde_json::to_string(&list)?);
     Ok(())
-}
-
-fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = std::env::var("ENVHUB_LOG")
-        .ok()
-        .or_else(|| std::env::var("RUST_LOG").ok())
-        .unwrap_or_else(|| "warn".to_string());
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(EnvFilter::new(filter))
-        .with_writer(std::io::stderr)
-        .try_init();
 }

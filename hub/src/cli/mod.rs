@@ -71,7 +71,7 @@ pub(crate) enum Outcome {
 /// Parses the command line, runs it, prints errors as `error: ...` with a `hint:` line.
 pub fn run() -> ExitCode {
     let cli = Cli::parse();
-    init_logging();
+    envhub_core::init_logging();
     match dispatch(cli) {
         Ok(Outcome::Done) => ExitCode::SUCCESS,
         Ok(Outcome::NotFound) => ExitCode::from(1),
@@ -110,16 +110,4 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Bench(args) => bench::run(&hub()?, &args),
         Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),
     }
-}
-
-fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = std::env::var(envhub::env_vars::ENVHUB_LOG)
-        .ok()
-        .or_else(|| std::env::var("RUST_LOG").ok())
-        .unwrap_or_else(|| "warn".to_string());
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(EnvFilter::new(filter))
-        .with_writer(std::io::stderr)
-        .try_init();
 }

@@ -1,8 +1,7 @@
-//! Integration tests of the `envhub` crate: registry, matching and the CLI binary.
+//! Integration tests of the `envhub` crate: the CLI binary (the catalog's own tests are in
+//! `catalog/tests`).
 
 mod cli;
-mod matching;
-mod registry;
 
 use std::path::{Path, PathBuf};
 
@@ -19,9 +18,4 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     path
-}
-
-/// The repository root.
-pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }

@@ -1,4 +1,4 @@
-use envhub::{MatchError, Registry, TaskSpec, match_task};
+use envhub_catalog::{MatchError, Registry, TaskSpec, match_task};
 
 fn spec(description: &str, robot: Option<&str>, env_type: Option<&str>) -> TaskSpec {
     TaskSpec {

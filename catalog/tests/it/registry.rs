@@ -1,8 +1,8 @@
 use crate::{repo_root, temp_dir, write};
-use envhub::{Registry, RegistryError, SearchQuery};
+use envhub_catalog::{Registry, RegistryError, SearchQuery};
 use std::path::PathBuf;
 
-fn ids(hits: &[envhub::SearchHit<'_>]) -> Vec<String> {
+fn ids(hits: &[envhub_catalog::SearchHit<'_>]) -> Vec<String> {
     hits.iter().map(|h| h.entry.id.clone()).collect()
 }
 
