@@ -411,3 +411,41 @@ impl Inbox {
         let _ = self.bell.wait_timeout(mail, timeout);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_unknown_hub_names_the_live_ones_and_the_closest() {
+        let live = vec![
+            "lab-a".to_string(),
+            "lab-b".to_string(),
+            "gpu-box".to_string(),
+        ];
+        let err = unknown_hub("lab-c", &live).to_string();
+        assert!(err.contains("live hubs: lab-a, lab-b, gpu-box"), "{err}");
+        assert!(err.contains("closest: lab-a, lab-b"), "{err}");
+        let none = unknown_hub("x", &[]).to_string();
+        assert!(none.contains("live hubs: none"), "{none}");
+    }
+
+    #[test]
+    fn an_inbox_hands_each_mailbox_its_own_messages_in_order() {
+        let inbox = Inbox::default();
+        inbox.post(1, vec![1]);
+        inbox.post(0, vec![0]);
+        inbox.post(1, vec![2]);
+        assert_eq!(inbox.take(1), Some(vec![1]));
+        assert_eq!(inbox.take(1), Some(vec![2]));
+        assert_eq!(inbox.take(0), Some(vec![0]));
+        assert_eq!(inbox.take(0), None);
+        inbox.post(3, vec![3]);
+        let start = std::time::Instant::now();
+        inbox.wait(&[2, 3], Duration::from_secs(5));
+        assert!(
+            start.elapsed() < Duration::from_secs(1),
+            "mail waiting ends a wait at once"
+        );
+    }
+}

@@ -123,3 +123,34 @@ pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, Hub
         ),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints_multicast_and_lease_reach_the_zenoh_config() {
+        let net = NetConfig {
+            connect: vec!["tcp/127.0.0.1:17999".into()],
+            multicast: Some(false),
+            lease_ms: Some(2500),
+            ..NetConfig::default()
+        };
+        let config = net.zenoh_config(false).unwrap();
+        let get = |key: &str| config.get_json(key).unwrap();
+        assert_eq!(get("connect/endpoints"), r#"["tcp/127.0.0.1:17999"]"#);
+        assert_eq!(get("listen/endpoints"), "[]", "a client listens on nothing");
+        assert_eq!(get("scouting/multicast/enabled"), "false");
+        assert_eq!(get("transport/link/tx/lease"), "2500");
+    }
+
+    #[test]
+    fn a_bad_endpoint_or_file_is_an_error_naming_it() {
+        let net = NetConfig {
+            config: Some("/no/such/zenoh.json5".into()),
+            ..NetConfig::default()
+        };
+        let err = net.zenoh_config(true).unwrap_err().to_string();
+        assert!(err.contains("/no/such/zenoh.json5"), "{err}");
+    }
+}
