@@ -13,4 +13,5 @@ mod rapier_rollouts;
 mod remote_hubs;
 mod remote_netns;
 mod rendering;
+mod small_shm;
 mod worker_lifetime;
