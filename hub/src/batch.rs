@@ -88,14 +88,16 @@ impl Frame {
     pub(crate) fn parse(bytes: &[u8]) -> Option<(Option<Frame>, &[u8])> {
         let h = u32::from_le_bytes(bytes.get(..4)?.try_into().ok()?) as usize;
         let w = u32::from_le_bytes(bytes.get(4..8)?.try_into().ok()?) as usize;
-        let n = h * w * 3;
-        let rgb = bytes.get(8..8 + n)?;
+        // The sizes come from another process: checked, never trusted to fit.
+        let n = h.checked_mul(w)?.checked_mul(3)?;
+        let end = n.checked_add(8)?;
+        let rgb = bytes.get(8..end)?;
         let frame = (n > 0).then(|| Frame {
             height: h,
             width: w,
             rgb: rgb.to_vec(),
         });
-        Some((frame, &bytes[8 + n..]))
+        Some((frame, &bytes[end..]))
     }
 }
 

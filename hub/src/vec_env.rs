@@ -253,11 +253,9 @@ impl VecEnv {
                                 };
                                 let reply =
                                     network.open_session(&hub, &request, options.start_timeout)?;
-                                let rows_layout = BatchLayout::new(
-                                    n,
-                                    reply.spec.observation_space.byte_len(),
-                                    with_final,
-                                );
+                                let (_, rows_layout) = crate::remote::untrusted::check_open_reply(
+                                    &hub, &reply, n, with_final,
+                                )?;
                                 let conn = RemoteConn::connect(
                                     network.clone(),
                                     inbox.clone(),
@@ -353,8 +351,36 @@ impl VecEnv {
             return Err(HubError::InvalidState(message));
         }
         let route = route.expect("some link started");
-        let layout = BatchLayout::new(num_envs, observation_space.byte_len(), with_final);
-        let pool = SlotPool::new(slots, layout, options.pool_bytes);
+        // The spaces came from other processes (workers running user code, hubs): sizes are
+        // checked before a slot is laid out by them.
+        let layout = observation_space
+            .check()
+            .ok()
+            .and_then(|obs| BatchLayout::checked(num_envs, obs, with_final))
+            .ok_or_else(|| {
+                HubError::InvalidState(format!(
+                    "`{id}` has an observation space too large for a batch of {num_envs} envs: {observation_space}"
+                ))
+            });
+        let layout = match layout {
+            Ok(layout) => layout,
+            Err(e) => {
+                for mut link in links {
+                    link.close();
+                }
+                slots.unlink_all();
+                return Err(e);
+            }
+        };
+        let mut pool = SlotPool::new(slots, layout, options.pool_bytes);
+        // The first slot now, reserved in full: a `/dev/shm` too small fails the open with
+        // the bytes needed and free, not a worker's SIGBUS at the first step.
+        if let Err(e) = pool.writable() {
+            for mut link in links {
+                link.close();
+            }
+            return Err(e.into());
+        }
         Ok(VecEnv {
             id: id.to_string(),
             route: Route {
@@ -419,6 +445,7 @@ impl VecEnv {
             step_timeout_ms: self.options.step_timeout.as_millis() as u64,
         };
         let reply = network.open_session(&target, &request, self.options.start_timeout)?;
+        crate::remote::untrusted::check_open_reply(&target, &reply, n, false)?;
         if reply.spec.observation_space != self.observation_space
             || reply.spec.action_space != self.action_space
         {

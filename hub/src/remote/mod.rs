@@ -9,6 +9,7 @@
 //! - `wire`: the messages of a remote session (the data plane's byte layout, one per hub and
 //!   round trip).
 //! - `keys`: the key expressions.
+//! - `untrusted`: checks of what a hub sends before the client uses it.
 
 pub(crate) mod bridge;
 pub(crate) mod client;
@@ -16,4 +17,5 @@ pub(crate) mod keys;
 pub(crate) mod link;
 pub mod net;
 pub(crate) mod serve;
+pub(crate) mod untrusted;
 pub(crate) mod wire;
