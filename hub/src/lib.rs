@@ -16,6 +16,8 @@ mod entry;
 mod env;
 pub mod env_vars;
 mod error;
+#[cfg(test)]
+mod fuzz;
 mod hub;
 mod launcher;
 mod matching;
