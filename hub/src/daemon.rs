@@ -174,7 +174,7 @@ impl Connection {
 /// The client's user adapters of a request (none when the field is absent, as from a client
 /// that predates it). Folders must be absolute: the daemon's working directory is not the
 /// client's.
-fn user_adapters(request: &Value) -> Result<UserAdapters, HubError> {
+pub(crate) fn user_adapters(request: &Value) -> Result<UserAdapters, HubError> {
     let invalid = |reason: String| HubError::InvalidConfig {
         what: "daemon request",
         reason: format!("invalid `user_adapters`: {reason}"),

@@ -16,6 +16,8 @@ mod bounded;
 mod catalog;
 mod daemon;
 mod daemon_client;
+#[cfg(test)]
+mod fuzz;
 mod hub;
 mod hub_node;
 mod launcher;

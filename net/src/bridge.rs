@@ -84,8 +84,11 @@ impl Sessions {
         workers: usize,
         policy: &ServePolicy,
     ) -> Result<Reservation<'_>, (String, String)> {
-        let (open_envs, open_workers) = self.totals();
+        // `starting` is held while the open sessions are counted: a session that moves from
+        // starting to open meanwhile (its entry added, then its reservation given back, which
+        // waits for this lock) is counted once or twice, never zero times.
         let mut starting = self.starting.lock().expect("not poisoned");
+        let (open_envs, open_workers) = self.totals();
         let used_envs = open_envs + starting.0;
         let used_workers = open_workers + starting.1;
         if let Some(max) = policy.max_envs
@@ -373,6 +376,11 @@ fn serve(
             let report = serde_json::json!({ "failed": failed, "info": info }).to_string();
             wire::encode_response(seq, status::ENV_FAILED, n, &out.rows, report.as_bytes())
         }
+        // A call that failed while the session goes on (bad reset options, an env to reset
+        // first): the slice failed this call only, as a local worker's refusal does.
+        Err(e) if !vec.is_closed() => {
+            wire::encode_response(seq, status::ERROR, n, &[], e.to_string().as_bytes())
+        }
         Err(e) => wire::encode_error(seq, n, &e),
     }
 }
@@ -488,5 +496,65 @@ impl Out {
         } else {
             Vec::new()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Instant;
+
+    /// Opens racing each other, more of them than the limit: sessions moving from "starting"
+    /// to "open" while another open counts them must be counted once, never zero times.
+    #[test]
+    fn concurrent_opens_never_pass_the_limit_together() {
+        const MAX: usize = 3;
+        let sessions = Sessions::default();
+        let policy = ServePolicy {
+            max_envs: Some(MAX),
+            max_workers: None,
+            allow_remote_files: false,
+        };
+        let over = AtomicBool::new(false);
+        let passed = std::sync::atomic::AtomicUsize::new(0);
+        let deadline = Instant::now() + Duration::from_millis(1500);
+        std::thread::scope(|s| {
+            for t in 0..8 {
+                let (sessions, policy, over, passed) = (&sessions, &policy, &over, &passed);
+                s.spawn(move || {
+                    let mut k = 0;
+                    while Instant::now() < deadline && !over.load(Ordering::Relaxed) {
+                        k += 1;
+                        let Ok(reservation) = sessions.reserve(1, 1, policy) else {
+                            continue;
+                        };
+                        passed.fetch_add(1, Ordering::Relaxed);
+                        // Registered as `start` does: the entry, then the reservation given back.
+                        let id = format!("{t}-{k}");
+                        sessions.lock().insert(
+                            id.clone(),
+                            Entry {
+                                client: String::new(),
+                                envs: 1,
+                                workers: 1,
+                                requests: None,
+                                stop: Arc::new(AtomicBool::new(false)),
+                            },
+                        );
+                        drop(reservation);
+                        if sessions.totals().0 > MAX {
+                            over.store(true, Ordering::Relaxed);
+                        }
+                        std::thread::yield_now();
+                        sessions.lock().remove(&id);
+                    }
+                });
+            }
+        });
+        assert!(passed.load(Ordering::Relaxed) > 0, "no open passed at all");
+        assert!(
+            !over.load(Ordering::Relaxed),
+            "more than {MAX} envs were open at once"
+        );
     }
 }

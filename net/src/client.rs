@@ -233,11 +233,12 @@ impl Network {
         if let Some(error) = value.get_mut("error").map(Value::take)
             && let Ok(error) = serde_json::from_value::<HubError>(error)
         {
-            return Err(error);
+            return Err(envhub_protocol::untrusted::from_hub(hub, error));
         }
         if let Some(err) = value.get("err") {
-            return Err(HubError::Remote(
-                err.as_str().unwrap_or("error").to_string(),
+            return Err(envhub_protocol::untrusted::from_hub(
+                hub,
+                HubError::Remote(err.as_str().unwrap_or("error").to_string()),
             ));
         }
         serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
@@ -370,17 +371,32 @@ pub fn unknown_hub(name: &str, live: &[String]) -> HubError {
     }
 }
 
+/// Per link, its responses with the connection that received each.
+type Mailboxes = HashMap<usize, VecDeque<(u64, Vec<u8>)>>;
+
 /// Responses of a session's remote links, as they arrive; waiters block on its condvar.
 #[derive(Default)]
 pub(crate) struct Inbox {
-    mail: Mutex<HashMap<usize, VecDeque<Vec<u8>>>>,
+    /// Per link: `(connection, response)`, the connection being the [`Inbox::connection`]
+    /// number of the subscriber that received it.
+    mail: Mutex<Mailboxes>,
     bell: Condvar,
 }
 
 impl Inbox {
-    /// Files a response for link `link` and wakes the waiters.
-    pub fn post(&self, link: usize, bytes: Vec<u8>) {
-        self.lock().entry(link).or_default().push_back(bytes);
+    /// A number for a new connection of a link, never given before: a link placed again on
+    /// another hub gets a new one, so what the lost hub still sends is told apart.
+    pub fn connection() -> u64 {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Files a response that connection `from` of link `link` received and wakes the waiters.
+    pub fn post(&self, link: usize, from: u64, bytes: Vec<u8>) {
+        self.lock()
+            .entry(link)
+            .or_default()
+            .push_back((from, bytes));
         self.bell.notify_all();
     }
 
@@ -390,13 +406,25 @@ impl Inbox {
         self.bell.notify_all();
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<usize, VecDeque<Vec<u8>>>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Mailboxes> {
         self.mail.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The oldest response of `link`, if any.
-    pub fn take(&self, link: usize) -> Option<Vec<u8>> {
-        self.lock().get_mut(&link)?.pop_front()
+    /// The oldest response of `link` received by connection `from`; what other connections
+    /// of the link received (a hub declared lost, still sending) is dropped.
+    pub fn take(&self, link: usize, from: u64) -> Option<Vec<u8>> {
+        let mut mail = self.lock();
+        let queue = mail.get_mut(&link)?;
+        while let Some((by, bytes)) = queue.pop_front() {
+            if by == from {
+                return Some(bytes);
+            }
+            tracing::warn!(
+                link,
+                "dropped an answer from a replaced connection (a lost hub)"
+            );
+        }
+        None
     }
 
     /// Blocks until a response for one of `links` is filed, a ring, or `timeout`.
@@ -431,21 +459,16 @@ mod tests {
     }
 
     #[test]
-    fn an_inbox_hands_each_mailbox_its_own_messages_in_order() {
+    fn answers_of_a_replaced_connection_are_not_taken_as_the_new_one_s() {
         let inbox = Inbox::default();
-        inbox.post(1, vec![1]);
-        inbox.post(0, vec![0]);
-        inbox.post(1, vec![2]);
-        assert_eq!(inbox.take(1), Some(vec![1]));
-        assert_eq!(inbox.take(1), Some(vec![2]));
-        assert_eq!(inbox.take(0), Some(vec![0]));
-        assert_eq!(inbox.take(0), None);
-        inbox.post(3, vec![3]);
-        let start = std::time::Instant::now();
-        inbox.wait(&[2, 3], Duration::from_secs(5));
-        assert!(
-            start.elapsed() < Duration::from_secs(1),
-            "mail waiting ends a wait at once"
+        let (lost, new) = (Inbox::connection(), Inbox::connection());
+        inbox.post(0, lost, b"from the lost hub".to_vec());
+        inbox.post(0, new, b"from its successor".to_vec());
+        inbox.post(0, lost, b"late, from the lost hub".to_vec());
+        assert_eq!(
+            inbox.take(0, new).as_deref(),
+            Some(&b"from its successor"[..])
         );
+        assert_eq!(inbox.take(0, new), None);
     }
 }

@@ -29,6 +29,8 @@ pub(crate) struct RemoteConn {
     inbox: Arc<Inbox>,
     /// Index of this link in the session (its mailbox in the inbox).
     pub link: usize,
+    /// What this connection's answers are filed under ([`Inbox::connection`]).
+    connection: u64,
     layout: Layout,
     /// Layout of the hub's result rows (its envs only).
     pub rows_layout: BatchLayout,
@@ -58,10 +60,13 @@ impl RemoteConn {
             hint: "the Zenoh session is failing".into(),
         };
         let z = network.zenoh();
+        let connection = Inbox::connection();
         let subscriber = {
             let inbox = inbox.clone();
             z.declare_subscriber(keys::responses(hub, session))
-                .callback(move |sample| inbox.post(link, sample.payload().to_bytes().into_owned()))
+                .callback(move |sample| {
+                    inbox.post(link, connection, sample.payload().to_bytes().into_owned())
+                })
                 .wait()
                 .map_err(failed)?
         };
@@ -73,10 +78,10 @@ impl RemoteConn {
             .wait()
             .map_err(failed)?;
         network.watch(&inbox);
-        // A link placed again keeps its mailbox: what the lost hub sent last must not pass
-        // for an answer of the new one.
-        while inbox.take(link).is_some() {}
+        // A link placed again keeps its mailbox: what the lost hub sent (before or after this)
+        // must not pass for an answer of the new one, so answers are taken by connection.
         Ok(RemoteConn {
+            connection,
             hub: hub.to_string(),
             session: session.to_string(),
             network,
@@ -119,7 +124,7 @@ impl RemoteConn {
 
     /// The answer to the request in flight, if it has arrived.
     pub fn try_take(&mut self) -> Result<Option<RemoteAnswer>, HubError> {
-        while let Some(bytes) = self.inbox.take(self.link) {
+        while let Some(bytes) = self.inbox.take(self.link, self.connection) {
             let Some(answer) = RemoteAnswer::parse(bytes) else {
                 return Err(DataPlaneError::Protocol(format!(
                     "hub `{}` sent a response of the wrong size",

@@ -3,6 +3,7 @@
 
 use crate::client::{Inbox, Network};
 use crate::link::RemoteConn;
+use envhub_protocol::untrusted::check_open_reply;
 use envhub_protocol::wire::{RemoteAnswer, RequestBody};
 use envhub_protocol::{HubError, OpenReply, OpenRequest};
 use envhub_session::{RemoteSlice, SliceOpener};
@@ -41,7 +42,9 @@ impl SliceOpener for ZenohSlices {
     ) -> Result<(OpenReply, Box<dyn RemoteSlice>), HubError> {
         let reply = self.network.open_session(hub, request, start_timeout)?;
         let n = request.config.num_envs;
-        let rows_layout = BatchLayout::new(n, reply.spec.observation_space.byte_len(), with_final);
+        // The hub's word on its spaces and session id is checked before any size is computed
+        // from it.
+        let (layout, rows_layout) = check_open_reply(hub, &reply, n, with_final)?;
         let conn = RemoteConn::connect(
             self.network.clone(),
             self.inbox.clone(),
@@ -49,7 +52,7 @@ impl SliceOpener for ZenohSlices {
             hub,
             &reply.session,
             n,
-            reply.spec.action_space.byte_len(),
+            layout.act_bytes,
             rows_layout,
         )?;
         Ok((reply, Box::new(conn)))

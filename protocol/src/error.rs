@@ -179,6 +179,12 @@ mod data_plane {
         },
         Protocol(String),
         PeerGone(String),
+        NoSpace {
+            #[serde(deserialize_with = "interned")]
+            what: StaticName,
+            needed: u64,
+            free: u64,
+        },
     }
 
     pub fn serialize<S: Serializer>(e: &DataPlaneError, s: S) -> Result<S::Ok, S::Error> {
@@ -189,6 +195,11 @@ mod data_plane {
             },
             DataPlaneError::Protocol(m) => Wire::Protocol(m.clone()),
             DataPlaneError::PeerGone(m) => Wire::PeerGone(m.clone()),
+            DataPlaneError::NoSpace { what, needed, free } => Wire::NoSpace {
+                what,
+                needed: *needed,
+                free: *free,
+            },
         }
         .serialize(s)
     }
@@ -198,6 +209,7 @@ mod data_plane {
             Wire::Ipc { what, detail } => DataPlaneError::Ipc { what, detail },
             Wire::Protocol(m) => DataPlaneError::Protocol(m),
             Wire::PeerGone(m) => DataPlaneError::PeerGone(m),
+            Wire::NoSpace { what, needed, free } => DataPlaneError::NoSpace { what, needed, free },
         })
     }
 }
@@ -240,6 +252,11 @@ mod tests {
                 detail: "x".into(),
             }),
             HubError::DataPlane(DataPlaneError::PeerGone("gone".into())),
+            HubError::DataPlane(DataPlaneError::NoSpace {
+                what: "a batch slot",
+                needed: 1 << 30,
+                free: 1 << 20,
+            }),
         ];
         for e in errors {
             let json = serde_json::to_value(&e).unwrap();

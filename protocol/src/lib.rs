@@ -15,6 +15,7 @@ mod ids;
 pub mod keys;
 mod messages;
 mod route;
+pub mod untrusted;
 pub mod wire;
 
 pub use error::HubError;

@@ -178,11 +178,12 @@ pub fn encode_error(seq: u64, num_envs: usize, error: &HubError) -> Vec<u8> {
     encode_response(seq, HUB_ERROR, num_envs, &[], &json)
 }
 
-/// The error a [`HUB_ERROR`] response carries, as the hub named `hub` sent it; text that is
-/// not one becomes [`HubError::Remote`] with it.
+/// The error a [`HUB_ERROR`] response carries, as the hub named `hub` sent it and as the
+/// client may take it ([`crate::untrusted::from_hub`]); text that is not one becomes
+/// [`HubError::Remote`] with it.
 pub fn decode_error(hub: &str, info: &[u8]) -> HubError {
     match serde_json::from_slice::<HubError>(info) {
-        Ok(e) => e,
+        Ok(e) => crate::untrusted::from_hub(hub, e),
         Err(_) => HubError::Remote(format!("hub `{hub}`: {}", String::from_utf8_lossy(info))),
     }
 }

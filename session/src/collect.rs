@@ -6,6 +6,7 @@ use crate::results::Place;
 use crate::vec_env::VecEnv;
 use crate::worker_link::{Answer, WorkerLink, env_range};
 use envhub_protocol::HubError;
+use envhub_protocol::untrusted::read_failure_report;
 use envhub_protocol::wire::{HUB_ERROR, RemoteAnswer, decode_error, land_rows};
 use envhub_shm::{DataPlaneError, SlotPool, status};
 
@@ -58,14 +59,6 @@ fn remote_error(w: &WorkerLink, answer: &RemoteAnswer) -> HubError {
         },
         e => e,
     }
-}
-
-/// One env that failed, as a worker reports it (`status::ENV_FAILED`).
-#[derive(serde::Deserialize)]
-struct FailedEnvs {
-    /// `(env index within the worker, message)`.
-    failed: Vec<(usize, String)>,
-    info: Option<serde_json::Value>,
 }
 
 /// A failure found while collecting, reported once every response has been read.
@@ -134,20 +127,41 @@ impl VecEnv {
         let mut failures = Vec::new();
         let mut infos: Vec<(usize, Option<serde_json::Value>)> = Vec::new();
         let mut any_info = false;
+        // Every response of the group is taken and judged before anything is returned, so an
+        // error about one worker never leaves the others' answers behind (the next call would
+        // be refused with "call `recv` first").
+        let mut ended: Option<HubError> = None;
         for &i in workers {
             let w = &mut self.workers[i];
             let Some(response) = w.response.take() else {
                 continue;
             };
             let header = *response.header();
+            let who = match w.remote_conn() {
+                Some(r) => format!("hub `{}`", r.hub()),
+                None => format!("worker {i}"),
+            };
+            // Results that could not be used: the worker's envs failed as a whole.
+            let unusable = |w: &crate::worker_link::WorkerLink, message: String| Failure {
+                worker: i,
+                envs: w.sent.clone(),
+                message,
+                per_env: false,
+            };
             if let Answer::Remote(answer) = &response {
                 match header.status {
                     status::OK | status::ENV_FAILED => {
-                        land_remote_rows(&self.pool, w, answer)?;
+                        if let Err(e) = land_remote_rows(&self.pool, w, answer) {
+                            failures.push(unusable(w, e.to_string()));
+                            infos.push((i, None));
+                            continue;
+                        }
                     }
                     HUB_ERROR => {
                         let err = remote_error(w, answer);
-                        return Err(self.give_up(err));
+                        ended = ended.or(Some(err));
+                        infos.push((i, None));
+                        continue;
                     }
                     _ => {}
                 }
@@ -161,12 +175,16 @@ impl VecEnv {
                     infos.push((i, parsed));
                 }
                 status::ENV_FAILED => {
-                    let report: FailedEnvs = serde_json::from_slice(response.info_bytes())
-                        .map_err(|e| {
-                            DataPlaneError::Protocol(format!(
-                                "worker {i} sent an unreadable failure report: {e}"
-                            ))
-                        })?;
+                    let report =
+                        read_failure_report(response.info_bytes(), &who, &w.sent, w.job.env_offset);
+                    let report = match report {
+                        Ok(report) => report,
+                        Err(message) => {
+                            failures.push(unusable(w, message));
+                            infos.push((i, None));
+                            continue;
+                        }
+                    };
                     let lo = w.job.env_offset;
                     let envs: Vec<usize> = report.failed.iter().map(|(k, _)| lo + k).collect();
                     let message = report
@@ -194,12 +212,14 @@ impl VecEnv {
                     infos.push((i, None));
                 }
                 other => {
-                    return Err(DataPlaneError::Protocol(format!(
-                        "worker {i} answered a step or reset with status {other}"
-                    ))
-                    .into());
+                    let message = format!("{who} answered a step or reset with status {other}");
+                    failures.push(unusable(w, message));
+                    infos.push((i, None));
                 }
             }
+        }
+        if let Some(err) = ended {
+            return Err(self.give_up(err));
         }
         let any_restart = workers.iter().any(|&i| self.workers[i].restarted);
         self.place_results(workers)?;
@@ -259,13 +279,26 @@ impl VecEnv {
         if contiguous {
             r.place = Place::Slot { index: slot, first };
             let n = r.env_ids.len();
-            let rows = self.slot_rows(slot, first, n)?;
-            if as_bools(rows.terminated).is_none() || as_bools(rows.truncated).is_none() {
+            let pool_slot = self.pool.get(slot).ok_or_else(|| {
+                DataPlaneError::Protocol(format!(
+                    "results name batch slot {slot}, which is not open"
+                ))
+            })?;
+            let rows = pool_slot.rows(first, n);
+            let (Some(term), Some(trunc)) = (as_bools(rows.terminated), as_bools(rows.truncated))
+            else {
                 return Err(DataPlaneError::Protocol(
                     "a worker wrote done flags other than 0 and 1".into(),
                 )
                 .into());
-            }
+            };
+            // The flags as checked, for a worker that writes its rows again after it answered
+            // (broken or hostile): the batch then shows these instead of panicking.
+            let g = &mut self.results.gathered;
+            g.terminated.clear();
+            g.terminated.extend_from_slice(term);
+            g.truncated.clear();
+            g.truncated.extend_from_slice(trunc);
             return Ok(());
         }
         // Results from several slots, or envs picked out of a worker's: copy them together.
@@ -319,12 +352,15 @@ impl VecEnv {
                 continue;
             }
             match self.results.place {
-                Place::Slot { index, .. } => {
+                Place::Slot { index, first } => {
                     if let Some(slot) = self.pool.get(index) {
                         for &env in &w.sent {
                             // SAFETY: the worker has answered (it writes these rows no more)
                             // and the slot is not lent yet: these are the results being made.
                             unsafe { slot.set_truncated(env) };
+                            if let Some(t) = self.results.gathered.truncated.get_mut(env - first) {
+                                *t = true;
+                            }
                         }
                     }
                 }
@@ -347,12 +383,17 @@ impl VecEnv {
             Place::Slot { index, first } => {
                 let slot = self.pool.get(index).expect("checked when collected");
                 let rows = slot.rows(first, r.env_ids.len());
+                // Checked when collected; a worker that wrote them again since is shown the
+                // flags as they were then.
+                let flags = as_bools(rows.terminated).zip(as_bools(rows.truncated));
+                let (terminated, truncated) =
+                    flags.unwrap_or((&r.gathered.terminated, &r.gathered.truncated));
                 Batch {
                     env_ids: &r.env_ids,
                     obs: rows.obs,
                     rewards: rows.rewards,
-                    terminated: as_bools(rows.terminated).expect("checked when collected"),
-                    truncated: as_bools(rows.truncated).expect("checked when collected"),
+                    terminated,
+                    truncated,
                     infos: &r.infos,
                     final_mask: rows.final_mask,
                     final_obs: rows.final_obs,

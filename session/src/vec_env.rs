@@ -329,8 +329,36 @@ impl VecEnv {
             return Err(HubError::InvalidState(message));
         }
         let route = route.expect("some link started");
-        let layout = BatchLayout::new(num_envs, observation_space.byte_len(), with_final);
-        let pool = SlotPool::new(slots, layout, options.pool_bytes);
+        // The spaces came from other processes (workers running user code, hubs): sizes are
+        // checked before a slot is laid out by them.
+        let layout = observation_space
+            .check()
+            .ok()
+            .and_then(|obs| BatchLayout::checked(num_envs, obs, with_final))
+            .ok_or_else(|| {
+                HubError::InvalidState(format!(
+                    "`{id}` has an observation space too large for a batch of {num_envs} envs: {observation_space}"
+                ))
+            });
+        let layout = match layout {
+            Ok(layout) => layout,
+            Err(e) => {
+                for mut link in links {
+                    link.close();
+                }
+                slots.unlink_all();
+                return Err(e);
+            }
+        };
+        let mut pool = SlotPool::new(slots, layout, options.pool_bytes);
+        // The first slot now, reserved in full: a `/dev/shm` too small fails the open with
+        // the bytes needed and free, not a worker's SIGBUS at the first step.
+        if let Err(e) = pool.writable() {
+            for mut link in links {
+                link.close();
+            }
+            return Err(e.into());
+        }
         Ok(VecEnv {
             id: id.to_string(),
             route: Route {
@@ -506,6 +534,11 @@ impl VecEnv {
     /// workers killed and its shared memory removed). The Python client checks for Ctrl-C.
     pub fn set_interrupt(&mut self, check: Arc<InterruptCheck>) {
         self.interrupt = check;
+    }
+
+    /// Whether the session is closed (closed, or ended by an error).
+    pub fn is_closed(&self) -> bool {
+        self.phase == Phase::Closed
     }
 
     pub(crate) fn check_open(&self) -> Result<(), HubError> {

@@ -192,7 +192,18 @@ pub enum SpaceError {
         /// The value found.
         value: f64,
     },
+    /// The space itself is malformed (sent by another process: a worker, a hub): a size
+    /// that overflows or exceeds the limit, bounds that do not match the shape, too deep.
+    #[error("malformed space: {0}")]
+    Malformed(String),
 }
+
+/// Most bytes one value of a space may take (1 GiB: far above any simulator's observation,
+/// far below what overflows a batch's size arithmetic).
+pub const MAX_VALUE_BYTES: usize = 1 << 30;
+
+/// Deepest nesting of `Dict`/`Tuple` a space may have.
+pub const MAX_DEPTH: usize = 32;
 
 const ALIGN: usize = 8;
 
@@ -257,6 +268,86 @@ impl Space {
             Space::MultiDiscrete { nvec, .. } => Some(vec![nvec.len()]),
             Space::Dict { .. } | Space::Tuple { .. } => None,
         }
+    }
+
+    /// Checks a space that another process sent before any size of it is used: every size
+    /// computed with checked arithmetic and at most [`MAX_VALUE_BYTES`], bounds as long as
+    /// the shape, `start` as long as `nvec`, positive counts, at most [`MAX_DEPTH`] levels.
+    /// Returns [`byte_len`](Self::byte_len), which is then safe to compute.
+    pub fn check(&self) -> Result<usize, SpaceError> {
+        self.check_at(0)
+    }
+
+    fn check_at(&self, depth: usize) -> Result<usize, SpaceError> {
+        let bad = |m: String| SpaceError::Malformed(m);
+        let too_big = || {
+            bad(format!(
+                "a value takes more than {MAX_VALUE_BYTES} bytes (the limit)"
+            ))
+        };
+        if depth > MAX_DEPTH {
+            return Err(bad(format!("nested deeper than {MAX_DEPTH} levels")));
+        }
+        let children: &mut dyn Iterator<Item = &Space> = match self {
+            Space::Dict { spaces } => &mut spaces.iter().map(|(_, s)| s),
+            Space::Tuple { spaces } => &mut spaces.iter(),
+            Space::Box {
+                dtype,
+                shape,
+                low,
+                high,
+            } => {
+                let n = shape
+                    .iter()
+                    .try_fold(1usize, |n, &d| n.checked_mul(d))
+                    .ok_or_else(too_big)?;
+                if low.len() != n || high.len() != n {
+                    return Err(bad(format!(
+                        "a box of shape {shape:?} ({n} elements) with {} low and {} high bounds",
+                        low.len(),
+                        high.len()
+                    )));
+                }
+                let bytes = n.checked_mul(dtype.size()).ok_or_else(too_big)?;
+                return (bytes <= MAX_VALUE_BYTES)
+                    .then_some(bytes)
+                    .ok_or_else(too_big);
+            }
+            Space::MultiBinary { shape } => {
+                let n = shape
+                    .iter()
+                    .try_fold(1usize, |n, &d| n.checked_mul(d))
+                    .ok_or_else(too_big)?;
+                return (n <= MAX_VALUE_BYTES).then_some(n).ok_or_else(too_big);
+            }
+            Space::Discrete { n, .. } => {
+                if *n <= 0 {
+                    return Err(bad(format!("a discrete space of {n} values")));
+                }
+                return Ok(8);
+            }
+            Space::MultiDiscrete { nvec, start } => {
+                if nvec.len() != start.len() || nvec.iter().any(|&n| n <= 0) {
+                    return Err(bad(format!(
+                        "a multi-discrete space with nvec {nvec:?} and start {start:?} (one positive count and one start per element)"
+                    )));
+                }
+                let bytes = nvec.len().checked_mul(8).ok_or_else(too_big)?;
+                return (bytes <= MAX_VALUE_BYTES)
+                    .then_some(bytes)
+                    .ok_or_else(too_big);
+            }
+        };
+        let mut total = 0usize;
+        for child in children {
+            let bytes = child.check_at(depth + 1)?;
+            total = bytes
+                .checked_next_multiple_of(ALIGN)
+                .and_then(|b| total.checked_add(b))
+                .filter(|&t| t <= MAX_VALUE_BYTES)
+                .ok_or_else(too_big)?;
+        }
+        Ok(total)
     }
 
     /// Bytes one value of this space takes in the flat layout.

@@ -102,6 +102,16 @@ pub struct Layout {
 }
 
 impl Layout {
+    /// [`new`](Self::new) for sizes another process sent: `None` when the request's size
+    /// does not fit in an `isize`.
+    pub fn checked(num_envs: usize, act_bytes: usize) -> Option<Layout> {
+        let size = num_envs
+            .checked_mul(act_bytes)?
+            .checked_add(num_envs.checked_mul(9)?)?
+            .checked_add(2 * BLOCK_ALIGN)?;
+        (size <= isize::MAX as usize).then(|| Layout::new(num_envs, act_bytes))
+    }
+
     /// The request layout of a worker with `num_envs` envs and actions of `act_bytes`.
     pub fn new(num_envs: usize, act_bytes: usize) -> Layout {
         let n = num_envs;
@@ -168,6 +178,19 @@ impl BatchLayout {
             final_obs,
             size,
         }
+    }
+
+    /// [`new`](Self::new) for sizes another process sent: `None` when the slot's size does
+    /// not fit in an `isize` (what a mapping and a slice can hold).
+    pub fn checked(num_envs: usize, obs_bytes: usize, with_final_obs: bool) -> Option<BatchLayout> {
+        let obs = num_envs.checked_mul(obs_bytes)?;
+        let size = obs
+            .checked_next_multiple_of(BLOCK_ALIGN)?
+            .checked_add(num_envs.checked_mul(11)?)?
+            .checked_add(2 * BLOCK_ALIGN)?
+            .checked_add(if with_final_obs { obs } else { 0 })?
+            .checked_next_multiple_of(BLOCK_ALIGN)?;
+        (size <= isize::MAX as usize).then(|| BatchLayout::new(num_envs, obs_bytes, with_final_obs))
     }
 
     /// Bytes of one slot.

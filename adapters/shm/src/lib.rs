@@ -34,7 +34,7 @@ pub use process::{ProcessWatch, die_with_parent, kill};
 pub use serve::{ServedBatch, serve_batch};
 pub use slots::{
     Bell, Doorbells, MAX_SLOTS, Side, Slot, SlotLease, SlotMap, SlotPool, SlotsName,
-    remove_stale_slots,
+    remove_stale_slots, shm_free_bytes,
 };
 pub use transport::{ChannelName, cleanup_dead_nodes, remove_namespace};
 pub use wait::WaitPolicy;
@@ -56,4 +56,17 @@ pub enum DataPlaneError {
     /// The peer process is gone or stopped answering.
     #[error("{0}")]
     PeerGone(String),
+    /// `/dev/shm` cannot hold a shared-memory object the session needs (reserved up front, so
+    /// a full `/dev/shm` is this error instead of a worker's SIGBUS on first touch).
+    #[error(
+        "`/dev/shm` is too small for {what}: it needs {needed} bytes, {free} bytes are free\nhint: make `/dev/shm` larger (`mount -o remount,size=8g /dev/shm`; Docker: `--shm-size=8g`), remove stale `/dev/shm` files, or use fewer envs or a smaller `pool_bytes`"
+    )]
+    NoSpace {
+        /// What was being created.
+        what: &'static str,
+        /// Bytes it needs.
+        needed: u64,
+        /// Bytes free in `/dev/shm` when it failed.
+        free: u64,
+    },
 }

@@ -103,6 +103,52 @@ pub fn remove_stale_slots(prefix: &str) {
     }
 }
 
+/// Sizes the new object `fd` to `len` bytes and reserves its pages now: `ftruncate` alone
+/// leaves a sparse object, and a `/dev/shm` that cannot back it kills the first process that
+/// touches a missing page with SIGBUS (a worker, far from the cause).
+fn reserve(fd: libc::c_int, len: usize) -> Result<(), DataPlaneError> {
+    let Ok(off_len) = libc::off_t::try_from(len) else {
+        return Err(DataPlaneError::NoSpace {
+            what: "a batch slot",
+            needed: len as u64,
+            free: shm_free_bytes(),
+        });
+    };
+    // SAFETY: fd is ours; the object is new and empty (zero-filled once sized).
+    if unsafe { libc::ftruncate(fd, off_len) } != 0 {
+        return Err(os_error("size batch slot"));
+    }
+    if len == 0 {
+        return Ok(());
+    }
+    // SAFETY: fd is ours; posix_fallocate returns an error number and sets no errno.
+    match unsafe { libc::posix_fallocate(fd, 0, off_len) } {
+        0 => Ok(()),
+        libc::ENOSPC | libc::ENOMEM | libc::EFBIG => Err(DataPlaneError::NoSpace {
+            what: "a batch slot",
+            needed: len as u64,
+            free: shm_free_bytes(),
+        }),
+        // A file system that cannot reserve (none that backs `/dev/shm` on Linux): keep the
+        // sparse object, as before.
+        libc::EOPNOTSUPP | libc::EINVAL => Ok(()),
+        code => Err(DataPlaneError::Ipc {
+            what: "reserve batch slot",
+            detail: std::io::Error::from_raw_os_error(code).to_string(),
+        }),
+    }
+}
+
+/// Bytes free in `/dev/shm` for an unprivileged process (0 when it cannot be read).
+pub fn shm_free_bytes() -> u64 {
+    // SAFETY: a valid NUL-terminated path and a valid out-pointer.
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    if unsafe { libc::statvfs(c"/dev/shm".as_ptr(), &mut st) } != 0 {
+        return 0;
+    }
+    (st.f_bavail as u64).saturating_mul(st.f_frsize as u64)
+}
+
 /// A mapped shared-memory object.
 struct Mapping {
     ptr: *mut u8,
@@ -133,8 +179,17 @@ impl Mapping {
             }));
         }
         let sized = if create {
-            // SAFETY: fd is ours; the object is new and empty (zero-filled once sized).
-            unsafe { libc::ftruncate(fd, len as libc::off_t) == 0 }
+            match reserve(fd, len) {
+                Ok(()) => true,
+                Err(err) => {
+                    // SAFETY: fd is ours and not used after this; the name is ours to remove.
+                    unsafe {
+                        libc::close(fd);
+                        libc::shm_unlink(path.as_ptr());
+                    }
+                    return Err(err);
+                }
+            }
         } else {
             // SAFETY: fd is ours and `st` is a valid out-pointer.
             let mut st: libc::stat = unsafe { std::mem::zeroed() };
