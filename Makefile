@@ -178,8 +178,12 @@ rust-test: setup py-install
 # and the release binaries go into its bin/, as in the wheel (`make wheel`).
 PY_BINARIES := envhub envhub-worker envhub-worker-mujoco
 PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
-PY_EXT_SUFFIX = $(shell $(VPY) -c 'import importlib.machinery as m; print(m.EXTENSION_SUFFIXES[0])')
+# The module is built for the stable ABI (pyo3's `abi3-py39`): one file, `_envhub.abi3.so`,
+# loads in every CPython from 3.9 on, the venvs provisioned for suites included (a copy named
+# for one interpreter, `_envhub.cpython-311-*.so`, would win over it there and is removed).
+PY_EXT_SUFFIX := .abi3.so
 py-install: build
+	rm -f py-client/python/envhub/_envhub.cpython-*.so
 	cp target/release/lib_envhub.so py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
 	mv -f py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp py-client/python/envhub/_envhub$(PY_EXT_SUFFIX)
 	rm -f $(PY_SITE)/envhub.pth $(PY_SITE)/_envhub.pth

@@ -14,6 +14,9 @@ pub struct Route {
     pub env_id: String,
     /// The entry's settings merged with the caller's.
     pub config: EnvConfig,
+    /// The Python environment its workers run in, provisioned (the entry's `python_env`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub python: Option<envhub_shm::WorkerPython>,
 }
 
 /// Merges the entry's settings under the caller's: the caller's `extra` keys override the
@@ -68,6 +71,7 @@ pub fn route(
             adapter: a.name.clone(),
             env_id: entry.env_id.clone(),
             config: config.clone(),
+            python: None,
         })
     };
     if let Some(pinned) = &entry.adapter {

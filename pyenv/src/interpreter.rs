@@ -33,10 +33,12 @@ pub fn version_of(python: &Path) -> Option<String> {
         .filter(|v| parse_version(v).is_some())
 }
 
-/// Every interpreter found, uv's first, one per version.
+/// Every interpreter found, one per version, newest first.
 pub fn present(uv: &Path) -> Vec<Interpreter> {
-    let mut found = from_uv(uv);
-    found.extend(from_pyenv());
+    // pyenv's first: uv lists the selected version by its pyenv shim, which works only
+    // while that version stays selected.
+    let mut found = from_pyenv();
+    found.extend(from_uv(uv));
     let mut seen = Vec::new();
     found.retain(|i| {
         let new = !seen.contains(&i.version);
@@ -45,15 +47,6 @@ pub fn present(uv: &Path) -> Vec<Interpreter> {
     });
     found.sort_by_key(|i| std::cmp::Reverse(parse_version(&i.version)));
     found
-}
-
-/// The interpreter for `requested` (`3.10`: the newest 3.10.x; `3.10.13`: exactly it).
-pub fn find(uv: &Path, requested: &str) -> Option<Interpreter> {
-    let (major, minor, patch) = parse_version(requested)?;
-    present(uv).into_iter().find(|i| {
-        parse_version(&i.version)
-            .is_some_and(|(a, b, c)| (a, b) == (major, minor) && (patch.is_none() || c == patch))
-    })
 }
 
 fn from_uv(uv: &Path) -> Vec<Interpreter> {

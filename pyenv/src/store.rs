@@ -170,14 +170,11 @@ impl Store {
         spec.validate().map_err(invalid)?;
         let (base, version) = match &spec.python {
             Some(requested) => {
-                let found = interpreter::find(&self.uv, requested)
-                    .or_else(|| {
-                        // Interpreters listed once per store; a re-check costs nothing more.
-                        self.interpreters()
-                            .iter()
-                            .find(|i| version_matches(&i.version, requested))
-                            .cloned()
-                    })
+                let found = self
+                    .interpreters()
+                    .iter()
+                    .find(|i| version_matches(&i.version, requested))
+                    .cloned()
                     .ok_or_else(|| PyEnvError::PythonNotFound {
                         name: name.to_string(),
                         requested: requested.clone(),
