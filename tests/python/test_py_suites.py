@@ -232,7 +232,11 @@ def test_one_client_opens_every_suite_and_a_native_env_at_once():
                 space = env.action_space
                 a = suite_runs.action(t, np.asarray(space.low), np.asarray(space.high), space.dtype)
                 obs, reward, terminated, truncated, _ = env.step(a)
-                assert env.observation_space.contains(obs) or isinstance(obs, dict)
+                # Shapes and keys, not bounds: Meta-World's observations leave its own space.
+                if isinstance(obs, dict):
+                    assert set(obs) == set(env.observation_space.spaces)
+                else:
+                    assert obs.shape == env.observation_space.shape and np.isfinite(obs).all()
                 assert np.isfinite(reward)
                 if terminated or truncated:
                     env.reset()
