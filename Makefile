@@ -167,9 +167,9 @@ NETNS_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v ip >/dev/null && com
 # optimised in every profile anyway), and end-to-end tests start the release binaries.
 rust-test: setup py-install
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
 	fi
 	$(CARGO) test $(PROFILE) --workspace --doc $(FEATURES)
 
@@ -199,8 +199,12 @@ py-install: build
 wheel: build
 	$(VPY) py-client/build_wheel.py --out dist
 
+# Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt
+# into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
+# a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
+# skips of those tests (no uv, no second CPython, no PyPI) into failures.
 py-test: py-install
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \

@@ -88,3 +88,8 @@ pub const ENVHUB_PYENV_WAIT: &str = "ENVHUB_PYENV_WAIT";
 /// second CPython and PyPI) fail instead of skipping when those are missing; `make
 /// rust-test` and `make py-test` set it.
 pub const ENVHUB_PYENV_REQUIRED: &str = "ENVHUB_PYENV_REQUIRED";
+
+/// Set (non-empty) to make the suite tests (`tests/python/test_py_suites.py`: Meta-World,
+/// robosuite, dm_control, MyoSuite, each in its own Python environment) fail instead of
+/// skipping when an environment cannot be built here; `make py-test` sets it.
+pub const ENVHUB_SUITES_REQUIRED: &str = "ENVHUB_SUITES_REQUIRED";
