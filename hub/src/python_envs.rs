@@ -154,7 +154,13 @@ frameworks:
   metaworld: {python_env: tiny}
 environments:
   - {id: a, name: A, framework: metaworld, env_id: X-v0, robot_type: arm, env_type: tabletop}
-  - {id: b, name: B, framework: gymnasium, env_id: Y-v0, robot_type: arm, env_type: tabletop, python_env: tiny}
+  - id: b
+    name: B
+    framework: gymnasium
+    env_id: Y-v0
+    robot_type: arm
+    env_type: tabletop
+    python_env: tiny
   - {id: c, name: C, framework: gymnasium, env_id: Z-v0, robot_type: arm, env_type: tabletop}
 "#;
 
@@ -178,10 +184,7 @@ environments:
 
     #[test]
     fn an_unknown_name_is_an_error_with_line_and_the_known_names() {
-        let text = FILE.replace(
-            "python_env: tiny}\n  - {id: c",
-            "python_env: tinny}\n  - {id: c",
-        );
+        let text = FILE.replace("    python_env: tiny\n", "    python_env: tinny\n");
         let err = load(&text).unwrap_err();
         assert!(
             err.starts_with("suites.yaml:11: entry `b` names the python env `tinny`")

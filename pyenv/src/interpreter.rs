@@ -33,23 +33,24 @@ pub fn version_of(python: &Path) -> Option<String> {
         .filter(|v| parse_version(v).is_some())
 }
 
-/// Every interpreter found, one per version, newest first.
-pub fn present(uv: &Path) -> Vec<Interpreter> {
-    // pyenv's first: uv lists the selected version by its pyenv shim, which works only
-    // while that version stays selected.
-    let mut found = from_pyenv();
-    found.extend(from_uv(uv));
-    let mut seen = Vec::new();
-    found.retain(|i| {
-        let new = !seen.contains(&i.version);
-        seen.push(i.version.clone());
-        new
-    });
+/// `lists` merged: one interpreter per version (the first list's wins), newest first.
+pub(crate) fn merged(lists: &[&[Interpreter]]) -> Vec<Interpreter> {
+    let mut found: Vec<Interpreter> = Vec::new();
+    for list in lists {
+        for i in list.iter() {
+            if !found.iter().any(|f| f.version == i.version) {
+                found.push(i.clone());
+            }
+        }
+    }
     found.sort_by_key(|i| std::cmp::Reverse(parse_version(&i.version)));
     found
 }
 
-fn from_uv(uv: &Path) -> Vec<Interpreter> {
+/// The interpreters uv finds (`PATH`, its own installs); it queries every candidate, which
+/// takes a second or two with pyenv's shims on `PATH`, so it is asked only when pyenv's
+/// list lacks the version.
+pub(crate) fn from_uv(uv: &Path) -> Vec<Interpreter> {
     #[derive(serde::Deserialize)]
     struct Listed {
         version: String,
@@ -79,7 +80,8 @@ fn from_uv(uv: &Path) -> Vec<Interpreter> {
         .collect()
 }
 
-fn from_pyenv() -> Vec<Interpreter> {
+/// pyenv's installed versions, by their real paths (its shims work only for the selected one).
+pub(crate) fn from_pyenv() -> Vec<Interpreter> {
     let run = |args: &[&str]| {
         let out = Command::new("pyenv").args(args).output().ok()?;
         out.status

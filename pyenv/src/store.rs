@@ -99,7 +99,9 @@ pub struct Store {
     packages: Vec<PathBuf>,
     lock_wait: Duration,
     progress: bool,
-    present: OnceLock<Vec<Interpreter>>,
+    from_pyenv: OnceLock<Vec<Interpreter>>,
+    from_uv: OnceLock<Vec<Interpreter>>,
+    merged: OnceLock<Vec<Interpreter>>,
     default_version: OnceLock<Option<String>>,
 }
 
@@ -115,7 +117,9 @@ impl Store {
             packages: Vec::new(),
             lock_wait: Duration::from_secs(900),
             progress: true,
-            present: OnceLock::new(),
+            from_pyenv: OnceLock::new(),
+            from_uv: OnceLock::new(),
+            merged: OnceLock::new(),
             default_version: OnceLock::new(),
         }
     }
@@ -153,7 +157,16 @@ impl Store {
 
     /// The interpreters present on this machine.
     pub fn interpreters(&self) -> &[Interpreter] {
-        self.present.get_or_init(|| interpreter::present(&self.uv))
+        let all = [self.pyenv_interpreters(), self.uv_interpreters()];
+        self.merged.get_or_init(|| interpreter::merged(&all))
+    }
+
+    fn pyenv_interpreters(&self) -> &[Interpreter] {
+        self.from_pyenv.get_or_init(interpreter::from_pyenv)
+    }
+
+    fn uv_interpreters(&self) -> &[Interpreter] {
+        self.from_uv.get_or_init(|| interpreter::from_uv(&self.uv))
     }
 
     /// Resolves `spec` to its key, folder and base interpreter, without building anything.
@@ -170,11 +183,14 @@ impl Store {
         spec.validate().map_err(invalid)?;
         let (base, version) = match &spec.python {
             Some(requested) => {
-                let found = self
-                    .interpreters()
-                    .iter()
-                    .find(|i| version_matches(&i.version, requested))
-                    .cloned()
+                let matching = |list: &[Interpreter]| {
+                    list.iter()
+                        .filter(|i| version_matches(&i.version, requested))
+                        .max_by_key(|i| parse_version(&i.version))
+                        .cloned()
+                };
+                let found = matching(self.pyenv_interpreters())
+                    .or_else(|| matching(self.uv_interpreters()))
                     .ok_or_else(|| PyEnvError::PythonNotFound {
                         name: name.to_string(),
                         requested: requested.clone(),
