@@ -275,3 +275,61 @@ def test_the_cli_shows_each_entrys_environment(suites) -> None:
     assert "broken (not built)" in envs.stdout, envs.stdout
     listed = cli("env", "list", registry=registry, timeout=60)
     assert listed.returncode == 0 and "gymnasium==1.2.0" in listed.stdout, listed.stdout
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def serve(name: str, registry: Path, tmp: Path, *extra: str) -> tuple[subprocess.Popen, str]:
+    """An `envhub serve` hub on loopback with its own (empty) cache folder."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    env = {k: v for k, v in os.environ.items() if k not in ("ENVHUB_ADAPTERS", "ENVHUB_CONNECT")}
+    env.update(
+        ENVHUB_NAMESPACE=f"pyenvhub_{name}_{os.getpid()}_",
+        ENVHUB_MULTICAST="0",
+        ENVHUB_PYENV_DIR=str(tmp / f"{name}-pyenvs"),
+    )
+    proc = subprocess.Popen(
+        [str(ENVHUB_BIN), "--registry", str(registry), "serve", "--socket", str(tmp / f"{name}.sock")]
+        + ["--name", name, "--listen", endpoint, *extra],
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    said = "".join(proc.stdout.readline() for _ in range(3))
+    assert "on the network" in said, f"hub {name} said {said!r} (exit status {proc.poll()})"
+    return proc, endpoint
+
+
+def test_a_remote_hub_builds_for_remote_clients_only_with_consent(suites, tmp_path, monkeypatch) -> None:
+    registry, versions = suites
+    name = "py" + versions[0].replace(".", "")
+    entry = f"cartpole-{name}"
+    strict, strict_at = serve("pyenvstrict", registry, tmp_path)
+    lenient, lenient_at = serve("pyenvlenient", registry, tmp_path, "--allow-provision")
+    monkeypatch.setenv("ENVHUB_CONNECT", f"{strict_at},{lenient_at}")
+    monkeypatch.setenv("ENVHUB_MULTICAST", "0")
+    try:
+        with pytest.raises(envhub.EnvHubError) as err:
+            envhub.make_vec(entry, 2, hubs=["pyenvstrict"], registry=str(registry))
+        message = str(err.value)
+        assert f"python env `{name}`" in message and "--allow-provision" in message, message
+        assert not (tmp_path / "pyenvstrict-pyenvs").exists() or not any((tmp_path / "pyenvstrict-pyenvs").iterdir())
+        env = envhub.make_vec(entry, 2, hubs=["pyenvlenient"], registry=str(registry))
+        try:
+            obs, _ = env.reset(seed=0)
+            for _ in range(20):
+                obs, *_ = env.step(np.zeros(2, dtype=np.int64))
+            assert obs.shape == (2, 4)
+        finally:
+            env.close()
+        assert any(p.name.startswith(f"{name}-") for p in (tmp_path / "pyenvlenient-pyenvs").iterdir())
+    finally:
+        for proc in (strict, lenient):
+            proc.kill()
+            proc.wait(timeout=10)
