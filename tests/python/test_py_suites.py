@@ -176,6 +176,20 @@ def test_entries_name_ids_the_suite_has(framework):
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []
 
 
+@pytest.mark.parametrize("framework", sorted(SUITES))
+def test_suite_runs_on_the_python_it_names(framework):
+    """A suite's environment is based on the CPython its `python:` names (dm_control's is not
+    the hub's 3.11: the worker's compiled module is built for the stable ABI)."""
+    env = SUITES[framework]
+    python = suite_python(env)
+    code = "import sys, envhub._envhub; print('%d.%d' % sys.version_info[:2])"
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)  # noqa: PLW1510
+    assert done.returncode == 0, done.stderr[-3000:]
+    want = REGISTRY["python_envs"][env].get("python")
+    if want:
+        assert done.stdout.strip() == want
+
+
 @pytest.mark.parametrize(
     ("query", "expected"),
     [
