@@ -217,15 +217,14 @@ fn ago(seconds: u64) -> String {
     }
 }
 
-/// The python env column of `envhub envs`: `name (ready)` / `name (not built)`, empty for
-/// entries in the hub's interpreter.
+/// The python env column of `envhub envs`: `name (ready)`, else `name (not built)` (also
+/// where that cannot be checked: no uv), empty for entries in the hub's interpreter.
 pub(crate) fn env_column(registry: &Registry, entry: &envhub::EnvEntry) -> String {
     let Some((name, spec)) = provision::env_of(registry, entry) else {
         return String::new();
     };
     match provision::is_ready(name, spec) {
         Ok(true) => format!("{name} (ready)"),
-        Ok(false) => format!("{name} (not built)"),
-        Err(_) => format!("{name} (?)"),
+        _ => format!("{name} (not built)"),
     }
 }
