@@ -203,8 +203,11 @@ class LiberoAdapter(EnvAdapter):
 
 class LiberoEnv(gym.Env):
     """Gymnasium's contract over LIBERO's `OffScreenRenderEnv` (`reset() -> obs`, `step ->
-    (obs, reward, done, info)`); the spaces come from the first observation. A `gymnasium.Env`,
-    so the worker's `TimeLimit` (the session's `max_episode_steps`) can wrap it."""
+    (obs, reward, done, info)`); the spaces come from the first observation, of a reset when
+    the env is made (LIBERO's kitchen scenes keep state across resets that `set_init_state`
+    does not restore: LIBERO in-process matches this env bit for bit when it is reset once
+    after it is made too). A `gymnasium.Env`, so the worker's `TimeLimit` (the session's
+    `max_episode_steps`) can wrap it."""
 
     metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium.Env's own attribute
 
