@@ -169,9 +169,9 @@ NETNS_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v ip >/dev/null && com
 # optimised in every profile anyway), and end-to-end tests start the release binaries.
 rust-test: setup py-install
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
 	fi
 	$(CARGO) test $(PROFILE) --workspace --doc $(FEATURES)
 
@@ -180,8 +180,12 @@ rust-test: setup py-install
 # and the release binaries go into its bin/, as in the wheel (`make wheel`).
 PY_BINARIES := envhub envhub-worker envhub-worker-mujoco
 PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
-PY_EXT_SUFFIX = $(shell $(VPY) -c 'import importlib.machinery as m; print(m.EXTENSION_SUFFIXES[0])')
+# The module is built for the stable ABI (pyo3's `abi3-py39`): one file, `_envhub.abi3.so`,
+# loads in every CPython from 3.9 on, the venvs provisioned for suites included (a copy named
+# for one interpreter, `_envhub.cpython-311-*.so`, would win over it there and is removed).
+PY_EXT_SUFFIX := .abi3.so
 py-install: build
+	rm -f py-client/python/envhub/_envhub.cpython-*.so
 	cp target/release/lib_envhub.so py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
 	mv -f py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp py-client/python/envhub/_envhub$(PY_EXT_SUFFIX)
 	rm -f $(PY_SITE)/envhub.pth $(PY_SITE)/_envhub.pth
@@ -197,8 +201,12 @@ py-install: build
 wheel: build
 	$(VPY) py-client/build_wheel.py --out dist
 
+# Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt
+# into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
+# a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
+# skips of those tests (no uv, no second CPython, no PyPI) into failures.
 py-test: py-install
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \

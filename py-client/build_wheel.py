@@ -43,14 +43,18 @@ BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco")
 EPOCH = (1980, 1, 1, 0, 0, 0)
 
 
+#: The oldest CPython the extension module supports: it is built for the stable ABI of this
+#: version (pyo3's `abi3-py39`, py-client/Cargo.toml), so one wheel serves every later one.
+ABI3_FROM = "cp39"
+
+
 def wheel_tag() -> str:
-    """`cp311-cp311-linux_x86_64` for the interpreter running this script: the extension
-    module was built for it (`PYO3_PYTHON`). A plain `linux_*` tag, not manylinux: the binaries
-    link the build machine's glibc and are not audited for older ones."""
-    impl = f"cp{sys.version_info.major}{sys.version_info.minor}"
-    abi = impl + sys.abiflags
+    """`cp39-abi3-linux_x86_64`: the module uses only the stable ABI of CPython 3.9, so the
+    wheel installs into any CPython from 3.9 on (the Python environments envhub builds for
+    suites included). A plain `linux_*` tag, not manylinux: the binaries link the build
+    machine's glibc and are not audited for older ones."""
     platform = sysconfig.get_platform().replace("-", "_").replace(".", "_")
-    return f"{impl}-{abi}-{platform}"
+    return f"{ABI3_FROM}-abi3-{platform}"
 
 
 def version() -> str:
@@ -111,7 +115,7 @@ def build(target: Path, out: Path) -> Path:
     ver = version()
     tag = wheel_tag()
     name = project["name"]
-    ext_suffix = sysconfig.get_config_var("EXT_SUFFIX")
+    ext_suffix = ".abi3.so"
     dist_info = f"{name}-{ver}.dist-info"
 
     missing = [str(target / f) for f in ("lib_envhub.so", *BINARIES) if not (target / f).is_file()]

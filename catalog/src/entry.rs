@@ -15,7 +15,8 @@ fn default_action_type() -> String {
 /// An environment of the registry.
 ///
 /// The first twelve fields are RoboSmith's, with its defaults, so a RoboSmith registry loads
-/// unchanged. `kwargs`, `max_episode_steps`, `asset_path` and `adapter` are envhub's.
+/// unchanged. `kwargs`, `max_episode_steps`, `asset_path`, `adapter` and `python_env` are
+/// envhub's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EnvEntry {
@@ -61,6 +62,10 @@ pub struct EnvEntry {
     /// Pins the adapter that runs this entry (otherwise the hub picks the best one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adapter: Option<String>,
+    /// The Python environment (`python_envs:` of the registry) its workers run in; otherwise
+    /// its framework's (`frameworks:`), else the hub's interpreter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub python_env: Option<String>,
 }
 
 impl EnvEntry {

@@ -12,9 +12,13 @@
 mod builtin_assets;
 mod entry;
 mod matching;
+mod python_env_spec;
+mod python_envs;
 mod registry;
 mod tags;
 
 pub use entry::EnvEntry;
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
+pub use python_env_spec::{PythonEnvSpec, package_name, parse_version, valid_name};
+pub use python_envs::{FrameworkDefaults, PythonEnvs};
 pub use registry::{DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery};

@@ -71,6 +71,16 @@ pub enum RegistryError {
         /// Line of the first definition.
         first_line: usize,
     },
+    /// A `python_envs:` definition is invalid, or an entry or framework names an undefined one.
+    #[error("{path}:{line}: {message}")]
+    PythonEnv {
+        /// The file.
+        path: String,
+        /// 1-based line (0 if unknown).
+        line: usize,
+        /// What is wrong, with the names that are defined and a hint.
+        message: String,
+    },
     /// No entry has this id.
     #[error("unknown environment id `{id}`{}\nhint: `envhub envs` lists every id", did_you_mean(.closest))]
     UnknownId {
@@ -85,6 +95,10 @@ pub enum RegistryError {
 #[serde(deny_unknown_fields)]
 struct RegistryFile {
     environments: Vec<EnvEntry>,
+    #[serde(default)]
+    python_envs: std::collections::BTreeMap<String, crate::python_env_spec::PythonEnvSpec>,
+    #[serde(default)]
+    frameworks: std::collections::BTreeMap<String, crate::python_envs::FrameworkDefaults>,
 }
 
 /// Filters for [`Registry::search`]. Every filter is a case-insensitive substring; empty
@@ -147,6 +161,7 @@ pub struct SearchHit<'a> {
 pub struct Registry {
     entries: Vec<EnvEntry>,
     sources: Vec<String>,
+    python_envs: crate::python_envs::PythonEnvs,
 }
 
 impl Registry {
@@ -168,6 +183,7 @@ impl Registry {
         Registry {
             entries,
             sources: vec![source.to_string()],
+            python_envs: Default::default(),
         }
     }
 
@@ -205,7 +221,15 @@ impl Registry {
         name: &str,
         base_dir: &Path,
     ) -> Result<(), RegistryError> {
-        let entries = parse(text, name)?;
+        let file = parse(text, name)?;
+        self.python_envs.add_file(
+            file.python_envs,
+            file.frameworks,
+            &file.environments,
+            text,
+            name,
+        )?;
+        let entries = file.environments;
         let mut seen = std::collections::HashSet::new();
         for (index, mut entry) in entries.into_iter().enumerate() {
             validate(&entry, index, text, name)?;
@@ -233,6 +257,11 @@ impl Registry {
         }
         self.sources.push(name.to_string());
         Ok(())
+    }
+
+    /// The Python environments its files declare (`python_envs:`, `frameworks:`).
+    pub fn python_envs(&self) -> &crate::python_envs::PythonEnvs {
+        &self.python_envs
     }
 
     /// The files this registry was built from, in order.
@@ -376,9 +405,8 @@ pub(crate) fn matching_tags(entry: &EnvEntry, tags: &[String]) -> Vec<String> {
     matched
 }
 
-fn parse(text: &str, name: &str) -> Result<Vec<EnvEntry>, RegistryError> {
+fn parse(text: &str, name: &str) -> Result<RegistryFile, RegistryError> {
     serde_norway::from_str::<RegistryFile>(text)
-        .map(|f| f.environments)
         .map_err(|err| {
             let (line, column) = err
                 .location()
@@ -453,7 +481,7 @@ fn validate(entry: &EnvEntry, index: usize, text: &str, name: &str) -> Result<()
 }
 
 /// 1-based lines where `id: <id>` is written (block style, with or without quotes).
-fn id_lines(text: &str, id: &str) -> Vec<usize> {
+pub(crate) fn id_lines(text: &str, id: &str) -> Vec<usize> {
     text.lines()
         .enumerate()
         .filter_map(|(i, line)| {

@@ -16,6 +16,7 @@ use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
 use envhub_core::Availability;
 use envhub_protocol::HubError;
+use envhub_shm::WorkerPython;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -150,13 +151,41 @@ fn describe_timeout() -> Duration {
 pub fn refresh_adapters() {
     CATALOG.clear();
     WITH_USER.clear();
+    IN_ENVS.lock().unwrap_or_else(|e| e.into_inner()).clear();
+}
+
+/// Catalogs of the Python worker in provisioned environments, by environment and user
+/// adapters (bounded as [`WITH_USER`]).
+type InEnv = ((WorkerPython, UserAdapters), Arc<[AdapterInfo]>);
+static IN_ENVS: Mutex<Vec<InEnv>> = Mutex::new(Vec::new());
+
+/// The Python-hosted adapters as the provisioned environment `env` hosts them (its own
+/// packages decide what is available), with `user`'s; asked once per environment.
+pub(crate) fn adapters_in(env: &WorkerPython, user: &UserAdapters) -> Arc<[AdapterInfo]> {
+    let key = (env.clone(), user.clone());
+    if let Some((_, list)) = IN_ENVS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|(k, _)| *k == key)
+    {
+        return list.clone();
+    }
+    // Asked without the lock held, as for `adapters`.
+    let list: Arc<[AdapterInfo]> = python(Some(env), user).into();
+    let mut known = IN_ENVS.lock().unwrap_or_else(|e| e.into_inner());
+    if known.len() == WITH_USER_CAPACITY {
+        known.remove(0);
+    }
+    known.push((key, list.clone()));
+    list
 }
 
 /// Every adapter, asked of the worker binary and the Python worker once per process.
 pub(crate) fn adapters() -> Result<Arc<[AdapterInfo]>, HubError> {
     unpack(CATALOG.get_or_compute(|| {
         let mut list = native_cached()?.to_vec();
-        list.extend(python(&UserAdapters::default()));
+        list.extend(python(None, &UserAdapters::default()));
         Ok(list.into())
     }))
 }
@@ -181,7 +210,7 @@ pub(crate) fn adapters_with(user: &UserAdapters) -> Result<Arc<[AdapterInfo]>, H
     };
     // Asked without holding the cache's lock, as for `adapters`.
     let mut list = native_adapters()?.to_vec();
-    list.extend(python(user));
+    list.extend(python(None, user));
     let list: Arc<[AdapterInfo]> = list.into();
     let mut state = WITH_USER.lock();
     if state.1 != generation {
@@ -268,10 +297,10 @@ fn last_line(bytes: &[u8]) -> String {
 
 /// The Python-hosted adapters (with `user`'s); when the interpreter cannot describe them,
 /// the built-in ones are listed as unavailable with the reason.
-fn python(user: &UserAdapters) -> Vec<AdapterInfo> {
-    let python = python_host::python_interpreter();
+fn python(env: Option<&WorkerPython>, user: &UserAdapters) -> Vec<AdapterInfo> {
+    let python = env.map_or_else(python_host::python_interpreter, |e| e.interpreter.clone());
     let timeout = describe_timeout();
-    let mut command = python_host::worker_command(user);
+    let mut command = python_host::worker_command_in(env, user);
     let hosted: Vec<String> = command
         .get_envs()
         .find(|(k, _)| *k == std::ffi::OsStr::new(ENVHUB_ADAPTERS))

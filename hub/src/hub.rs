@@ -222,7 +222,31 @@ impl Hub {
         config: &EnvConfig,
         user: &UserAdapters,
     ) -> Result<Route, HubError> {
+        self.route_provisioning(id, config, user, crate::provision::automatic())
+    }
+
+    /// [`Hub::route_with`], building the entry's Python environment first if it needs one
+    /// that is not ready and `may_build` (else that is an error saying how to build it).
+    pub(crate) fn route_provisioning(
+        &self,
+        id: &str,
+        config: &EnvConfig,
+        user: &UserAdapters,
+        may_build: bool,
+    ) -> Result<Route, HubError> {
         let entry = self.registry.get(id)?;
+        let hint = format!(
+            "`envhub env sync {}` builds it (ENVHUB_PROVISION=explicit turned building on first need off)",
+            crate::provision::env_of(&self.registry, entry).map_or("", |(name, _)| name)
+        );
+        if let Some(python) =
+            crate::provision::worker_python(&self.registry, entry, may_build, &hint)?
+        {
+            // The environment's own packages decide which adapter runs the entry.
+            let mut found = route(entry, &catalog::adapters_in(&python, user), config)?;
+            found.python = Some(python);
+            return Ok(found);
+        }
         // Native adapters first: when one runs the entry (and draws the render mode asked
         // for), Python is never started to ask.
         let native = catalog::native_adapters()?;
@@ -275,6 +299,7 @@ impl Hub {
             adapter: adapter.to_string(),
             env_id: env_id.to_string(),
             config: config.clone(),
+            python: None,
         };
         VecEnv::start(env_id, route, self.options.clone(), &self.launch())
     }

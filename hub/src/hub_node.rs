@@ -286,7 +286,19 @@ impl State {
         let workers = envhub_session::workers_for(&config, num_envs.max(1));
         let route = self
             .hub
-            .route_with(&request.id, &config, &UserAdapters::default())?;
+            .route_provisioning(
+                &request.id,
+                &config,
+                &UserAdapters::default(),
+                self.policy.allow_provision,
+            )
+            .map_err(|e| match e {
+                HubError::PythonEnv { message, .. } if !self.policy.allow_provision => self.refuse(
+                    message.split("\nhint:").next().unwrap_or_default().to_string(),
+                    "its owner can build it with `envhub env sync`, or let remote clients' sessions build it with `envhub serve --allow-provision`",
+                ),
+                e => e,
+            })?;
         let mut options: SessionOptions = self.hub.options().clone();
         options.restart_on_crash = request.restart_on_crash;
         options.step_timeout = Duration::from_millis(request.step_timeout_ms.max(1));

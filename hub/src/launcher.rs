@@ -115,7 +115,13 @@ pub(crate) fn launch_local(
     user: &UserAdapters,
     start_timeout: Duration,
 ) -> Result<(Child, ReadySpec), HubError> {
-    let (mut command, path) = match crate::catalog::host_of(&job.adapter, user) {
+    // A job in a provisioned environment runs in its interpreter, whatever hosts the adapter
+    // in the hub's.
+    let host = match &job.python {
+        Some(_) => Host::Python,
+        None => crate::catalog::host_of(&job.adapter, user),
+    };
+    let (mut command, path) = match host {
         Host::Native => {
             let path = worker_binary();
             let mut command = Command::new(&path);
@@ -127,8 +133,11 @@ pub(crate) fn launch_local(
             (command, path)
         }
         Host::Python => (
-            crate::python_host::worker_command(user),
-            crate::python_host::python_interpreter(),
+            crate::python_host::worker_command_in(job.python.as_ref(), user),
+            job.python
+                .as_ref()
+                .map(|p| p.interpreter.clone())
+                .unwrap_or_else(crate::python_host::python_interpreter),
         ),
     };
     command

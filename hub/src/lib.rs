@@ -22,6 +22,7 @@ mod hub;
 mod hub_node;
 mod launcher;
 mod placement;
+pub mod provision;
 mod python_host;
 mod routing;
 mod settings;
@@ -31,6 +32,7 @@ pub use catalog::{AdapterInfo, Host, refresh_adapters};
 pub use daemon::{default_socket, serve};
 pub use daemon_client::DaemonClient;
 pub use envhub_catalog::{
+    FrameworkDefaults, PythonEnvs,
     Candidate, DEFAULT_REGISTRY_NAME, EnvEntry, MatchError, Registry, RegistryError, SearchHit,
     SearchQuery, TaskMatch, TaskSpec, match_task,
 };

@@ -134,8 +134,20 @@ fn unique<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
 
 /// `python -m envhub.worker`, hosting this process's user adapters and `extra` ones (a
 /// daemon's client's) in `ENVHUB_ADAPTERS`, with `extra`'s folders first on `PYTHONPATH`.
-pub(crate) fn worker_command(extra: &UserAdapters) -> Command {
-    let mut cmd = Command::new(python_interpreter());
+/// It runs in the provisioned environment `env` (its interpreter and variables), or in the
+/// hub's interpreter.
+pub(crate) fn worker_command_in(
+    env: Option<&envhub_shm::WorkerPython>,
+    extra: &UserAdapters,
+) -> Command {
+    let mut cmd = match env {
+        Some(env) => {
+            let mut cmd = Command::new(&env.interpreter);
+            cmd.envs(&env.env);
+            cmd
+        }
+        None => Command::new(python_interpreter()),
+    };
     cmd.arg("-m").arg("envhub.worker");
     let adapters = unique(own_adapters().into_iter().chain(extra.adapters.clone()));
     if !adapters.is_empty() {
@@ -174,7 +186,7 @@ mod tests {
             adapters: vec!["client_sim:ClientAdapter".into()],
             pythonpath: vec!["/client/dir".into()],
         };
-        let cmd = worker_command(&extra);
+        let cmd = worker_command_in(None, &extra);
         let env = |name: &str| {
             cmd.get_envs()
                 .find(|(k, _)| *k == OsStr::new(name))
@@ -192,7 +204,7 @@ mod tests {
         );
         assert!(env("PYTHONPATH").starts_with("/client/dir"));
         // Nothing extra: the worker inherits this process's PYTHONPATH untouched.
-        let plain = worker_command(&UserAdapters::default());
+        let plain = worker_command_in(None, &UserAdapters::default());
         assert!(!plain.get_envs().any(|(k, _)| k == OsStr::new("PYTHONPATH")));
     }
 }

@@ -58,6 +58,7 @@ pub fn route(
             adapter: a.name.clone(),
             env_id: entry.env_id.clone(),
             config: config.clone(),
+            python: None,
         })
     };
     if let Some(pinned) = &entry.adapter {

@@ -9,4 +9,7 @@ pub struct ServePolicy {
     pub max_workers: Option<usize>,
     /// Let remote clients name files on this hub (`asset_path`, `xml_file`, ...).
     pub allow_remote_files: bool,
+    /// Build the Python environment an entry needs for a remote client when it is not
+    /// provisioned yet (installing packages is the operator's decision).
+    pub allow_provision: bool,
 }

@@ -38,6 +38,15 @@ pub enum HubError {
         /// How to install it.
         hint: String,
     },
+    /// A Python environment an entry runs in could not be provided (not provisioned where
+    /// provisioning is explicit or not allowed, or its build failed).
+    #[error("{message}")]
+    PythonEnv {
+        /// The environment's name.
+        name: String,
+        /// Why, with the hint.
+        message: String,
+    },
     /// A session option is invalid.
     #[error("invalid {what}: {reason}")]
     InvalidConfig {

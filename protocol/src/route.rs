@@ -12,4 +12,7 @@ pub struct Route {
     pub env_id: String,
     /// The entry's settings merged with the caller's.
     pub config: EnvConfig,
+    /// The Python environment its workers run in, provisioned (the entry's `python_env`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub python: Option<envhub_shm::WorkerPython>,
 }

@@ -60,7 +60,9 @@ pub(crate) fn hub_error(py: Python<'_>, e: HubError) -> PyErr {
         ),
         HubError::InvalidConfig { .. } => raise(py, "InvalidConfigError", message, vec![]),
         HubError::WorkerBinary { .. } => raise(py, "WorkerBinaryError", message, vec![]),
-        HubError::MakeFailed(_) => raise(py, "MakeError", message, vec![]),
+        HubError::MakeFailed(_) | HubError::PythonEnv { .. } => {
+            raise(py, "MakeError", message, vec![])
+        }
         HubError::InvalidAction { .. } => raise(py, "InvalidActionError", message, vec![]),
         HubError::InvalidState(_) => raise(py, "InvalidStateError", message, vec![]),
         HubError::WorkerDied {

@@ -40,11 +40,12 @@ fn memory_view<'py>(
     len: usize,
     writable: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let flags = if writable {
-        pyo3::ffi::PyBUF_WRITE
-    } else {
-        pyo3::ffi::PyBUF_READ
-    };
+    // `PyBUF_WRITE` / `PyBUF_READ` of `memoryobject.h`, stable ABI since 3.3; pyo3-ffi
+    // exports them only with the buffer protocol (stable from 3.11), and the module is
+    // built for the stable ABI of 3.9.
+    const PYBUF_READ: std::ffi::c_int = 0x100;
+    const PYBUF_WRITE: std::ffi::c_int = 0x200;
+    let flags = if writable { PYBUF_WRITE } else { PYBUF_READ };
     // SAFETY: the memory stays mapped for the whole call that uses the view (it is the
     // request or response sample being served); the wrappers in `envhub.worker` copy what an
     // env may keep beyond it (its action).

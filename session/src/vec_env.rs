@@ -181,6 +181,7 @@ impl VecEnv {
                     owner_pid: std::process::id(),
                     spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
+                    python: route.python.clone(),
                 })));
                 worker_index += 1;
             }
@@ -261,6 +262,7 @@ impl VecEnv {
                                     owner_pid: std::process::id(),
                                     spin_us: 0,
                                     max_spin_us: 0,
+                                    python: None,
                                 };
                                 Ok((
                                     WorkerLink::remote(index, job, reply.spec, conn),

@@ -314,12 +314,17 @@ STEPS = 20
 
 
 def reference(suite: str, task: int):
-    """LIBERO's own env for `suite`'s task `task`, as the adapter makes it."""
+    """LIBERO's own env for `suite`'s task `task`, as the adapter makes it (assets where the
+    adapter finds them)."""
+    adapter.use_assets()
     from libero.libero import benchmark
     from libero.libero.envs import OffScreenRenderEnv
 
     tasks = benchmark.get_benchmark(suite)()
     env = OffScreenRenderEnv(bddl_file_name=tasks.get_task_bddl_file_path(task), ignore_done=True, **CAMERA)
+    # The adapter resets a new env once to build its spaces; some scenes (libero_90's kitchens)
+    # keep state across resets that `set_init_state` does not restore, so the reference does too.
+    env.reset()
     return env, tasks.get_task_init_states(task)
 
 

@@ -32,9 +32,12 @@ REGISTRY_PATH = REPO_ROOT / "configs" / "env_registry.yaml"
 
 REQUIRED_FIELDS = {"id", "name", "framework", "env_id", "robot_type", "env_type"}
 OPTIONAL_FIELDS = {"robot_model", "task_tags", "obs_type", "action_type", "description", "source"}
-EXTENSION_FIELDS = {"kwargs", "max_episode_steps", "asset_path", "adapter"}
+EXTENSION_FIELDS = {"kwargs", "max_episode_steps", "asset_path", "adapter", "python_env"}
 ALLOWED = {
-    "framework": {"gymnasium", "maniskill", "libero", "isaac_lab", "custom_mjcf", "rapier"},
+    "framework": {
+        "gymnasium", "maniskill", "libero", "isaac_lab", "custom_mjcf", "rapier",
+        "metaworld", "robosuite", "dm_control", "myosuite",
+    },
     "robot_type": {"arm", "quadruped", "biped", "dexterous_hand", "mobile_base", "custom"},
     "env_type": {"tabletop", "floor", "terrain", "aerial", "aquatic"},
     "obs_type": {"state", "image", "state+image"},

@@ -66,3 +66,30 @@ pub const ENVHUB_DESCRIBE_TIMEOUT: &str = "ENVHUB_DESCRIBE_TIMEOUT";
 /// before it sleeps (default 300; 0: always sleep). Spinning saves a wake-up per step on
 /// machines with cores to spare.
 pub const ENVHUB_BRIDGE_SPIN_US: &str = "ENVHUB_BRIDGE_SPIN_US";
+
+/// The folder of the Python environments built for suites (`python_envs:` in a registry),
+/// one venv each (default: `$XDG_CACHE_HOME/envhub/pyenvs`, else `~/.cache/envhub/pyenvs`).
+pub const ENVHUB_PYENV_DIR: &str = "ENVHUB_PYENV_DIR";
+
+/// The `uv` executable that builds them (default: beside the hub's interpreter, then `PATH`).
+pub const ENVHUB_UV: &str = "ENVHUB_UV";
+
+/// `auto` (default): a session builds its entry's Python environment on first need;
+/// `explicit`: only `envhub env sync` builds them, and a session whose environment is missing
+/// fails with that hint. A hub serving remote clients builds for them only with
+/// `envhub serve --allow-provision`, whatever this says.
+pub const ENVHUB_PROVISION: &str = "ENVHUB_PROVISION";
+
+/// Seconds a process waits for another one's build of the same Python environment before
+/// giving up (default 900).
+pub const ENVHUB_PYENV_WAIT: &str = "ENVHUB_PYENV_WAIT";
+
+/// Set (non-empty) to make the tests that build Python environments (they need `uv`, a
+/// second CPython and PyPI) fail instead of skipping when those are missing; `make
+/// rust-test` and `make py-test` set it.
+pub const ENVHUB_PYENV_REQUIRED: &str = "ENVHUB_PYENV_REQUIRED";
+
+/// Set (non-empty) to make the suite tests (`tests/python/test_py_suites.py`: Meta-World,
+/// robosuite, dm_control, MyoSuite, each in its own Python environment) fail instead of
+/// skipping when an environment cannot be built here; `make py-test` sets it.
+pub const ENVHUB_SUITES_REQUIRED: &str = "ENVHUB_SUITES_REQUIRED";

@@ -41,6 +41,22 @@ pub struct WorkerJob {
     /// Spin at most this long before blocking, in microseconds.
     #[serde(default)]
     pub max_spin_us: u64,
+    /// The Python environment a Python-hosted adapter runs in (`None`: the hub's interpreter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub python: Option<WorkerPython>,
+}
+
+/// A provisioned Python environment that workers run in: its interpreter and variables.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorkerPython {
+    /// Its name in the registry (`metaworld`).
+    pub name: String,
+    /// The venv's interpreter.
+    pub interpreter: std::path::PathBuf,
+    /// Variables its workers run with (`MUJOCO_GL=egl`).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub env: std::collections::BTreeMap<String, String>,
 }
 
 /// The spec a ready worker reports.

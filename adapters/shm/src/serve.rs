@@ -309,6 +309,7 @@ mod tests {
             owner_pid: std::process::id(),
             spin_us: 0,
             max_spin_us: 0,
+            python: None,
         }
     }
 

@@ -46,6 +46,17 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
                     ("no".to_string(), format!("{reason} (fix: {hint})"))
                 }
             };
+            // Suites in their own Python environment run there, whatever the hub's
+            // interpreter lacks: say which, and whether it is built.
+            let envs = python_envs_of(hub, a);
+            let (status, note) = if envs.is_empty() {
+                (status, note)
+            } else {
+                (
+                    format!("{status}; in env"),
+                    format!("runs in python env {}", envs.join(", ")),
+                )
+            };
             vec![a.name.clone(), status, a.frameworks.join(", "), note]
         })
         .collect();
@@ -57,4 +68,35 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
         )
     );
     Ok(Outcome::Done)
+}
+
+/// The Python environments (with their state) that the registry's entries of `adapter`'s
+/// frameworks run in: `` `metaworld` (ready) ``.
+fn python_envs_of(hub: &Hub, adapter: &envhub::AdapterInfo) -> Vec<String> {
+    let registry = hub.registry();
+    if registry.python_envs().all().is_empty() {
+        return Vec::new();
+    }
+    let mut names: Vec<(String, String)> = Vec::new();
+    for entry in registry.entries() {
+        let framework =
+            envhub_core::canonical_framework(&entry.framework).unwrap_or(&entry.framework);
+        if !adapter.frameworks.iter().any(|f| f == framework) {
+            continue;
+        }
+        if let Some((name, spec)) = envhub::provision::env_of(registry, entry)
+            && !names.iter().any(|(n, _)| n == name)
+        {
+            let state = match envhub::provision::is_ready(name, spec) {
+                Ok(true) => "ready",
+                Ok(false) => "not built: `envhub env sync`",
+                Err(_) => "cannot check",
+            };
+            names.push((name.to_string(), state.to_string()));
+        }
+    }
+    names
+        .into_iter()
+        .map(|(n, s)| format!("`{n}` ({s})"))
+        .collect()
 }

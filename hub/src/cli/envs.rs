@@ -58,27 +58,31 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
         return Ok(Outcome::NotFound);
     }
     if !args.json {
+        // A column for the Python environment only where the catalog declares some.
+        let with_envs = !registry.python_envs().all().is_empty();
         let rows: Vec<Vec<String>> = hits
             .iter()
             .map(|h| {
                 let e = h.entry;
-                vec![
+                let mut row = vec![
                     e.id.clone(),
                     e.env_id.clone(),
                     e.framework.clone(),
                     e.robot_type.clone(),
                     e.env_type.clone(),
                     table::truncate(&e.description, 60),
-                ]
+                ];
+                if with_envs {
+                    row.insert(5, super::env_cmd::env_column(registry, e));
+                }
+                row
             })
             .collect();
-        print!(
-            "{}",
-            table::render(
-                &["ID", "ENV_ID", "FRAMEWORK", "ROBOT", "TYPE", "DESCRIPTION"],
-                &rows
-            )
-        );
+        let mut header = vec!["ID", "ENV_ID", "FRAMEWORK", "ROBOT", "TYPE", "DESCRIPTION"];
+        if with_envs {
+            header.insert(5, "PYTHON_ENV");
+        }
+        print!("{}", table::render(&header, &rows));
         println!("{} of {} environments", hits.len(), registry.len());
     }
     Ok(Outcome::Done)

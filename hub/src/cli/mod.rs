@@ -2,6 +2,7 @@
 
 mod adapters;
 mod bench;
+mod env_cmd;
 mod envs;
 mod hubs;
 mod match_cmd;
@@ -60,6 +61,8 @@ enum Command {
     Serve(serve::Args),
     /// List the live hubs on the network.
     Hubs(hubs::Args),
+    /// The Python environments suites run in (`python_envs:`): list, build, remove.
+    Env(env_cmd::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -103,6 +106,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
             None => envs::run(&registry()?, &args),
         },
         Command::Hubs(args) => hubs::run(&hub()?, &args),
+        Command::Env(args) => env_cmd::run(&registry()?, &args),
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),

@@ -30,6 +30,11 @@ pub(crate) struct Args {
     /// default: remote clients run this hub's registry entries as they are.
     #[arg(long)]
     allow_remote_files: bool,
+    /// Build the Python environment a suite needs (`python_envs:`) when a remote client's
+    /// session needs one that is not provisioned yet. Off by default: such a session is
+    /// refused, naming the environment (`envhub env sync` builds it here beforehand).
+    #[arg(long)]
+    allow_provision: bool,
 }
 
 impl Args {
@@ -49,6 +54,7 @@ pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outco
             max_envs: args.max_envs,
             max_workers: args.max_workers,
             allow_remote_files: args.allow_remote_files,
+            allow_provision: args.allow_provision,
         };
         Some(envhub::join(hub.clone(), &name, &net, policy)?)
     };

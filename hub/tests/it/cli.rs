@@ -19,6 +19,12 @@ fn envhub_in(cwd: &Path, args: &[&str], vars: &[(&str, &str)]) -> Run {
             cmd.env_remove(k);
         }
     }
+    // An empty cache of Python environments: `envhub envs` says `(not built)` for the
+    // catalog's suites whatever this machine has built.
+    cmd.env(
+        "ENVHUB_PYENV_DIR",
+        std::env::temp_dir().join("envhub-it-no-pyenvs"),
+    );
     cmd.envs(vars.iter().copied());
     let out = cmd.output().expect("envhub runs");
     Run {

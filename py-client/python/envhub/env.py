@@ -8,7 +8,8 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 
-from . import _spaces
+
+from . import _info_tree, _spaces
 from ._session import RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 
@@ -83,7 +84,7 @@ class Env(gymnasium.Env[Any, Any]):
             self._first_seed = None
         super().reset(seed=seed)
         obs, info = self._session.reset_single(seed, to_json(options) if options else None)
-        return self._codec.obs(obs), info
+        return self._codec.obs(obs), _info_tree.decode(info)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """Advances one step. A continuous action outside the action space's bounds reaches
@@ -91,7 +92,7 @@ class Env(gymnasium.Env[Any, Any]):
         `strict_actions`); NaN, infinity, a discrete action out of range or the wrong shape
         raise `InvalidActionError`."""
         obs, reward, terminated, truncated, info = self._session.step_single(self._codec.actions(action))
-        return self._codec.obs(obs), reward, terminated, truncated, info
+        return self._codec.obs(obs), reward, terminated, truncated, _info_tree.decode(info)
 
     def render(self) -> np.ndarray | None:
         """The current frame as a `(height, width, 3)` uint8 array when the env was made with

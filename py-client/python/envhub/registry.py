@@ -42,6 +42,8 @@ class EnvEntry:
     max_episode_steps: int | None = None
     asset_path: str | None = None
     adapter: str | None = None
+    # The Python environment (`python_envs:` of the registry) its workers run in, if its own.
+    python_env: str | None = None
     # The registry this entry came from, so `make_env(entry)` finds it again.
     _registry: Any = field(default=None, repr=False, compare=False)
 

@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from . import _spaces
+from . import _info_tree, _spaces
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
@@ -232,14 +232,14 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         if final is not None:
             for k, data in enumerate(final):
                 if data is not None:
-                    final_info = infos[k].pop("final_info", {}) if infos is not None else {}
+                    final_info = _info_tree.decode(infos[k].pop("final_info", {})) if infos is not None else {}
                     out = _add_info(
                         out, {"final_obs": self._codec.obs_from_bytes(data), "final_info": final_info}, k, n
                     )
         if infos is not None:
             for k, info in enumerate(infos):
                 if info:
-                    out = _add_info(out, info, k, n)
+                    out = _add_info(out, _info_tree.decode(info), k, n)
         return out
 
     def render(self) -> tuple[np.ndarray | None, ...] | None:

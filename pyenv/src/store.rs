@@ -1,0 +1,571 @@
+//! The cache folder of environments: building one, finding it ready, listing and removing.
+//!
+//! Layout of `<root>`: `<name>-<key>/` a ready venv (its `envhub-env.json` manifest written
+//! before the folder got its name), `<name>-<key>.lock` its build lock, `.tmp-<name>-<key>-*`
+//! a build in progress or one that was interrupted (cleared by the next build of that key).
+//! A build happens in the temporary folder and is renamed into place only once everything
+//! succeeded, so nothing half-installed is ever found ready.
+
+use crate::error::{PyEnvError, io};
+use crate::interpreter::{self, Interpreter};
+use crate::lock;
+use envhub_catalog::{PythonEnvSpec, parse_version, valid_name};
+use crate::uv;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+/// The manifest of a ready environment (`envhub-env.json` in its folder).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Its name in the registry.
+    pub name: String,
+    /// The key (hash of the Python version and requirements).
+    pub key: String,
+    /// Full version of its interpreter (`3.10.13`).
+    pub python_version: String,
+    /// The interpreter it is based on.
+    pub base_interpreter: PathBuf,
+    /// Everything installed on request: the spec's requirements and the worker's.
+    pub requirements: Vec<String>,
+    /// When it was built (seconds since the Unix epoch).
+    pub created_unix: u64,
+    /// How long building it took.
+    pub install_seconds: f64,
+}
+
+const MANIFEST: &str = "envhub-env.json";
+const LAST_USE: &str = ".envhub-last-use";
+
+/// An environment ready to run workers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PythonEnv {
+    /// Its name.
+    pub name: String,
+    /// Its key.
+    pub key: String,
+    /// The venv.
+    pub dir: PathBuf,
+    /// Its interpreter (`<dir>/bin/python`).
+    pub python: PathBuf,
+    /// Variables its workers run with.
+    pub env: BTreeMap<String, String>,
+    /// Whether this call built it (false: it was ready, or another process built it).
+    pub built: bool,
+}
+
+/// An environment found in the cache folder.
+#[derive(Clone, Debug)]
+pub struct Stored {
+    /// Its folder's name (`metaworld-2b38c1c44ecc8a00`).
+    pub dir_name: String,
+    /// Its folder.
+    pub dir: PathBuf,
+    /// Its manifest, when it is ready.
+    pub manifest: Option<Manifest>,
+    /// Bytes of its files (hard links into uv's cache counted in full).
+    pub size_bytes: u64,
+    /// When a hub last used it (or it was built).
+    pub last_use: Option<SystemTime>,
+}
+
+/// What an environment resolves to before it is built: its key, folder and base interpreter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// Its name.
+    pub name: String,
+    /// Its key.
+    pub key: String,
+    /// Where it is (or will be).
+    pub dir: PathBuf,
+    /// The interpreter to base it on.
+    pub base: PathBuf,
+    /// Everything to install.
+    pub requirements: Vec<String>,
+    /// Variables for its workers.
+    pub env: BTreeMap<String, String>,
+}
+
+/// Builds environments into a cache folder with uv and finds them there.
+#[derive(Debug)]
+pub struct Store {
+    root: PathBuf,
+    uv: PathBuf,
+    default_python: PathBuf,
+    extra_requirements: Vec<String>,
+    packages: Vec<PathBuf>,
+    lock_wait: Duration,
+    progress: bool,
+    from_pyenv: OnceLock<Vec<Interpreter>>,
+    from_uv: OnceLock<Vec<Interpreter>>,
+    merged: OnceLock<Vec<Interpreter>>,
+    default_version: OnceLock<Option<String>>,
+}
+
+impl Store {
+    /// A store in `root`, building with `uv`; environments that name no Python version are
+    /// based on `default_python` (the hub's interpreter).
+    pub fn new(root: PathBuf, uv: PathBuf, default_python: PathBuf) -> Store {
+        Store {
+            root,
+            uv,
+            default_python,
+            extra_requirements: Vec::new(),
+            packages: Vec::new(),
+            lock_wait: Duration::from_secs(900),
+            progress: true,
+            from_pyenv: OnceLock::new(),
+            from_uv: OnceLock::new(),
+            merged: OnceLock::new(),
+            default_version: OnceLock::new(),
+        }
+    }
+
+    /// Requirements every environment gets besides its own (where it names no such
+    /// package): what the linked packages need at import.
+    pub fn with_extra_requirements(mut self, extra: Vec<String>) -> Store {
+        self.extra_requirements = extra;
+        self
+    }
+
+    /// Python package folders (`.../envhub`) linked into every environment's
+    /// `site-packages`, and imported once after a build as its check.
+    pub fn with_packages(mut self, packages: Vec<PathBuf>) -> Store {
+        self.packages = packages;
+        self
+    }
+
+    /// How long to wait for another process's build of the same environment.
+    pub fn with_lock_wait(mut self, wait: Duration) -> Store {
+        self.lock_wait = wait;
+        self
+    }
+
+    /// Whether to print progress lines on stderr (default true).
+    pub fn with_progress(mut self, progress: bool) -> Store {
+        self.progress = progress;
+        self
+    }
+
+    /// The cache folder.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The interpreters present on this machine.
+    pub fn interpreters(&self) -> &[Interpreter] {
+        let all = [self.pyenv_interpreters(), self.uv_interpreters()];
+        self.merged.get_or_init(|| interpreter::merged(&all))
+    }
+
+    fn pyenv_interpreters(&self) -> &[Interpreter] {
+        self.from_pyenv.get_or_init(interpreter::from_pyenv)
+    }
+
+    fn uv_interpreters(&self) -> &[Interpreter] {
+        self.from_uv.get_or_init(|| interpreter::from_uv(&self.uv))
+    }
+
+    /// Resolves `spec` to its key, folder and base interpreter, without building anything.
+    pub fn plan(&self, name: &str, spec: &PythonEnvSpec) -> Result<Plan, PyEnvError> {
+        let invalid = |message: String| PyEnvError::InvalidSpec {
+            name: name.to_string(),
+            message,
+        };
+        if !valid_name(name) {
+            return Err(invalid(format!(
+                "`{name}` is not a valid name; use letters, digits, `-`, `_` and `.`"
+            )));
+        }
+        spec.validate().map_err(invalid)?;
+        let (base, version) = match &spec.python {
+            Some(requested) => {
+                let matching = |list: &[Interpreter]| {
+                    list.iter()
+                        .filter(|i| version_matches(&i.version, requested))
+                        .max_by_key(|i| parse_version(&i.version))
+                        .cloned()
+                };
+                let found = matching(self.pyenv_interpreters())
+                    .or_else(|| matching(self.uv_interpreters()))
+                    .ok_or_else(|| PyEnvError::PythonNotFound {
+                        name: name.to_string(),
+                        requested: requested.clone(),
+                        present: interpreter::describe(self.interpreters()),
+                    })?;
+                (found.path, requested.trim().to_string())
+            }
+            None => {
+                let version = self
+                    .default_version
+                    .get_or_init(|| interpreter::version_of(&self.default_python))
+                    .clone()
+                    .ok_or_else(|| {
+                        invalid(format!(
+                            "cannot run the hub's interpreter `{}` to learn its version; name one with `python:`",
+                            self.default_python.display()
+                        ))
+                    })?;
+                let (major, minor, _) = parse_version(&version).expect("checked by version_of");
+                (self.default_python.clone(), format!("{major}.{minor}"))
+            }
+        };
+        let key = spec.key(&version, &self.extra_requirements);
+        Ok(Plan {
+            name: name.to_string(),
+            dir: self.root.join(format!("{name}-{key}")),
+            key,
+            base,
+            requirements: spec.full_requirements(&self.extra_requirements),
+            env: spec.env.clone(),
+        })
+    }
+
+    /// The environment of `plan` if it is ready (built completely, for these requirements).
+    pub fn ready(&self, plan: &Plan) -> Option<PythonEnv> {
+        let manifest = read_manifest(&plan.dir)?;
+        let python = plan.dir.join("bin").join("python");
+        (manifest.requirements == plan.requirements && python.exists()).then(|| PythonEnv {
+            name: plan.name.clone(),
+            key: plan.key.clone(),
+            dir: plan.dir.clone(),
+            python,
+            env: plan.env.clone(),
+            built: false,
+        })
+    }
+
+    /// The environment `name` as `spec` describes it, built first if it is not ready. Two
+    /// callers (processes or threads) build it once: the other waits up to the lock wait.
+    pub fn ensure(&self, name: &str, spec: &PythonEnvSpec) -> Result<PythonEnv, PyEnvError> {
+        let plan = self.plan(name, spec)?;
+        if let Some(env) = self.ready(&plan) {
+            self.used(&env)?;
+            return Ok(env);
+        }
+        std::fs::create_dir_all(&self.root).map_err(io(name, "create", &self.root))?;
+        let lock_path = self.root.join(format!("{name}-{}.lock", plan.key));
+        let progress = self.progress;
+        let _lock = lock::acquire(name, &lock_path, self.lock_wait, |holder| {
+            tracing::info!(
+                env = name,
+                holder,
+                "waiting for another build of the python env"
+            );
+            if progress {
+                eprintln!(
+                    "envhub: waiting for python env `{name}`: another process ({holder}) is building it (up to {} s)",
+                    self.lock_wait.as_secs()
+                );
+            }
+        })?;
+        if let Some(env) = self.ready(&plan) {
+            self.used(&env)?;
+            return Ok(env); // built by the process we waited for
+        }
+        self.clear_leftovers(&plan)?;
+        let mut env = self.build(&plan)?;
+        env.built = true;
+        self.used(&env)?;
+        Ok(env)
+    }
+
+    /// Every environment folder in the cache, ready or not, by name.
+    pub fn list(&self) -> Vec<Stored> {
+        let Ok(read) = std::fs::read_dir(&self.root) else {
+            return Vec::new();
+        };
+        let mut found: Vec<Stored> = read
+            .flatten()
+            .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+            .map(|e| {
+                let dir = e.path();
+                Stored {
+                    dir_name: e.file_name().to_string_lossy().into_owned(),
+                    manifest: read_manifest(&dir),
+                    size_bytes: size_of(&dir),
+                    last_use: std::fs::metadata(dir.join(LAST_USE))
+                        .and_then(|m| m.modified())
+                        .ok(),
+                    dir,
+                }
+            })
+            .collect();
+        found.sort_by(|a, b| a.dir_name.cmp(&b.dir_name));
+        found
+    }
+
+    /// Removes every stored folder of the environment `name` (or the one folder named
+    /// `name`), builds in progress excepted; returns the folders removed.
+    pub fn remove(&self, name: &str) -> Result<Vec<PathBuf>, PyEnvError> {
+        let stored = self.list();
+        let matching: Vec<&Stored> = stored
+            .iter()
+            .filter(|s| {
+                s.dir_name == name
+                    || s.manifest.as_ref().is_some_and(|m| m.name == name)
+                    || (s.dir_name.starts_with(".tmp-")
+                        && s.dir_name[5..].starts_with(&format!("{name}-")))
+            })
+            .collect();
+        if matching.is_empty() {
+            let mut known: Vec<String> = stored
+                .iter()
+                .filter_map(|s| s.manifest.as_ref().map(|m| m.name.clone()))
+                .collect();
+            known.dedup();
+            return Err(PyEnvError::NotStored {
+                name: name.to_string(),
+                root: self.root.clone(),
+                known,
+            });
+        }
+        let mut removed = Vec::new();
+        for s in matching {
+            // Not while it is being built: its builder holds the lock (`<name>-<key>.lock`).
+            let stem = match &s.manifest {
+                Some(m) => format!("{}-{}", m.name, m.key),
+                None => {
+                    let rest = s.dir_name.trim_start_matches(".tmp-");
+                    rest.rsplitn(3, '-').nth(2).unwrap_or(rest).to_string()
+                }
+            };
+            let lock_path = self.root.join(format!("{stem}.lock"));
+            let _lock = lock::acquire(name, &lock_path, Duration::ZERO, |_| {})?;
+            let trash = self.root.join(format!(
+                ".trash-{}-{}",
+                s.dir_name.trim_start_matches('.'),
+                std::process::id()
+            ));
+            std::fs::rename(&s.dir, &trash).map_err(io(name, "remove", &s.dir))?;
+            std::fs::remove_dir_all(&trash).map_err(io(name, "remove", &trash))?;
+            removed.push(s.dir.clone());
+        }
+        Ok(removed)
+    }
+
+    fn used(&self, env: &PythonEnv) -> Result<(), PyEnvError> {
+        let now = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+            .as_secs();
+        let path = env.dir.join(LAST_USE);
+        std::fs::write(&path, format!("{now}\n")).map_err(io(&env.name, "write", &path))?;
+        // Re-pointed where the packages moved (another checkout, a reinstalled wheel).
+        link_packages(&env.name, &env.dir, &self.packages)
+    }
+
+    fn clear_leftovers(&self, plan: &Plan) -> Result<(), PyEnvError> {
+        let prefix = format!(".tmp-{}-{}-", plan.name, plan.key);
+        for entry in std::fs::read_dir(&self.root)
+            .map_err(io(&plan.name, "read", &self.root))?
+            .flatten()
+        {
+            let file_name = entry.file_name();
+            let file_name = file_name.to_string_lossy();
+            if file_name.starts_with(&prefix) || file_name.starts_with(".trash-") {
+                tracing::info!(folder = %file_name, "removing an interrupted build");
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        if plan.dir.exists() {
+            // Built for other requirements under the same key, or damaged: rebuilt.
+            std::fs::remove_dir_all(&plan.dir).map_err(io(&plan.name, "remove", &plan.dir))?;
+        }
+        Ok(())
+    }
+
+    fn build(&self, plan: &Plan) -> Result<PythonEnv, PyEnvError> {
+        let name = &plan.name;
+        let nanos = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+            .subsec_nanos();
+        let tmp = self.root.join(format!(
+            ".tmp-{name}-{}-{}-{nanos}",
+            plan.key,
+            std::process::id()
+        ));
+        let start = Instant::now();
+        if self.progress {
+            eprintln!(
+                "envhub: building python env `{name}` ({} requirements, on `{}`) into `{}`; this can take minutes",
+                plan.requirements.len(),
+                plan.base.display(),
+                plan.dir.display()
+            );
+        }
+        let result = self.build_in(plan, &tmp, start);
+        if result.is_err() {
+            let _ = std::fs::remove_dir_all(&tmp);
+        }
+        result?;
+        std::fs::rename(&tmp, &plan.dir).map_err(io(name, "rename into place", &tmp))?;
+        if self.progress {
+            eprintln!(
+                "envhub: python env `{name}` ready in {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+        }
+        Ok(PythonEnv {
+            name: name.clone(),
+            key: plan.key.clone(),
+            python: plan.dir.join("bin").join("python"),
+            dir: plan.dir.clone(),
+            env: plan.env.clone(),
+            built: true,
+        })
+    }
+
+    fn build_in(&self, plan: &Plan, tmp: &Path, start: Instant) -> Result<(), PyEnvError> {
+        let name = &plan.name;
+        let failed = |stage: &str, message: String| PyEnvError::Install {
+            name: name.clone(),
+            stage: stage.to_string(),
+            packages: uv::named_packages(&message, &plan.requirements),
+            message,
+        };
+        let every = Duration::from_secs(10);
+        let progress = |stage: &'static str| {
+            let show = self.progress;
+            move |elapsed: Duration| {
+                if show {
+                    eprintln!(
+                        "envhub: python env `{name}`: {stage} ({} s)",
+                        elapsed.as_secs()
+                    );
+                }
+            }
+        };
+        let mut venv = Command::new(&self.uv);
+        venv.args([
+            "venv",
+            "--quiet",
+            "--relocatable",
+            "--no-python-downloads",
+            "--python",
+        ])
+        .arg(&plan.base)
+        .arg(tmp);
+        uv::run(venv, every, progress("creating the venv")).map_err(|uv::Failed(m)| {
+            PyEnvError::Install {
+                name: name.clone(),
+                stage: "`uv venv`".into(),
+                packages: format!("its interpreter `{}`", plan.base.display()),
+                message: m,
+            }
+        })?;
+        let python = tmp.join("bin").join("python");
+        let mut install = Command::new(&self.uv);
+        install
+            .args(["pip", "install", "--quiet", "--python"])
+            .arg(&python)
+            .args(&plan.requirements);
+        uv::run(install, every, progress("installing"))
+            .map_err(|uv::Failed(m)| failed("`uv pip install`", m))?;
+        link_packages(name, tmp, &self.packages)?;
+        if !self.packages.is_empty() {
+            let modules: Vec<String> = self
+                .packages
+                .iter()
+                .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .collect();
+            let mut check = Command::new(&python);
+            check
+                .arg("-c")
+                .arg(format!("import {}", modules.join(", ")));
+            uv::run(check, every, |_| {}).map_err(|uv::Failed(m)| {
+                failed(
+                    "importing envhub's worker package in the new env",
+                    last_lines(&m, 6),
+                )
+            })?;
+        }
+        let manifest = Manifest {
+            name: name.clone(),
+            key: plan.key.clone(),
+            python_version: interpreter::version_of(&python).unwrap_or_default(),
+            base_interpreter: plan.base.clone(),
+            requirements: plan.requirements.clone(),
+            created_unix: SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .unwrap_or_default()
+                .as_secs(),
+            install_seconds: start.elapsed().as_secs_f64(),
+        };
+        let path = tmp.join(MANIFEST);
+        let text = serde_json::to_string_pretty(&manifest).expect("a manifest serializes");
+        std::fs::write(&path, text).map_err(io(name, "write", &path))
+    }
+}
+
+fn version_matches(version: &str, requested: &str) -> bool {
+    match (parse_version(version), parse_version(requested)) {
+        (Some((a, b, c)), Some((x, y, z))) => (a, b) == (x, y) && (z.is_none() || c == z),
+        _ => false,
+    }
+}
+
+fn read_manifest(dir: &Path) -> Option<Manifest> {
+    let text = std::fs::read_to_string(dir.join(MANIFEST)).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Links each package folder into the venv's `site-packages` (replacing a stale link
+/// atomically: a link beside it, renamed over it).
+fn link_packages(name: &str, venv: &Path, packages: &[PathBuf]) -> Result<(), PyEnvError> {
+    if packages.is_empty() {
+        return Ok(());
+    }
+    let lib = venv.join("lib");
+    let site = std::fs::read_dir(&lib)
+        .map_err(io(name, "read", &lib))?
+        .flatten()
+        .map(|e| e.path().join("site-packages"))
+        .find(|p| p.is_dir())
+        .ok_or_else(|| PyEnvError::Io {
+            name: name.to_string(),
+            what: "find site-packages in",
+            path: lib.clone(),
+            source: std::io::ErrorKind::NotFound.into(),
+        })?;
+    for package in packages {
+        let Some(file_name) = package.file_name() else {
+            continue;
+        };
+        let link = site.join(file_name);
+        if std::fs::read_link(&link).is_ok_and(|target| &target == package) {
+            continue;
+        }
+        let tmp = site.join(format!(
+            ".{}-{}.link",
+            file_name.to_string_lossy(),
+            std::process::id()
+        ));
+        let _ = std::fs::remove_file(&tmp);
+        std::os::unix::fs::symlink(package, &tmp).map_err(io(name, "link", &tmp))?;
+        std::fs::rename(&tmp, &link).map_err(io(name, "link", &link))?;
+    }
+    Ok(())
+}
+
+fn size_of(dir: &Path) -> u64 {
+    let Ok(read) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    read.flatten()
+        .map(|e| match e.file_type() {
+            Ok(t) if t.is_dir() => size_of(&e.path()),
+            Ok(t) if t.is_file() => e.metadata().map(|m| m.len()).unwrap_or(0),
+            _ => 0,
+        })
+        .sum()
+}
+
+fn last_lines(text: &str, n: usize) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(n)..].join("\n")
+}
