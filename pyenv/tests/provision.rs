@@ -174,7 +174,8 @@ fn child_build() {
     let Some(root) = std::env::var_os("ENVHUB_PYENV_TEST_CHILD_ROOT") else {
         return;
     };
-    let uv = find_uv(None, Some(&python())).unwrap();
+    let explicit = std::env::var_os("ENVHUB_UV").map(PathBuf::from);
+    let uv = find_uv(explicit.as_deref(), Some(&python())).unwrap();
     let store = Store::new(PathBuf::from(root), uv, python()).with_progress(false);
     let _ = store.ensure("interrupted", &spec(&["numpy", "packaging"]));
 }
@@ -193,6 +194,9 @@ fn an_interrupted_build_never_counts_as_ready() {
     // Killed as soon as its build folder appears: mid-venv or mid-install.
     let deadline = Instant::now() + Duration::from_secs(60);
     while leftovers(store.root()).is_empty() {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("the child exited ({status}) before it started building");
+        }
         assert!(
             Instant::now() < deadline,
             "the child never started building"
