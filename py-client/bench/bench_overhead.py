@@ -26,10 +26,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import envhub
 import gymnasium
 import numpy as np
-
-import envhub
 
 
 def _rate(envs: Any, step: Callable[[int], Any], seconds: float) -> float:
@@ -115,7 +114,7 @@ def main() -> None:
             "envhub_2": lambda fns=fns: envhub.AsyncVectorEnv(fns, num_workers=2),
             "gymnasium_async": lambda fns=fns: gymnasium.vector.AsyncVectorEnv(fns, shared_memory=True),
         }
-        r = best(makers, lambda e: random_rate(e, actions, args.seconds), args.rounds)
+        r = best(makers, lambda e, actions=actions: random_rate(e, actions, args.seconds), args.rounds)
         row: dict[str, Any] = {"env": env_id, "num_envs": n, **{k: round(v) for k, v in r.items()}}
         row["overhead_us_per_env_step"] = round((1 / r["envhub_1"] - 1 / r["in_process"]) * 1e6, 1)
         row["envhub_1/in_process"] = round(r["envhub_1"] / r["in_process"], 2)
@@ -126,7 +125,7 @@ def main() -> None:
             policy = Mlp(int(np.prod(probe.observation_space.shape)), int(np.prod(space.shape)), space.low, space.high)
             pr = best(
                 {k: makers[k] for k in ("in_process", "envhub_2")},
-                lambda e: policy_rate(e, policy, args.seconds),
+                lambda e, policy=policy: policy_rate(e, policy, args.seconds),
                 args.rounds,
             )
             row["policy_in_process"] = round(pr["in_process"])

@@ -64,6 +64,38 @@ class _Batch:
         self.num_envs = n
 
 
+_SCALARS = (int, float, bool)
+
+
+def _flat_infos(infos: list[dict[str, Any] | None], n: int) -> dict[str, Any] | None:
+    """What Gymnasium's `VectorEnv._add_info` makes of these envs' infos (same keys, order,
+    dtypes and masks), built in one pass without its per-value temporaries (a fresh mask
+    per value). None where its recursion or special cases apply (a nested dict, a
+    `final_obs` key, a key that starts with `_` and so may collide with a mask): that step
+    takes Gymnasium's own batching."""
+    out: dict[str, Any] = {}
+    for k, info in enumerate(infos):
+        if not info:
+            continue
+        for key, value in info.items():
+            if type(key) is not str or key[:1] == "_" or key == "final_obs" or isinstance(value, dict):
+                return None
+            column = out.get(key)
+            if column is None:
+                t = type(value)
+                if t in _SCALARS or issubclass(t, np.number):
+                    column = np.zeros(n, dtype=t)
+                elif isinstance(value, np.ndarray):
+                    column = np.zeros((n, *value.shape), dtype=value.dtype)
+                else:
+                    column = np.full(n, fill_value=None, dtype=object)
+                out[key] = column
+                out[f"_{key}"] = np.zeros(n, dtype=np.bool_)
+            column[k] = value
+            out[f"_{key}"][k] = True
+    return out
+
+
 class AsyncVectorEnv(VectorEnv):
     """`gymnasium.vector.AsyncVectorEnv` on envhub: `env_fns[i]()` builds env `i` in an
     envhub worker process, and results arrive through shared memory.
@@ -249,6 +281,10 @@ class AsyncVectorEnv(VectorEnv):
     def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
         # Gymnasium's own batching of each env's info, once unwrapped; same_step infos are
         # rebuilt as its worker builds them.
+        if final is None and infos is not None:
+            flat = _flat_infos([decode_info(info) if info else None for info in infos], n)
+            if flat is not None:
+                return flat
         out: dict[str, Any] = {}
         batch = _Batch(n)
         for k in range(n):
