@@ -1,5 +1,5 @@
-"""The drop-in's one-pass batching of infos (`envhub.async_vector._flat_infos`) against
-Gymnasium's own `VectorEnv._add_info`: same keys in the same order, same dtypes, shapes,
+"""The one-pass batching of infos (`envhub._infos.flat_infos`) against Gymnasium's own
+`VectorEnv._add_info` (and `envhub.vector._add_info`, for infos that came as JSON): same keys in the same order, same dtypes, shapes,
 values and masks, for every kind of info value it takes; and it declines (None) where
 Gymnasium's recursion or special cases apply."""
 
@@ -10,7 +10,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from envhub.async_vector import _flat_infos
+from envhub._infos import flat_infos as _flat_infos
+from envhub.vector import _add_info
 
 
 class _Batch:
@@ -78,7 +79,34 @@ def test_no_info_is_an_empty_dict():
         {"final_obs": 1.0},  # Gymnasium batches it as an object array
         {"_x": 1, "x": 2.0},  # a key that is another key's mask
         {1: 2.0},  # not a text key
+        {"goal": [1.0, 2.0]},  # a list (envhub.VectorEnv batches it as an array, Gymnasium as objects)
     ],
 )
 def test_declines_what_gymnasium_treats_apart(info):
     assert _flat_infos([{"a": 1.0}, info], 2) is None
+
+
+def _json_info(rng: np.random.Generator) -> dict[str, Any] | None:
+    pool: dict[str, Any] = {
+        "x": float(rng.normal()),
+        "t": int(rng.integers(0, 1000)),
+        "done": bool(rng.random() < 0.5),
+        "label": f"step-{rng.integers(9)}",
+    }
+    return {k: v for k, v in pool.items() if rng.random() < 0.7} or None
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_flat_infos_of_json_values_are_make_vecs(seed):
+    # What `envhub.make_vec`'s workers send: JSON numbers, flags and text.
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 9))
+    infos = [_json_info(rng) for _ in range(n)]
+    want: dict[str, Any] = {}
+    for k, info in enumerate(infos):
+        if info:
+            want = _add_info(want, info, k, n)
+    got = _flat_infos(infos, n)
+    assert got is not None
+    assert_identical(got, want)
+    assert_identical(got, gymnasium_infos(infos, n))

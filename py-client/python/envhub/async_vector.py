@@ -25,6 +25,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
 from ._calls import Calls
+from ._infos import flat_infos
 from ._pickled import decode_info, wrap
 from .errors import InvalidConfigError, InvalidStateError, MakeError
 from .hosted.env_fns import FRAMEWORK, write_payload
@@ -62,38 +63,6 @@ class _Batch:
 
     def __init__(self, n: int) -> None:
         self.num_envs = n
-
-
-_SCALARS = (int, float, bool)
-
-
-def _flat_infos(infos: list[dict[str, Any] | None], n: int) -> dict[str, Any] | None:
-    """What Gymnasium's `VectorEnv._add_info` makes of these envs' infos (same keys, order,
-    dtypes and masks), built in one pass without its per-value temporaries (a fresh mask
-    per value). None where its recursion or special cases apply (a nested dict, a
-    `final_obs` key, a key that starts with `_` and so may collide with a mask): that step
-    takes Gymnasium's own batching."""
-    out: dict[str, Any] = {}
-    for k, info in enumerate(infos):
-        if not info:
-            continue
-        for key, value in info.items():
-            if type(key) is not str or key[:1] == "_" or key == "final_obs" or isinstance(value, dict):
-                return None
-            column = out.get(key)
-            if column is None:
-                t = type(value)
-                if t in _SCALARS or issubclass(t, np.number):
-                    column = np.zeros(n, dtype=t)
-                elif isinstance(value, np.ndarray):
-                    column = np.zeros((n, *value.shape), dtype=value.dtype)
-                else:
-                    column = np.full(n, fill_value=None, dtype=object)
-                out[key] = column
-                out[f"_{key}"] = np.zeros(n, dtype=np.bool_)
-            column[k] = value
-            out[f"_{key}"][k] = True
-    return out
 
 
 class AsyncVectorEnv(VectorEnv):
@@ -282,7 +251,7 @@ class AsyncVectorEnv(VectorEnv):
         # Gymnasium's own batching of each env's info, once unwrapped; same_step infos are
         # rebuilt as its worker builds them.
         if final is None and infos is not None:
-            flat = _flat_infos([decode_info(info) if info else None for info in infos], n)
+            flat = flat_infos([decode_info(info) if info else None for info in infos], n)
             if flat is not None:
                 return flat
         out: dict[str, Any] = {}

@@ -11,6 +11,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _spaces
+from ._infos import flat_infos
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
@@ -228,6 +229,10 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     # ---------------------------------------------------------------------------------------
 
     def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
+        if final is None and infos is not None:
+            flat = flat_infos(infos, n)
+            if flat is not None:
+                return flat
         out: dict[str, Any] = {}
         if final is not None:
             for k, data in enumerate(final):
