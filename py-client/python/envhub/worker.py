@@ -94,12 +94,12 @@ class HostedEnv:
         else:
             np.frombuffer(out, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape)[...] = obs
 
-    def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> str | None:
+    def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> Encoded | str | None:
         obs, info = self.env.reset(seed=seed, options=json.loads(options) if options else None)
         self._write_obs(obs, out)
-        return info_json(info)
+        return _info_out(info)
 
-    def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, str | None]:
+    def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, Encoded | str | None]:
         # A copy the env owns: `action` views the request sample, which the next request
         # overwrites, and envs may keep their action ("previous action" features).
         leaf = self.act_leaf
@@ -109,7 +109,7 @@ class HostedEnv:
             act = np.frombuffer(action, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape).copy()
         obs, reward, terminated, truncated, info = self.env.step(act)
         self._write_obs(obs, out)
-        return float(reward), bool(terminated), bool(truncated), info_json(info)
+        return float(reward), bool(terminated), bool(truncated), _info_out(info)
 
     def render_rgb(self) -> tuple[int, int, bytes] | None:
         return _rgb(self.env.render())
@@ -236,12 +236,18 @@ def _info_value(v: Any) -> Any:
     return None
 
 
+def _info_out(info: dict[str, Any] | None) -> Encoded | str | None:
+    """An env's info as `serve_worker` reads it: the drop-in's already plain dict as it is
+    (read value by value in Rust, no text), else `info_json`."""
+    if type(info) is Encoded:
+        return info or None
+    return info_json(info)
+
+
 def info_json(info: dict[str, Any] | None) -> str | None:
     """The info values that travel (numbers, flags, text, short numeric vectors) as JSON."""
     if not info:
         return None
-    if type(info) is Encoded:  # the drop-in's: plain JSON values already
-        return json.dumps(info)
     out = {}
     for k, v in info.items():
         value = _info_value(v)
