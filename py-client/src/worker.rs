@@ -22,6 +22,7 @@ use envhub_shm::{
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt};
 use std::io::Write;
 
 /// One Python env, through the wrapper `envhub.worker.HostedEnv` (methods `reset_into`,
@@ -104,6 +105,33 @@ fn fill_info(info: &mut Info, json: Option<String>) {
     }
 }
 
+/// Fills `info` from what a wrapper returned: `None`, JSON object text, or a dict of plain
+/// values (`envhub._pickled.Encoded`: flags, integers, floats and text only), read here
+/// value by value so the numbers skip the round trip through text.
+fn fill_info_py(info: &mut Info, value: &Bound<'_, PyAny>) -> PyResult<()> {
+    if value.is_none() {
+        return Ok(());
+    }
+    if let Ok(dict) = value.cast::<PyDict>() {
+        for (key, v) in dict.iter() {
+            let key: String = key.extract()?;
+            let v = if v.is_instance_of::<PyBool>() {
+                InfoValue::Bool(v.extract()?)
+            } else if v.is_instance_of::<PyInt>() {
+                InfoValue::Int(v.extract()?)
+            } else if v.is_instance_of::<PyFloat>() {
+                InfoValue::Float(v.extract()?)
+            } else {
+                InfoValue::Text(v.extract()?)
+            };
+            info.insert(key, v);
+        }
+        return Ok(());
+    }
+    fill_info(info, Some(value.extract()?));
+    Ok(())
+}
+
 impl Env for PyEnv {
     fn observation_space(&self) -> &Space {
         &self.observation_space
@@ -121,21 +149,16 @@ impl Env for PyEnv {
         info: &mut Info,
     ) -> Result<(), EnvError> {
         Python::attach(|py| {
-            let mut run = || -> PyResult<Option<String>> {
+            let mut run = || -> PyResult<()> {
                 let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
                 let options = (!options.is_empty())
                     .then(|| serde_json::to_string(options).unwrap_or_default());
-                self.env
-                    .call_method1(py, "reset_into", (seed, options, out))?
-                    .extract(py)
+                let got = self
+                    .env
+                    .call_method1(py, "reset_into", (seed, options, out))?;
+                fill_info_py(info, got.bind(py))
             };
-            match run() {
-                Ok(json) => {
-                    fill_info(info, json);
-                    Ok(())
-                }
-                Err(e) => Err(self.failed(py, "reset", e)),
-            }
+            run().map_err(|e| self.failed(py, "reset", e))
         })
     }
 
@@ -146,24 +169,24 @@ impl Env for PyEnv {
         info: &mut Info,
     ) -> Result<Transition, EnvError> {
         Python::attach(|py| {
-            let mut run = || -> PyResult<(f64, bool, bool, Option<String>)> {
+            let mut run = || -> PyResult<Transition> {
                 let act = memory_view(py, action.as_ptr(), action.len(), false)?;
                 let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
-                self.env
-                    .call_method1(py, "step_into", (act, out))?
-                    .extract(py)
+                let got = self.env.call_method1(py, "step_into", (act, out))?;
+                let (reward, terminated, truncated, info_value): (
+                    f64,
+                    bool,
+                    bool,
+                    Bound<'_, PyAny>,
+                ) = got.bind(py).extract()?;
+                fill_info_py(info, &info_value)?;
+                Ok(Transition {
+                    reward,
+                    terminated,
+                    truncated,
+                })
             };
-            match run() {
-                Ok((reward, terminated, truncated, json)) => {
-                    fill_info(info, json);
-                    Ok(Transition {
-                        reward,
-                        terminated,
-                        truncated,
-                    })
-                }
-                Err(e) => Err(self.failed(py, "step", e)),
-            }
+            run().map_err(|e| self.failed(py, "step", e))
         })
     }
 

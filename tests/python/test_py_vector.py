@@ -170,6 +170,25 @@ def test_send_recv(workers):
         sync_envs.close()
 
 
+def test_masked_reset_after_recv_keeps_the_received_observations():
+    """A masked reset returns, for the envs it does not reset, their latest observations:
+    those of the last `recv`, not of the last lock-step `reset`."""
+    envs = envhub.make_vec("gym-cartpole", 3, num_workers=1, autoreset_mode="disabled")
+    try:
+        first, _ = envs.reset(seed=0)
+        first = np.array(first)
+        envs.send(np.array([1, 0]), env_ids=[0, 2])
+        obs, _, _, _, info = envs.recv()
+        received = {int(i): np.array(obs[k]) for k, i in enumerate(info["env_id"])}
+        assert sorted(received) == [0, 2]
+        merged, _ = envs.reset(options={"reset_mask": np.array([False, True, False])})
+        np.testing.assert_array_equal(merged[0], received[0])
+        np.testing.assert_array_equal(merged[2], received[2])
+        assert not np.array_equal(merged[0], first[0])  # it stepped
+    finally:
+        envs.close()
+
+
 def test_step_with_results_pending_is_an_error():
     envs = envhub.make_vec("gym-cartpole", 2, num_workers=1)
     try:

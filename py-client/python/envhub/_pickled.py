@@ -15,6 +15,7 @@ numpy scalar beside it (`TYPES`), which is exact: Gymnasium batches a value by i
 from __future__ import annotations
 
 import binascii
+import functools
 import json
 import math
 import pickle
@@ -28,6 +29,23 @@ KEY = "__envhub_pickle__"
 TYPES = "__envhub_types__"
 
 _PLAIN = (bool, int, float, str)
+# Numpy scalar types that batch as their Python counterparts do (no `TYPES` entry needed).
+_AS_PYTHON = (np.float64, np.int64)
+
+
+class Encoded(dict):
+    """An info `encode_info` made: plain JSON values already, so the worker dumps it as it
+    is (`envhub.worker.info_json`) rather than checking every value again."""
+
+
+@functools.lru_cache(maxsize=256)
+def _types_text(types: tuple[tuple[str, str], ...]) -> str:
+    return json.dumps(dict(types))
+
+
+@functools.lru_cache(maxsize=256)
+def _types_of(text: str) -> tuple[tuple[str, Any], ...]:
+    return tuple((key, np.dtype(dtype).type) for key, dtype in json.loads(text).items())
 
 
 def wrap(obj: Any) -> dict[str, str]:
@@ -49,24 +67,25 @@ def encode_info(info: dict[str, Any] | None) -> dict[str, Any] | None:
     when empty."""
     if not info:
         return None
-    out: dict[str, Any] = {}
-    types: dict[str, str] = {}
+    out = Encoded()
+    types: list[tuple[str, str]] = []
     for key, value in info.items():
         if type(key) is not str or key in (KEY, TYPES, "final_info"):
             return wrap(info)
-        if isinstance(value, np.generic) and value.dtype.kind in "biuf":
-            if type(value) not in (np.float64, np.int64):  # those batch as float and int do
-                types[key] = value.dtype.str
+        t = type(value)
+        if t not in _PLAIN:
+            if not (isinstance(value, np.generic) and value.dtype.kind in "biuf"):
+                return wrap(info)
+            if t not in _AS_PYTHON:  # those batch as float and int do
+                types.append((key, value.dtype.str))
             value = value.item()
-        if type(value) not in _PLAIN:
-            return wrap(info)
         if type(value) is float and not math.isfinite(value):
             return wrap(info)  # JSON has no NaN or infinity
         if type(value) is int and not -(2**63) <= value < 2**63:
             return wrap(info)
         out[key] = value
     if types:
-        out[TYPES] = json.dumps(types)
+        out[TYPES] = _types_text(tuple(types))
     return out
 
 
@@ -79,6 +98,6 @@ def decode_info(info: dict[str, Any] | None) -> dict[str, Any]:
     if TYPES not in info:
         return info
     out = dict(info)
-    for key, dtype in json.loads(out.pop(TYPES)).items():
-        out[key] = np.dtype(dtype).type(out[key])
+    for key, scalar in _types_of(out.pop(TYPES)):
+        out[key] = scalar(out[key])
     return out

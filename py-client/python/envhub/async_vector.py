@@ -25,6 +25,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
 from ._calls import Calls
+from ._infos import flat_infos
 from ._pickled import decode_info, wrap
 from .errors import InvalidConfigError, InvalidStateError, MakeError
 from .hosted.env_fns import FRAMEWORK, write_payload
@@ -249,6 +250,10 @@ class AsyncVectorEnv(VectorEnv):
     def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
         # Gymnasium's own batching of each env's info, once unwrapped; same_step infos are
         # rebuilt as its worker builds them.
+        if final is None and infos is not None:
+            flat = flat_infos([decode_info(info) if info else None for info in infos], n)
+            if flat is not None:
+                return flat
         out: dict[str, Any] = {}
         batch = _Batch(n)
         for k in range(n):

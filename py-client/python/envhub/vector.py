@@ -11,6 +11,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _info_tree, _spaces
+
+from ._infos import flat_infos
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
 from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
@@ -135,6 +137,9 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         }
         self.render_mode = render_mode
         self._last_obs: np.ndarray | None = None
+        # Rows `recv` returned since `_last_obs` (env ids, raw rows), merged into a copy only
+        # when a masked reset needs the batch's latest observations.
+        self._received: list[tuple[np.ndarray, np.ndarray]] = []
         # `seed=` seeds the first reset that is not given one (env `i` with `seed + i`).
         self._first_seed = check_seed(seed)
         self._sent = np.zeros(self.num_envs, dtype=np.bool_)
@@ -172,19 +177,29 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             seeds, None if mask is None else mask.tolist(), to_json(options) if options else None
         )
         if mask is not None and not mask.all():
-            merged = self._last_obs.copy()  # type: ignore[union-attr]
+            merged = self._latest_obs()
             merged[mask] = raw[mask]
             raw = merged
             if infos is not None:
                 infos = [info if m else {} for info, m in zip(infos, mask, strict=True)]
         self._last_obs = raw
+        self._received.clear()
         self._sent[:] = False
         return self._codec.obs(raw), self._info(infos, None, self.num_envs)
+
+    def _latest_obs(self) -> np.ndarray:
+        """A copy of every env's latest raw observation: the last full batch, with the rows
+        `recv` returned since then."""
+        merged = self._last_obs.copy()  # type: ignore[union-attr]
+        for ids, rows in self._received:
+            merged[ids] = rows
+        return merged
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Steps every env with its action (an array of shape `action_space.shape`)."""
         raw, rewards, terminated, truncated, infos, final = self._session.step(self._codec.actions(actions))
         self._last_obs = raw
+        self._received.clear()
         if infos is None and final is None:
             return self._codec.obs(raw), rewards, terminated, truncated, {}
         return self._codec.obs(raw), rewards, terminated, truncated, self._info(infos, final, self.num_envs)
@@ -221,6 +236,10 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             )
             infos = None if infos is None else [i for i, k in zip(infos, keep, strict=True) if k]
             final = None if final is None else [f for f, k in zip(final, keep, strict=True) if k]
+        if self._last_obs is not None and len(ids):
+            self._received.append((ids, raw))
+            if len(self._received) > 64:  # bounded: fold them into one batch
+                self._last_obs, self._received = self._latest_obs(), []
         info = self._info(infos, final, len(ids))
         info["env_id"] = ids
         return self._codec.obs(raw), rewards, terminated, truncated, info
@@ -228,6 +247,10 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     # ---------------------------------------------------------------------------------------
 
     def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
+        if final is None and infos is not None:
+            flat = flat_infos(infos, n)
+            if flat is not None:
+                return flat
         out: dict[str, Any] = {}
         if final is not None:
             for k, data in enumerate(final):

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import _envhub
 from ._batched import env_value as _env_value
+from ._pickled import Encoded
 from ._spaces import _Leaf, _tree, from_gymnasium
 from .config import EnvConfig
 from .hosted import all_adapters
@@ -63,6 +64,11 @@ def _read(node: Any, buf: np.ndarray) -> Any:
     return tuple(_read(child, buf) for child in children)
 
 
+def _whole(node: Any) -> _Leaf | None:
+    """The leaf when a space is one array at offset 0, else None."""
+    return node if isinstance(node, _Leaf) and node.offset == 0 else None
+
+
 def _rgb(frame: Any) -> tuple[int, int, bytes] | None:
     if frame is None:
         return None
@@ -77,19 +83,33 @@ class HostedEnv:
         self.env = env
         self.obs_tree = _space_tree(obs_desc)
         self.act_tree = _space_tree(act_desc)
+        # One array leaf (most spaces): its bytes are viewed in one step, not walked.
+        self.obs_leaf = _whole(self.obs_tree)
+        self.act_leaf = _whole(self.act_tree)
 
-    def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> str | None:
+    def _write_obs(self, obs: Any, out: memoryview) -> None:
+        leaf = self.obs_leaf
+        if leaf is None:
+            _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
+        else:
+            np.frombuffer(out, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape)[...] = obs
+
+    def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> Encoded | str | None:
         obs, info = self.env.reset(seed=seed, options=json.loads(options) if options else None)
-        _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
-        return info_json(info)
+        self._write_obs(obs, out)
+        return _info_out(info)
 
-    def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, str | None]:
+    def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, Encoded | str | None]:
         # A copy the env owns: `action` views the request sample, which the next request
         # overwrites, and envs may keep their action ("previous action" features).
-        act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8).copy())
+        leaf = self.act_leaf
+        if leaf is None:
+            act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8).copy())
+        else:
+            act = np.frombuffer(action, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape).copy()
         obs, reward, terminated, truncated, info = self.env.step(act)
-        _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
-        return float(reward), bool(terminated), bool(truncated), info_json(info)
+        self._write_obs(obs, out)
+        return float(reward), bool(terminated), bool(truncated), _info_out(info)
 
     def render_rgb(self) -> tuple[int, int, bytes] | None:
         return _rgb(self.env.render())
@@ -214,6 +234,14 @@ def _info_value(v: Any) -> Any:
         if a.dtype.kind in "biuf" and a.ndim <= 1 and a.size <= 64:
             return [float(x) for x in a.reshape(-1)]
     return None
+
+
+def _info_out(info: dict[str, Any] | None) -> Encoded | str | None:
+    """An env's info as `serve_worker` reads it: the drop-in's already plain dict as it is
+    (read value by value in Rust, no text), else `info_json`."""
+    if type(info) is Encoded:
+        return info or None
+    return info_json(info)
 
 
 def info_json(info: dict[str, Any] | None) -> str | None:
