@@ -15,6 +15,7 @@ mod matching;
 mod python_env_spec;
 mod python_envs;
 mod registry;
+mod registry_error;
 mod tags;
 
 pub use entry::EnvEntry;

@@ -14,8 +14,8 @@
 //! the provisioning's part (`envhub-pyenv`, driven by the facade).
 
 use crate::entry::EnvEntry;
-use crate::registry::RegistryError;
 use crate::python_env_spec::PythonEnvSpec;
+use crate::registry_error::{RegistryError, id_lines};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -105,10 +105,7 @@ impl PythonEnvs {
             if let Some(name) = &entry.python_env
                 && !self.specs.contains_key(name)
             {
-                let line = crate::registry::id_lines(text, &entry.id)
-                    .first()
-                    .copied()
-                    .unwrap_or(0);
+                let line = id_lines(text, &entry.id).first().copied().unwrap_or(0);
                 return Err(unknown(name, format!("entry `{}`", entry.id), line));
             }
         }

@@ -32,9 +32,8 @@ pub use catalog::{AdapterInfo, Host, refresh_adapters};
 pub use daemon::{default_socket, serve};
 pub use daemon_client::DaemonClient;
 pub use envhub_catalog::{
-    FrameworkDefaults, PythonEnvs,
-    Candidate, DEFAULT_REGISTRY_NAME, EnvEntry, MatchError, Registry, RegistryError, SearchHit,
-    SearchQuery, TaskMatch, TaskSpec, match_task,
+    Candidate, DEFAULT_REGISTRY_NAME, EnvEntry, FrameworkDefaults, MatchError, PythonEnvs,
+    Registry, RegistryError, SearchHit, SearchQuery, TaskMatch, TaskSpec, match_task,
 };
 pub use envhub_core::env_vars;
 pub use envhub_core::{AutoresetMode, EnvConfig, ResetOptions, Space};

@@ -9,10 +9,10 @@
 //! off. A hub serving remote clients builds for them only with `envhub serve
 //! --allow-provision`: installing packages is its operator's decision.
 
-use crate::entry::EnvEntry;
 use crate::env_vars::{ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_UV};
-use crate::error::HubError;
-use crate::registry::Registry;
+use envhub_catalog::EnvEntry;
+use envhub_catalog::Registry;
+use envhub_protocol::HubError;
 use envhub_pyenv::{PythonEnvSpec, Store};
 use envhub_shm::WorkerPython;
 use std::path::PathBuf;

@@ -513,7 +513,7 @@ mod tests {
         let policy = ServePolicy {
             max_envs: Some(MAX),
             max_workers: None,
-            allow_remote_files: false,
+            ..ServePolicy::default()
         };
         let over = AtomicBool::new(false);
         let passed = std::sync::atomic::AtomicUsize::new(0);

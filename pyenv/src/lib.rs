@@ -16,8 +16,8 @@ mod lock;
 mod store;
 mod uv;
 
+pub use envhub_catalog::{PythonEnvSpec, package_name, valid_name};
 pub use error::PyEnvError;
 pub use interpreter::{Interpreter, version_of};
-pub use envhub_catalog::{PythonEnvSpec, package_name, valid_name};
 pub use store::{Manifest, Plan, PythonEnv, Store, Stored};
 pub use uv::find_uv;

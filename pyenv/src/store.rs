@@ -9,8 +9,8 @@
 use crate::error::{PyEnvError, io};
 use crate::interpreter::{self, Interpreter};
 use crate::lock;
-use envhub_catalog::{PythonEnvSpec, parse_version, valid_name};
 use crate::uv;
+use envhub_catalog::{PythonEnvSpec, parse_version, valid_name};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -95,6 +95,7 @@ fn cartpole(num_envs: usize, workers: usize) -> Route {
         adapter: "classic_control".into(),
         env_id: "CartPole-v1".into(),
         config,
+        python: None,
     }
 }
 
