@@ -87,7 +87,7 @@ def suite_python(name: str) -> str:
         from envhub._cli import BINARY
 
         try:
-            done = subprocess.run(  # noqa: PLW1510 - the exit status is checked below
+            done = subprocess.run(
                 [str(BINARY), "env", "sync", name],
                 capture_output=True,
                 text=True,
@@ -124,7 +124,7 @@ def native_run(c: dict[str, Any], tmp_path: Path) -> dict[str, Any]:
     """`c` run with the suite's own API in its own interpreter."""
     python = suite_python(SUITES[c["framework"]])
     out = tmp_path / f"{c['entry']}.pkl"
-    done = subprocess.run(  # noqa: PLW1510 - the exit status is checked below
+    done = subprocess.run(
         [python, str(HERE / "suite_runs.py"), "native", json.dumps(c), str(out)],
         capture_output=True,
         text=True,
@@ -183,7 +183,7 @@ def test_suite_runs_on_the_python_it_names(framework):
     env = SUITES[framework]
     python = suite_python(env)
     code = "import sys, envhub._envhub; print('%d.%d' % sys.version_info[:2])"
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)  # noqa: PLW1510
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
     assert done.returncode == 0, done.stderr[-3000:]
     want = REGISTRY["python_envs"][env].get("python")
     if want:

@@ -8,7 +8,6 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 
-
 from . import _info_tree, _spaces
 from ._session import RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json

@@ -11,7 +11,6 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _info_tree, _spaces
-
 from ._infos import flat_infos
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json

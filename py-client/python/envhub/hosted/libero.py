@@ -209,7 +209,7 @@ class LiberoEnv(gym.Env):
     after it is made too). A `gymnasium.Env`, so the worker's `TimeLimit` (the session's
     `max_episode_steps`) can wrap it."""
 
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium.Env's own attribute
+    metadata: dict[str, Any] = {"render_modes": []}
 
     def __init__(self, env: Any, tasks: Any, index: int, init_state: int | None) -> None:
         self.env = env
