@@ -373,12 +373,13 @@ def test_gymnasium_specs_carry_gymnasium_robotics_limits(entry_id, gym_id):
 
 def test_every_catalog_spec_has_a_limit_but_libero_isaac_and_maniskill():
     """Only frameworks whose limits envhub cannot know without their packages (and that the
-    entries do not state) leave `max_episode_steps` out of the spec."""
+    entries do not state) leave `max_episode_steps` out of the spec: ManiSkill, Isaac Lab and
+    the suites that run in Python environments of their own (their own limits apply)."""
     unlimited = sorted(
         e.id for e in envhub.EnvRegistry() if gymnasium.spec(f"envhub/{e.id}").max_episode_steps is None
     )
     frameworks = {envhub.EnvRegistry().get(i).framework for i in unlimited}
-    assert frameworks <= {"maniskill", "isaac_lab"}, unlimited
+    assert frameworks <= {"maniskill", "isaac_lab", "metaworld", "robosuite", "dm_control", "myosuite"}, unlimited
 
 
 def _truncation_step(env, steps=600):
