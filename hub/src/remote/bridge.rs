@@ -152,18 +152,20 @@ impl Sessions {
     }
 }
 
-fn session_id() -> String {
-    use std::sync::atomic::AtomicU64;
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64);
-    format!(
-        "s{:x}{:x}-{}",
-        std::process::id(),
-        nanos & 0xffff_ffff,
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    )
+/// A session id no one can guess (128 random bits from the OS): the session's keys are
+/// known only to those that see its traffic.
+fn session_id() -> Result<String, HubError> {
+    let mut bytes = [0u8; 16];
+    // SAFETY: `bytes` is a valid buffer of its length; getrandom fills it or fails.
+    let filled = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
+    if filled != bytes.len() as isize {
+        return Err(HubError::InvalidState(format!(
+            "the OS random source failed: {}",
+            std::io::Error::last_os_error()
+        )));
+    }
+    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    Ok(format!("s{hex}"))
 }
 
 /// Registers a started session and runs it on its own thread; returns its id.
@@ -175,7 +177,7 @@ pub(crate) fn start(
     vec: VecEnv,
     reservation: Reservation<'_>,
 ) -> Result<String, HubError> {
-    let id = session_id();
+    let id = session_id()?;
     let publisher = zenoh
         .declare_publisher(keys::responses(hub, &id))
         .express(true)
