@@ -35,6 +35,17 @@ impl std::fmt::Debug for DaemonClient {
 impl DaemonClient {
     /// Connects to the daemon listening on `socket`.
     pub fn connect(socket: &Path) -> Result<Arc<DaemonClient>, HubError> {
+        // The default folder must be this user's: else the socket in it may be another's.
+        if socket.parent() == Some(crate::daemon_guard::private_dir().as_path())
+            && socket.exists()
+            && let Err(reason) =
+                crate::daemon_guard::check_private_dir(&crate::daemon_guard::private_dir())
+        {
+            return Err(HubError::Daemon {
+                socket: socket.display().to_string(),
+                reason,
+            });
+        }
         let stream = UnixStream::connect(socket).map_err(|e| HubError::Daemon {
             socket: socket.display().to_string(),
             reason: format!("cannot connect: {e}"),

@@ -12,6 +12,7 @@ mod builtin_assets;
 mod catalog;
 mod daemon;
 mod daemon_client;
+mod daemon_guard;
 mod entry;
 mod env;
 pub mod env_vars;
