@@ -446,3 +446,29 @@ fn another_user_cannot_use_the_daemon() {
     std::io::BufReader::new(own).read_line(&mut line).unwrap();
     assert!(line.contains("pong"), "{line}");
 }
+
+/// A socket that accepts and never answers (a stuck or stopped daemon, or not a daemon at
+/// all): connecting fails within the ping's time limit instead of hanging.
+#[test]
+fn a_daemon_that_never_answers_is_an_error_within_seconds() {
+    let dir = std::env::temp_dir().join(format!("e2e-silent-daemon-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let socket = dir.join("hub.sock");
+    let _ = std::fs::remove_file(&socket);
+    let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+    let silent = std::thread::spawn(move || {
+        // Holds the connection open without a word until the client gives up.
+        let (mut stream, _) = listener.accept().unwrap();
+        let mut sink = Vec::new();
+        let _ = std::io::Read::read_to_end(&mut stream, &mut sink);
+    });
+    let start = std::time::Instant::now();
+    let Err(e) = Hub::connect(&socket, Registry::builtin()) else {
+        panic!("a silent socket passed for a daemon");
+    };
+    let took = start.elapsed();
+    assert!(took < std::time::Duration::from_secs(8), "took {took:?}");
+    assert!(e.to_string().contains("no reply to `ping`"), "{e}");
+    silent.join().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
