@@ -30,12 +30,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-/// The default control socket: `$XDG_RUNTIME_DIR/envhub.sock`, else `/tmp/envhub-<uid>.sock`.
+/// The default control socket: `$XDG_RUNTIME_DIR/envhub.sock`, else
+/// `/tmp/envhub-<uid>/envhub.sock` in a folder only this user may enter (a socket directly
+/// in the world-writable `/tmp` could be taken first by another user).
 pub fn default_socket() -> PathBuf {
     match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
         Some(dir) => Path::new(&dir).join("envhub.sock"),
-        // SAFETY: getuid has no preconditions.
-        None => std::env::temp_dir().join(format!("envhub-{}.sock", unsafe { libc::getuid() })),
+        None => crate::daemon_guard::private_dir().join("envhub.sock"),
     }
 }
 
@@ -46,6 +47,10 @@ pub fn serve(socket: &Path, hub: Arc<Hub>, on_ready: impl FnOnce()) -> Result<()
         socket: socket.display().to_string(),
         reason,
     };
+    if socket.parent() == Some(crate::daemon_guard::private_dir().as_path()) {
+        crate::daemon_guard::ensure_private_dir(&crate::daemon_guard::private_dir())
+            .map_err(fail)?;
+    }
     if socket.exists() {
         if UnixStream::connect(socket).is_ok() {
             return Err(fail("another hub is already serving here".into()));
@@ -54,6 +59,7 @@ pub fn serve(socket: &Path, hub: Arc<Hub>, on_ready: impl FnOnce()) -> Result<()
             .map_err(|e| fail(format!("cannot remove the stale socket: {e}")))?;
     }
     let listener = UnixListener::bind(socket).map_err(|e| fail(format!("cannot listen: {e}")))?;
+    crate::daemon_guard::restrict_socket(socket).map_err(fail)?;
     // A restarted hub starts clean: remove what crashed processes left in shared memory.
     if let Err(e) = envhub_shm::cleanup_dead_nodes(&hub.options().namespace) {
         tracing::warn!(error = %e, "could not clean up dead nodes");
@@ -64,6 +70,13 @@ pub fn serve(socket: &Path, hub: Arc<Hub>, on_ready: impl FnOnce()) -> Result<()
     on_ready();
     for stream in listener.incoming() {
         let Ok(stream) = stream else { continue };
+        match crate::daemon_guard::peer_uid(&stream) {
+            Ok(peer) if crate::daemon_guard::peer_allowed(peer) => {}
+            peer => {
+                tracing::warn!(?peer, "refused a connection from another user");
+                continue;
+            }
+        }
         let (hub, workers) = (hub.clone(), workers.clone());
         std::thread::spawn(move || {
             if let Err(e) = Connection::new(hub, workers).run(stream) {

@@ -35,6 +35,17 @@ impl std::fmt::Debug for DaemonClient {
 impl DaemonClient {
     /// Connects to the daemon listening on `socket`.
     pub fn connect(socket: &Path) -> Result<Arc<DaemonClient>, HubError> {
+        // The default folder must be this user's: else the socket in it may be another's.
+        if socket.parent() == Some(crate::daemon_guard::private_dir().as_path())
+            && socket.exists()
+            && let Err(reason) =
+                crate::daemon_guard::check_private_dir(&crate::daemon_guard::private_dir())
+        {
+            return Err(HubError::Daemon {
+                socket: socket.display().to_string(),
+                reason,
+            });
+        }
         let stream = UnixStream::connect(socket).map_err(|e| HubError::Daemon {
             socket: socket.display().to_string(),
             reason: format!("cannot connect: {e}"),
@@ -49,6 +60,21 @@ impl DaemonClient {
         };
         client.call(json!({"op": "ping"}))?;
         Ok(Arc::new(client))
+    }
+
+    /// How long a call may wait for its reply: a daemon that accepts and never answers (stuck,
+    /// stopped, or not a daemon at all) must not hang its clients.
+    fn time_limit(request: &Value) -> Duration {
+        match request["op"].as_str() {
+            // Starting a worker takes up to its start timeout.
+            Some("launch") => {
+                Duration::from_millis(request["start_timeout_ms"].as_u64().unwrap_or(60_000))
+                    + Duration::from_secs(10)
+            }
+            // May ask Python adapters what they host (an interpreter's start, imports).
+            Some("adapters" | "route") => Duration::from_secs(120),
+            _ => Duration::from_secs(5),
+        }
     }
 
     fn fail(&self, reason: impl std::fmt::Display) -> HubError {
@@ -76,15 +102,31 @@ impl DaemonClient {
             .lock()
             .map_err(|_| self.fail("connection poisoned"))?;
         let (reader, writer) = &mut *conn;
+        let limit = Self::time_limit(&request);
+        writer
+            .set_read_timeout(Some(limit))
+            .map_err(|e| self.fail(format!("set a time limit: {e}")))?;
         let mut line = request.to_string();
         line.push('\n');
         writer
             .write_all(line.as_bytes())
             .map_err(|e| self.fail(format!("send: {e}")))?;
         let mut reply = String::new();
-        let n = reader
-            .read_line(&mut reply)
-            .map_err(|e| self.fail(format!("receive: {e}")))?;
+        let n = reader.read_line(&mut reply).map_err(|e| {
+            if matches!(
+                e.kind(),
+                std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+            ) {
+                // A late reply would pass for the next call's: this connection is done.
+                let _ = writer.shutdown(std::net::Shutdown::Both);
+                self.fail(format!(
+                    "no reply to `{}` within {limit:?}; the daemon is stuck, stopped or not an envhub daemon",
+                    request["op"].as_str().unwrap_or("?")
+                ))
+            } else {
+                self.fail(format!("receive: {e}"))
+            }
+        })?;
         if n == 0 {
             return Err(self.fail("the daemon closed the connection"));
         }

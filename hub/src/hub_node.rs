@@ -132,14 +132,25 @@ pub fn join(
             .map_err(zerr("declare subscriber"))?
     };
     // A client that leaves (exits, crashes, or is cut off past its lease) takes its sessions.
+    // Any peer can declare and drop a token of the same key, so a deletion ends sessions only
+    // once no token of that key is left on the network: the real client's still answers.
     let clients = {
-        let sessions = sessions.clone();
+        let (sessions, zenoh) = (sessions.clone(), session.clone());
         session
             .liveliness()
             .declare_subscriber(keys::ALL_CLIENTS)
             .callback(move |sample| {
                 if sample.kind() == zenoh::sample::SampleKind::Delete {
-                    sessions.client_gone(sample.key_expr().as_str());
+                    let (sessions, zenoh) = (sessions.clone(), zenoh.clone());
+                    let key = sample.key_expr().as_str().to_string();
+                    // Not on Zenoh's thread: the check is a query.
+                    std::thread::spawn(move || {
+                        if client_token_remains(&zenoh, &key) {
+                            tracing::warn!(client = %key, "a token of a live client was dropped by another peer: its sessions go on");
+                        } else {
+                            sessions.client_gone(&key);
+                        }
+                    });
                 }
             })
             .wait()
@@ -333,6 +344,20 @@ impl State {
             workers,
         })
     }
+}
+
+/// Whether a client's token `key` is still held by someone (the client itself, when another
+/// peer declared and dropped a copy to end its sessions).
+fn client_token_remains(zenoh: &zenoh::Session, key: &str) -> bool {
+    let Ok(replies) = zenoh
+        .liveliness()
+        .get(key)
+        .timeout(Duration::from_millis(250))
+        .wait()
+    else {
+        return false;
+    };
+    replies.recv().is_ok_and(|r| r.result().is_ok())
 }
 
 /// Whether a kwarg's name says it names a file or folder (`xml_file`, `model_path`,

@@ -16,6 +16,7 @@ mod bounded;
 mod catalog;
 mod daemon;
 mod daemon_client;
+mod daemon_guard;
 #[cfg(test)]
 mod fuzz;
 mod hub;

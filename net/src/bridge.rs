@@ -153,6 +153,22 @@ impl Sessions {
     }
 }
 
+/// A session id no one can guess (128 random bits from the OS): the session's keys are
+/// known only to those that see its traffic.
+fn session_id() -> Result<String, HubError> {
+    let mut bytes = [0u8; 16];
+    // SAFETY: `bytes` is a valid buffer of its length; getrandom fills it or fails.
+    let filled = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
+    if filled != bytes.len() as isize {
+        return Err(HubError::InvalidState(format!(
+            "the OS random source failed: {}",
+            std::io::Error::last_os_error()
+        )));
+    }
+    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    Ok(format!("s{hex}"))
+}
+
 /// Registers a started session and runs it on its own thread; returns its id.
 pub fn start(
     sessions: &Arc<Sessions>,
@@ -162,7 +178,7 @@ pub fn start(
     vec: VecEnv,
     reservation: Reservation<'_>,
 ) -> Result<String, HubError> {
-    let id = envhub_protocol::session_id();
+    let id = session_id()?;
     let publisher = zenoh
         .declare_publisher(keys::responses(hub, &id))
         .express(true)

@@ -399,3 +399,79 @@ fn errors_through_the_daemon_are_the_embedded_hubs() {
     let bad = make_error(&remote, "gym-pendulum", &cases[2].1);
     assert!(matches!(bad, HubError::MakeFailed(_)), "{bad:?}");
 }
+
+/// The daemon's socket is its user's alone (mode 0600), and a connection from another user
+/// that gets through anyway (the socket opened up by hand) is refused: the daemon asks the
+/// kernel who connected (`SO_PEERCRED`). The second user is uid 65534 (`nobody`), which
+/// needs root to become; skipped otherwise, unless `ENVHUB_NETNS_REQUIRED` (the root tier).
+#[test]
+fn another_user_cannot_use_the_daemon() {
+    use std::os::unix::fs::PermissionsExt;
+    use std::os::unix::process::CommandExt;
+    let daemon = Daemon::start("peer");
+    let mode = std::fs::metadata(&daemon.socket)
+        .unwrap()
+        .permissions()
+        .mode();
+    assert_eq!(mode & 0o777, 0o600, "socket mode {:o}", mode & 0o777);
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        assert!(
+            std::env::var_os("ENVHUB_NETNS_REQUIRED").is_none_or(|v| v.is_empty()),
+            "another_user_cannot_use_the_daemon: required (ENVHUB_NETNS_REQUIRED) but not root"
+        );
+        eprintln!("skipped the second user: needs root to run as uid 65534");
+        return;
+    }
+    let dir = daemon.socket.parent().unwrap();
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::set_permissions(&daemon.socket, std::fs::Permissions::from_mode(0o666)).unwrap();
+    // Connects as `nobody`, sends a ping, prints what comes back (nothing: refused).
+    // (The daemon may drop the connection before the ping is even written: a broken pipe.)
+    let script = "import socket,sys\ns=socket.socket(socket.AF_UNIX)\ns.settimeout(5)\ntry:\n    s.connect(sys.argv[1])\n    s.sendall(b'{\"op\": \"ping\"}\\n')\n    print(repr(s.recv(100)))\nexcept OSError as e:\n    print('error', e)\n";
+    let out = Command::new("python3")
+        .args(["-c", script])
+        .arg(&daemon.socket)
+        .uid(65534)
+        .gid(65534)
+        .output()
+        .expect("python3 runs");
+    let said = String::from_utf8_lossy(&out.stdout);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{said} {err}");
+    assert!(!said.contains("pong"), "another user was served: {said}");
+    // It reached the socket (the refusal is the daemon's, not the file mode's).
+    assert!(!said.contains("Permission denied"), "{said}");
+    // The daemon's own user still is.
+    let mut own = std::os::unix::net::UnixStream::connect(&daemon.socket).unwrap();
+    std::io::Write::write_all(&mut own, b"{\"op\": \"ping\"}\n").unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(own).read_line(&mut line).unwrap();
+    assert!(line.contains("pong"), "{line}");
+}
+
+/// A socket that accepts and never answers (a stuck or stopped daemon, or not a daemon at
+/// all): connecting fails within the ping's time limit instead of hanging.
+#[test]
+fn a_daemon_that_never_answers_is_an_error_within_seconds() {
+    let dir = std::env::temp_dir().join(format!("e2e-silent-daemon-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let socket = dir.join("hub.sock");
+    let _ = std::fs::remove_file(&socket);
+    let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+    let silent = std::thread::spawn(move || {
+        // Holds the connection open without a word until the client gives up.
+        let (mut stream, _) = listener.accept().unwrap();
+        let mut sink = Vec::new();
+        let _ = std::io::Read::read_to_end(&mut stream, &mut sink);
+    });
+    let start = std::time::Instant::now();
+    let Err(e) = Hub::connect(&socket, Registry::builtin()) else {
+        panic!("a silent socket passed for a daemon");
+    };
+    let took = start.elapsed();
+    assert!(took < std::time::Duration::from_secs(8), "took {took:?}");
+    assert!(e.to_string().contains("no reply to `ping`"), "{e}");
+    silent.join().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -14,5 +14,6 @@ mod rapier_rollouts;
 mod remote_hubs;
 mod remote_netns;
 mod rendering;
+mod session_owner;
 mod small_shm;
 mod worker_lifetime;

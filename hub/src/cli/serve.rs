@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
-    /// Control socket (default: $XDG_RUNTIME_DIR/envhub.sock, else /tmp/envhub-<uid>.sock).
+    /// Control socket (default: $XDG_RUNTIME_DIR/envhub.sock, else /tmp/envhub-<uid>/envhub.sock).
     #[arg(long)]
     socket: Option<PathBuf>,
     /// Name of this hub on the network (default: the host name).
