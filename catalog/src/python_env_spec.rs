@@ -13,6 +13,11 @@ pub struct PythonEnvSpec {
     pub python: Option<String>,
     /// Requirements as pip and uv read them (`metaworld==3.1.1`).
     pub requirements: Vec<String>,
+    /// Packages installed after `requirements` without their declared dependencies (a suite
+    /// whose metadata pulls a training stack or an sdist that cannot build, as hf-libero's
+    /// does); part of the key like `requirements`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub no_deps: Vec<String>,
     /// Variables the workers of this environment run with (`MUJOCO_GL: egl`); not part of
     /// the key: they change how it runs, not what is installed.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -30,7 +35,7 @@ impl PythonEnvSpec {
                 "`requirements` is empty; list at least one package (`gymnasium==1.2.0`)".into(),
             );
         }
-        for req in &self.requirements {
+        for req in self.requirements.iter().chain(&self.no_deps) {
             let name = package_name(req);
             if name.is_empty() || req.trim_start().starts_with('-') {
                 return Err(format!(
@@ -70,6 +75,19 @@ impl PythonEnvSpec {
         all
     }
 
+    /// The packages to install without their dependencies, trimmed, sorted, deduplicated.
+    pub fn no_deps_sorted(&self) -> Vec<String> {
+        let mut all: Vec<String> = self
+            .no_deps
+            .iter()
+            .map(|r| r.trim().to_string())
+            .filter(|r| !r.is_empty())
+            .collect();
+        all.sort();
+        all.dedup();
+        all
+    }
+
     /// The stable key of this environment built on Python `python_version` (major.minor or
     /// full): 16 hex digits of a hash of the version and [`full_requirements`]. Equal sets in
     /// another order give the same key; any change of a pin gives another.
@@ -78,6 +96,12 @@ impl PythonEnvSpec {
     pub fn key(&self, python_version: &str, extra: &[String]) -> String {
         let mut text = format!("{KEY_RECIPE}\npython {python_version}\n");
         for req in self.full_requirements(extra) {
+            text.push_str(&req);
+            text.push('\n');
+        }
+        // Absent from the keys of environments without them, which stay what they were.
+        for req in self.no_deps_sorted() {
+            text.push_str("no-deps ");
             text.push_str(&req);
             text.push('\n');
         }
@@ -149,6 +173,16 @@ mod tests {
             requirements: reqs.iter().map(|s| s.to_string()).collect(),
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn no_deps_packages_change_the_key_and_are_checked() {
+        let plain = spec(&["robosuite==1.4.0"]);
+        let mut with = plain.clone();
+        with.no_deps = vec!["hf-libero==0.1.4".into()];
+        assert_ne!(plain.key("3.11", &[]), with.key("3.11", &[]));
+        with.no_deps.push("--index-url x".into());
+        assert!(with.validate().unwrap_err().contains("--index-url x"));
     }
 
     #[test]

@@ -31,6 +31,9 @@ pub struct Manifest {
     pub base_interpreter: PathBuf,
     /// Everything installed on request: the spec's requirements and the worker's.
     pub requirements: Vec<String>,
+    /// Installed after them without their dependencies.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub no_deps: Vec<String>,
     /// When it was built (seconds since the Unix epoch).
     pub created_unix: u64,
     /// How long building it took.
@@ -85,6 +88,8 @@ pub struct Plan {
     pub base: PathBuf,
     /// Everything to install.
     pub requirements: Vec<String>,
+    /// Installed after `requirements`, without their dependencies.
+    pub no_deps: Vec<String>,
     /// Variables for its workers.
     pub env: BTreeMap<String, String>,
 }
@@ -220,6 +225,7 @@ impl Store {
             key,
             base,
             requirements: spec.full_requirements(&self.extra_requirements),
+            no_deps: spec.no_deps_sorted(),
             env: spec.env.clone(),
         })
     }
@@ -228,7 +234,10 @@ impl Store {
     pub fn ready(&self, plan: &Plan) -> Option<PythonEnv> {
         let manifest = read_manifest(&plan.dir)?;
         let python = plan.dir.join("bin").join("python");
-        (manifest.requirements == plan.requirements && python.exists()).then(|| PythonEnv {
+        (manifest.requirements == plan.requirements
+            && manifest.no_deps == plan.no_deps
+            && python.exists())
+        .then(|| PythonEnv {
             name: plan.name.clone(),
             key: plan.key.clone(),
             dir: plan.dir.clone(),
@@ -466,6 +475,14 @@ impl Store {
             .args(&plan.requirements);
         uv::run(install, every, progress("installing"))
             .map_err(|uv::Failed(m)| failed("`uv pip install`", m))?;
+        if !plan.no_deps.is_empty() {
+            let mut bare = Command::new(&self.uv);
+            bare.args(["pip", "install", "--quiet", "--no-deps", "--python"])
+                .arg(&python)
+                .args(&plan.no_deps);
+            uv::run(bare, every, progress("installing without dependencies"))
+                .map_err(|uv::Failed(m)| failed("`uv pip install --no-deps`", m))?;
+        }
         link_packages(name, tmp, &self.packages)?;
         if !self.packages.is_empty() {
             let modules: Vec<String> = self
@@ -490,6 +507,7 @@ impl Store {
             python_version: interpreter::version_of(&python).unwrap_or_default(),
             base_interpreter: plan.base.clone(),
             requirements: plan.requirements.clone(),
+            no_deps: plan.no_deps.clone(),
             created_unix: SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .unwrap_or_default()
