@@ -148,7 +148,9 @@ CHECK_IDS = {
     "print(json.dumps([e['id'] for e in entries if e['env_id'] not in gym.registry]))",
     "myosuite": "import gymnasium as gym, myosuite; "
     "print(json.dumps([e['id'] for e in entries if e['env_id'] not in gym.registry]))",
-    "libero": "from libero.libero.benchmark.libero_suite_task_map import libero_task_map as m; "
+    # LIBERO asks on stdin at its first import without a config: the adapter writes one first.
+    "libero": "from envhub.hosted.libero import ensure_config; ensure_config(); "
+    "from libero.libero.benchmark.libero_suite_task_map import libero_task_map as m; "
     "print(json.dumps([e['id'] for e in entries if e['env_id'].partition('/')[0] not in m]))",
 }
 
