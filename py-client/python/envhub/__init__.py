@@ -47,10 +47,10 @@ from .errors import (
     WorkerBinaryError,
     WorkerDiedError,
 )
+from .record import RecordEpisodes, record  # `envhub.record` is the function; the package stays importable
 from .registration import register_envs
 from .registry import EnvEntry, EnvRegistry, MatchResult, TaskSpec, match_task_to_env
 from .vector import VectorEnv
-from .record import RecordEpisodes, record  # `envhub.record` is the function; the package stays importable
 
 __version__: str = _envhub.__version__
 

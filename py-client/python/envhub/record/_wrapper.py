@@ -10,6 +10,7 @@ from __future__ import annotations
 import queue
 import threading
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -129,12 +130,14 @@ class RecordEpisodes(VectorWrapper):
         feats["next.terminated"] = {"dtype": "bool", "shape": [1], "names": None}
         feats["next.truncated"] = {"dtype": "bool", "shape": [1], "names": None}
         self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
-        if self._render:
-            frames = env.render()
-            first = np.asarray(frames[0])
-            feats[RENDER_KEY] = video_feature(first.shape, self.fps, codec, "yuv420p")
-        self._writer = DatasetWriter(root, repo_id, self.fps, feats, robot_type=robot_type, codec=codec)
-        self.root = self._writer.root
+        # The frames' shape is known at the first reset (envs render only after one), so
+        # the dataset opens there when frames are recorded.
+        self._open = lambda extra: DatasetWriter(
+            root, repo_id, self.fps, {**feats, **extra}, robot_type=robot_type, codec=codec
+        )
+        self._codec = codec
+        self._writer = None if self._render else self._open({})
+        self.root = Path(root)
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self.stats = {
             "episodes_written": 0,
@@ -161,8 +164,12 @@ class RecordEpisodes(VectorWrapper):
 
     def reset(self, *, seed=None, options=None):
         obs, info = self.env.reset(seed=seed, options=options)
+        frames = self._frames()
+        if self._writer is None:
+            shape = frames.shape[1:]
+            self._writer = self._open({RENDER_KEY: video_feature(shape, self.fps, self._codec, "yuv420p")})
         self._put(("reset",))
-        self._last = (_copy(obs), self._frames())
+        self._last = (_copy(obs), frames)
         self._fresh[:] = False
         return obs, info
 
