@@ -90,7 +90,7 @@ def record(
             if len(ended):
                 kept += len(ended)
                 if progress is not None:
-                    progress(len(ended))
+                    progress(min(len(ended), episodes - kept + len(ended)))
             if max_steps is not None and steps >= max_steps:
                 break
     finally:
