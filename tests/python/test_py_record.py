@@ -243,3 +243,23 @@ def test_cli_video(envhub, tmp_path):
     assert main(["gym-cartpole", "--video", str(out), "--steps", "12"]) == 0
     with av.open(str(out)) as f:
         assert sum(1 for _ in f.decode(video=0)) == 13
+
+
+def test_files_of_an_episode_in_flight_are_removed_on_reopening(envhub, tmp_path):
+    """A crash after an episode's data file but before `info.json`: the dataset still loads,
+    and recording into it again removes the stray files and appends after the counted ones."""
+    import shutil
+
+    from envhub.record import record
+
+    root = tmp_path / "crash"
+    record("gym-cartpole", 1, root, num_envs=1, max_episode_steps=3, video=False)
+    data = root / "data/chunk-000"
+    shutil.copy(data / "file-000.parquet", data / "file-001.parquet")
+    (data / ".file-002.parquet.tmp").write_bytes(b"partial")
+    assert _load("envhub/gym-cartpole", root).num_episodes == 1
+    record("gym-cartpole", 1, root, num_envs=1, max_episode_steps=3, video=False)
+    assert not (data / ".file-002.parquet.tmp").exists()
+    ds = _load("envhub/gym-cartpole", root)
+    assert ds.num_episodes == 2 and ds.num_frames == 6
+    assert [int(ds[i]["episode_index"]) for i in (0, 3)] == [0, 1]

@@ -47,7 +47,8 @@ def _replace(tmp: Path, final: Path) -> None:
 
 def _tmp(final: Path) -> Path:
     final.parent.mkdir(parents=True, exist_ok=True)
-    return final.with_name(f".{final.name}.tmp{final.suffix}")
+    # Not `*.parquet`: LeRobot's loader reads every `*/*.parquet` under `data/` and `meta/episodes/`.
+    return final.with_name(f".{final.name}.tmp")
 
 
 def video_feature(shape: tuple[int, ...], fps: int, codec: str, pix_fmt: str) -> dict:
