@@ -47,6 +47,7 @@ from .errors import (
     WorkerBinaryError,
     WorkerDiedError,
 )
+from .record import RecordEpisodes, record  # `envhub.record` is the function; the package stays importable
 from .registration import register_envs
 from .registry import EnvEntry, EnvRegistry, MatchResult, TaskSpec, match_task_to_env
 from .vector import VectorEnv
@@ -99,6 +100,7 @@ __all__ = [
     "HubLostError",
     "HubRefusedError",
     "NetworkError",
+    "RecordEpisodes",
     "UnknownHubError",
     "InvalidActionError",
     "InvalidConfigError",
@@ -118,6 +120,7 @@ __all__ = [
     "hubs",
     "make_vec",
     "match_task_to_env",
+    "record",
     "register_envs",
     "worker_binary",
 ]
