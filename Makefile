@@ -47,6 +47,9 @@ MESA_STAMP := .build/mesa.installed
 LAVAPIPE_DIR := .build/lavapipe
 LAVAPIPE_ICD := $(LAVAPIPE_DIR)/lvp_icd.json
 MANISKILL_STAMP := $(VENV)/.maniskill-installed
+# Recording's tests (`envhub.record`): pyarrow + PyAV for the recorder, and LeRobot's own
+# loader (lerobot-dataset with torch and torchvision) as the judge of what it writes.
+RECORD_STAMP := $(VENV)/.record-installed
 ifneq ($(wildcard $(LAVAPIPE_ICD)),)
 export VK_ICD_FILENAMES ?= $(abspath $(LAVAPIPE_ICD))
 endif
@@ -104,6 +107,10 @@ $(MESA_STAMP):
 	fi
 
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
+
+$(RECORD_STAMP): $(VENV_STAMP) requirements-record.txt
+	$(VPY) -m pip install --quiet -r requirements-record.txt
+	touch $@
 
 $(MANISKILL_STAMP): $(VENV_STAMP) requirements-maniskill.txt
 	$(VPY) -m pip install --quiet -r requirements-maniskill.txt
@@ -205,8 +212,8 @@ wheel: build
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
-py-test: py-install
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+py-test: py-install $(RECORD_STAMP)
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \

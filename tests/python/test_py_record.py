@@ -263,3 +263,33 @@ def test_files_of_an_episode_in_flight_are_removed_on_reopening(envhub, tmp_path
     ds = _load("envhub/gym-cartpole", root)
     assert ds.num_episodes == 2 and ds.num_frames == 6
     assert [int(ds[i]["episode_index"]) for i in (0, 3)] == [0, 1]
+
+
+def test_the_envhub_cli_records_a_dataset_and_a_video(envhub, tmp_path):
+    """`envhub record` and `envhub run --video`, the Rust CLI, through the Python recorder."""
+    import subprocess
+
+    import av
+    from envhub._cli import BINARY
+
+    mujoco_or_skip(envhub)
+    out = tmp_path / "ds"
+    done = subprocess.run(
+        [str(BINARY), "record", "mujoco-half-cheetah", "--episodes", "2", "--out", str(out),
+         "--num-envs", "2", "--max-episode-steps", "5", "--no-video"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    ds = _load("envhub/mujoco-half-cheetah", out)
+    assert ds.meta.total_episodes >= 2 and ds.meta.total_frames >= 10
+    video = tmp_path / "look.mp4"
+    done = subprocess.run(
+        [str(BINARY), "run", "gym-cartpole", "--video", str(video), "--video-steps", "8"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    with av.open(str(video)) as f:
+        assert sum(1 for _ in f.decode(video=0)) == 9
+    bad = subprocess.run([str(BINARY), "record", "no-such-env", "--out", str(tmp_path / "x")],
+                         capture_output=True, text=True, timeout=120)
+    assert bad.returncode != 0 and "no-such-env" in bad.stderr

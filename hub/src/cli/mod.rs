@@ -6,6 +6,7 @@ mod env_cmd;
 mod envs;
 mod hubs;
 mod match_cmd;
+mod record;
 mod run;
 mod serve;
 mod show;
@@ -63,6 +64,8 @@ enum Command {
     Hubs(hubs::Args),
     /// The Python environments suites run in (`python_envs:`): list, build, remove.
     Env(env_cmd::Args),
+    /// Record episodes into a LeRobot dataset (v3: Parquet, MP4 per camera, meta/).
+    Record(record::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -110,7 +113,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),
-        Command::Run(args) => run::run(&hub()?, &args),
+        Command::Run(args) => match &args.video {
+            Some(path) => record::video(&cli.registries, &args.id, path, args.video_steps),
+            None => run::run(&hub()?, &args),
+        },
+        Command::Record(args) => record::run(&cli.registries, &args),
         Command::Bench(args) => bench::run(&hub()?, &args),
         Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),
     }

@@ -21,13 +21,22 @@ pub(crate) struct Args {
     /// Envs stepped at once.
     #[arg(long, default_value_t = 1)]
     num_envs: usize,
-    /// The policy, as `module:function` (a callable taking the observations batch and the
-    /// action space, returning actions); default: random actions.
+    /// The policy, as `module:function` (a callable taking the batched observation and
+    /// returning actions); default: random actions.
     #[arg(long, value_name = "MODULE:FUNCTION")]
     policy: Option<String>,
     /// Keep only episodes whose info says `success` / `is_success`.
     #[arg(long)]
     success_only: bool,
+    /// No video of `render()` frames (camera observations are still encoded).
+    #[arg(long)]
+    no_video: bool,
+    /// Episode limit (default: the entry's).
+    #[arg(long)]
+    max_episode_steps: Option<u32>,
+    /// Seed of the first reset and of the random policy.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 /// The hub's interpreter running `python -m envhub.record ARGS`, with the CLI's registries.
@@ -67,6 +76,13 @@ pub(crate) fn run(registries: &[PathBuf], args: &Args) -> anyhow::Result<Outcome
     if args.success_only {
         argv.push("--success-only".into());
     }
+    if args.no_video {
+        argv.push("--no-video".into());
+    }
+    if let Some(limit) = args.max_episode_steps {
+        argv.extend(["--max-episode-steps".into(), limit.to_string()]);
+    }
+    argv.extend(["--seed".into(), args.seed.to_string()]);
     recorder(registries, &argv)
 }
 

@@ -10,7 +10,7 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// Registry id (`gym-cartpole`).
-    id: String,
+    pub(crate) id: String,
     /// Envs in the batch.
     #[arg(long, default_value_t = 8)]
     num_envs: usize,
@@ -30,6 +30,13 @@ pub(crate) struct Args {
     /// (`box1,box2,local`: spread by cores) or counts (`box1:48,box2:16`).
     #[arg(long, value_name = "HUBS", default_value = "local")]
     hub: String,
+    /// Write the first env's `render()` frames of a random rollout to this MP4 instead (a
+    /// quick look at an env; through the Python package's recorder).
+    #[arg(long, value_name = "FILE.mp4")]
+    pub(crate) video: Option<std::path::PathBuf>,
+    /// Steps of the video (`--video`).
+    #[arg(long, default_value_t = 300)]
+    pub(crate) video_steps: usize,
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
