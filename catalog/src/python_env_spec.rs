@@ -63,29 +63,16 @@ impl PythonEnvSpec {
     /// sorted and without duplicates: what is installed and what the key hashes.
     pub fn full_requirements(&self, extra: &[String]) -> Vec<String> {
         let named: Vec<String> = self.requirements.iter().map(|r| package_name(r)).collect();
-        let mut all: Vec<String> = self
-            .requirements
-            .iter()
-            .chain(extra.iter().filter(|e| !named.contains(&package_name(e))))
-            .map(|r| r.trim().to_string())
-            .filter(|r| !r.is_empty())
-            .collect();
-        all.sort();
-        all.dedup();
-        all
+        normalized(
+            self.requirements
+                .iter()
+                .chain(extra.iter().filter(|e| !named.contains(&package_name(e)))),
+        )
     }
 
     /// The packages to install without their dependencies, trimmed, sorted, deduplicated.
     pub fn no_deps_sorted(&self) -> Vec<String> {
-        let mut all: Vec<String> = self
-            .no_deps
-            .iter()
-            .map(|r| r.trim().to_string())
-            .filter(|r| !r.is_empty())
-            .collect();
-        all.sort();
-        all.dedup();
-        all
+        normalized(self.no_deps.iter())
     }
 
     /// The stable key of this environment built on Python `python_version` (major.minor or
@@ -107,6 +94,18 @@ impl PythonEnvSpec {
         }
         format!("{:016x}", fnv1a64(text.as_bytes()))
     }
+}
+
+/// Requirements trimmed, without empty ones, sorted and deduplicated (the order a registry
+/// file lists them in changes nothing).
+fn normalized<'a>(requirements: impl Iterator<Item = &'a String>) -> Vec<String> {
+    let mut all: Vec<String> = requirements
+        .map(|r| r.trim().to_string())
+        .filter(|r| !r.is_empty())
+        .collect();
+    all.sort();
+    all.dedup();
+    all
 }
 
 /// FNV-1a, 64 bits: tiny, and fixed by its definition (std's hashers may change between Rust

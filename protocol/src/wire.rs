@@ -178,12 +178,13 @@ pub fn encode_error(seq: u64, num_envs: usize, error: &HubError) -> Vec<u8> {
     encode_response(seq, HUB_ERROR, num_envs, &[], &json)
 }
 
-/// The error a [`HUB_ERROR`] response carries, as the hub named `hub` sent it and as the
-/// client may take it ([`crate::untrusted::from_hub`]); text that is not one becomes
-/// [`HubError::Remote`] with it.
+/// The error a [`HUB_ERROR`] response carries, as the hub named `hub` sent it; text that is
+/// not one becomes [`HubError::Remote`] with it. Not yet filtered: the caller maps what it
+/// understands (a hub's `WorkerDied`) and passes the rest through
+/// [`crate::untrusted::from_hub`].
 pub fn decode_error(hub: &str, info: &[u8]) -> HubError {
     match serde_json::from_slice::<HubError>(info) {
-        Ok(e) => crate::untrusted::from_hub(hub, e),
+        Ok(e) => e,
         Err(_) => HubError::Remote(format!("hub `{hub}`: {}", String::from_utf8_lossy(info))),
     }
 }
@@ -315,6 +316,30 @@ pub fn write_rows(layout: &BatchLayout, to: &mut [u8], envs: &[usize], rows: &Ro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A hub's error comes back as sent (the engine maps a `WorkerDied` to its own worker and
+    /// filters the rest); text that is no error names the hub.
+    #[test]
+    fn hub_errors_decode_as_sent_and_garbage_names_the_hub() {
+        let died = HubError::WorkerDied {
+            worker: 0,
+            envs: "0..2".into(),
+            pid: 7,
+            why: "died (signal: 9 (SIGKILL))".into(),
+        };
+        let response = encode_error(1, 2, &died);
+        let answer = RemoteAnswer::parse(response).unwrap();
+        assert_eq!(answer.header().status, HUB_ERROR);
+        assert!(matches!(
+            decode_error("box1", answer.info_bytes()),
+            HubError::WorkerDied { pid: 7, .. }
+        ));
+        let text = decode_error("box1", b"not json").to_string();
+        assert!(
+            text.contains("hub `box1`") && text.contains("not json"),
+            "{text}"
+        );
+    }
 
     #[test]
     fn a_request_survives_the_wire_at_any_alignment() {

@@ -31,8 +31,10 @@ import gymnasium
 import numpy as np
 
 
-def _rate(envs: Any, step: Callable[[int], Any], seconds: float) -> float:
-    envs.reset(seed=0)
+def _rate(envs: Any, step: Callable[[int], Any], seconds: float, reset: Callable[[], Any] | None = None) -> float:
+    """Env steps per second of `step` after a reset (`reset`, else `envs.reset(seed=0)`) and 20
+    warm-up steps."""
+    (reset or (lambda: envs.reset(seed=0)))()
     for i in range(20):
         step(i)
     n, start = 0, time.perf_counter()
@@ -66,18 +68,15 @@ class Mlp:
 
 
 def policy_rate(envs: Any, policy: Mlp, seconds: float) -> float:
-    state = {"obs": envs.reset(seed=0)[0]}
+    state: dict[str, Any] = {}
+
+    def reset() -> None:
+        state["obs"] = envs.reset(seed=0)[0]
 
     def step(_: int) -> None:
         state["obs"] = envs.step(policy(state["obs"]))[0]
 
-    for i in range(20):
-        step(i)
-    n, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        step(n)
-        n += 1
-    return n * envs.num_envs / (time.perf_counter() - start)
+    return _rate(envs, step, seconds, reset)
 
 
 def best(makers: dict[str, Callable[[], Any]], measure: Callable[[Any], float], rounds: int) -> dict[str, float]:

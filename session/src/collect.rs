@@ -6,7 +6,7 @@ use crate::results::Place;
 use crate::vec_env::VecEnv;
 use crate::worker_link::{Answer, WorkerLink, env_range};
 use envhub_protocol::HubError;
-use envhub_protocol::untrusted::read_failure_report;
+use envhub_protocol::untrusted::{from_hub, read_failure_report};
 use envhub_protocol::wire::{HUB_ERROR, RemoteAnswer, decode_error, land_rows};
 use envhub_shm::{DataPlaneError, SlotPool, status};
 
@@ -57,7 +57,7 @@ fn remote_error(w: &WorkerLink, answer: &RemoteAnswer) -> HubError {
             pid,
             why: format!("on hub `{hub}`: {why}"),
         },
-        e => e,
+        e => from_hub(hub, e),
     }
 }
 
