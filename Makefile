@@ -76,10 +76,15 @@ help:
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
 
+# Packages go in with uv (pinned in requirements-dev.txt; pip brings it in first): it resolves
+# fast and links files from its cache (~/.cache/uv) instead of copying them, so a second clone
+# of the repo (CI's) installs in seconds and takes almost no disk (torch alone is 6 GB).
+UV := $(VENV)/bin/uv
+UV_PIP := $(UV) pip install --quiet --python $(VPY)
 $(VENV_STAMP): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --upgrade pip
-	$(VPY) -m pip install --quiet -r requirements-dev.txt
+	$(VPY) -m pip install --quiet --disable-pip-version-check "$$(grep -E '^uv==' requirements-dev.txt)"
+	$(UV_PIP) -r requirements-dev.txt
 	touch $@
 
 venv: $(VENV_STAMP)
@@ -109,11 +114,11 @@ $(MESA_STAMP):
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
 
 $(RECORD_STAMP): $(VENV_STAMP) requirements-record.txt
-	$(VPY) -m pip install --quiet -r requirements-record.txt
+	$(UV_PIP) -r requirements-record.txt
 	touch $@
 
 $(MANISKILL_STAMP): $(VENV_STAMP) requirements-maniskill.txt
-	$(VPY) -m pip install --quiet -r requirements-maniskill.txt
+	$(UV_PIP) -r requirements-maniskill.txt
 	touch $@
 
 # lavapipe from bookworm-backports with private apt lists (nothing installed system-wide).
