@@ -60,8 +60,13 @@ LIBERO_STAMP := $(LIBERO_VENV)/.installed
 # Written by `make libero` once the adapter is available (assets included).
 LIBERO_READY := $(LIBERO_VENV)/.ready
 LIBERO_PACKAGE := hf-libero==0.1.4
+# LeRobot's dataset loader (with torch, ~5 GB) in an interpreter of its own: the judge of the
+# recorder's tests (requirements-lerobot.txt says why it is not .venv/). uv, from .venv/,
+# downloads in parallel.
+LEROBOT_VENV := .venv-lerobot
+LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero wheel env
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -72,6 +77,7 @@ help:
 	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
+	@echo "make lerobot  LeRobot's dataset loader in .venv-lerobot, the recorder tests' judge (about 5 GB; make py-test does it)"
 
 $(VENV_STAMP): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -144,6 +150,14 @@ libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
 	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
 	touch $(LIBERO_READY)
 
+$(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_STAMP)
+	rm -rf $(LEROBOT_VENV)
+	$(PYTHON) -m venv $(LEROBOT_VENV)
+	$(VENV)/bin/uv pip install --quiet --python $(LEROBOT_VENV)/bin/python -r requirements-lerobot.txt
+	touch $@
+
+lerobot: $(LEROBOT_STAMP)
+
 build: setup
 	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
 
@@ -205,8 +219,8 @@ wheel: build
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
-py-test: py-install
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+py-test: py-install $(LEROBOT_STAMP)
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \
@@ -216,7 +230,7 @@ test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) $(LIBERO_VENV) .build dist
+	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) .build dist
 
 # The variables cargo sees here, for running it by hand: `eval "$$(make -s env)"`.
 env:

@@ -6,6 +6,7 @@ mod env_cmd;
 mod envs;
 mod hubs;
 mod match_cmd;
+mod record;
 mod run;
 mod serve;
 mod show;
@@ -52,8 +53,10 @@ enum Command {
     Match(match_cmd::Args),
     /// List the adapters (simulators) and whether they can run here.
     Adapters(adapters::Args),
-    /// Run a random-policy rollout through the hub.
+    /// Run a random-policy rollout through the hub (or, with `--video`, film one env).
     Run(run::Args),
+    /// Record episodes into a LeRobot dataset (Parquet, MP4, JSON).
+    Record(record::Args),
     /// Measure throughput through the hub against in-process stepping, and the round trip.
     Bench(bench::Args),
     /// Run the hub as a daemon that several client processes share (set ENVHUB_HUB to its
@@ -110,7 +113,24 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),
-        Command::Run(args) => run::run(&hub()?, &args),
+        Command::Run(args) => match args.video() {
+            Some((path, id, steps, seed)) => {
+                hub()?; // applies the config's `python:` (the recorder's interpreter)
+                record::video(
+                    &cli.registries,
+                    cli.config.as_deref(),
+                    id,
+                    path,
+                    steps,
+                    seed,
+                )
+            }
+            None => run::run(&hub()?, &args),
+        },
+        Command::Record(args) => {
+            hub()?;
+            record::run(&cli.registries, cli.config.as_deref(), &args)
+        }
         Command::Bench(args) => bench::run(&hub()?, &args),
         Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),
     }
