@@ -43,7 +43,7 @@ def run(kind: str, a: argparse.Namespace, actions: np.ndarray, tmp: Path) -> dic
     steps = a.frame_steps if frames else a.steps
     env = envhub.make_vec(
         a.id, a.envs, render_mode="rgb_array" if frames else None, max_episode_steps=a.max_episode_steps,
-        **({"width": a.size, "height": a.size} if frames else {}),
+        **({"width": a.size, "height": a.size} if frames and a.size else {}),
     )
     root = tmp / f"{kind}-{time.monotonic_ns()}"
     target = envhub.RecordEpisodes(env, str(root), video=frames) if kind in ("recorded", "frames+video") else env
@@ -84,7 +84,8 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=64)
     p.add_argument("--steps", type=int, default=400, help="batched steps without frames")
     p.add_argument("--frame-steps", type=int, default=20, help="batched steps with frames")
-    p.add_argument("--size", type=int, default=96, help="frame width and height")
+    p.add_argument("--size", type=int, default=96, help="frame width and height (0: the env's own)")
+    p.add_argument("--kinds", nargs="+", default=["plain", "recorded", "frames", "frames+video"])
     p.add_argument("--max-episode-steps", type=int, default=50)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--json", action="store_true")
@@ -98,26 +99,30 @@ def main() -> None:
     results: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(a.rounds):
-            for kind in ("plain", "recorded", "frames", "frames+video"):
+            for kind in a.kinds:
                 results.setdefault(kind, []).append(run(kind, a, actions, Path(tmp)))
     summary = {}
     for kind, rs in results.items():
         rate = statistics.median(r["env_steps_per_s"] for r in rs)
         summary[kind] = {**rs[-1], "env_steps_per_s": rate, "all_rates": [round(r["env_steps_per_s"]) for r in rs]}
-    summary["ratio_recorded_over_plain"] = summary["recorded"]["env_steps_per_s"] / summary["plain"]["env_steps_per_s"]
-    summary["ratio_video_over_frames"] = summary["frames+video"]["env_steps_per_s"] / summary["frames"]["env_steps_per_s"]
+    for name, (a_kind, b_kind) in {"recorded / plain": ("recorded", "plain"),
+                                   "frames+video / frames": ("frames+video", "frames")}.items():
+        if a_kind in summary and b_kind in summary:
+            summary[name] = summary[a_kind]["env_steps_per_s"] / summary[b_kind]["env_steps_per_s"]
     if a.json:
         print(json.dumps({"id": a.id, "envs": a.envs, "size": a.size, **summary}, indent=2))
         return
-    print(f"{a.id}, {a.envs} envs, frames {a.size}x{a.size}, median of {a.rounds} rounds")
-    for kind in ("plain", "recorded", "frames", "frames+video"):
+    size = f"{a.size}x{a.size}" if a.size else "the env's size"
+    print(f"{a.id}, {a.envs} envs, frames {size}, median of {a.rounds} rounds")
+    for kind in a.kinds:
         r = summary[kind]
         line = f"  {kind:<13} {r['env_steps_per_s']:>10.0f} env steps/s  {r['all_rates']}"
         if "parquet_bytes_per_frame" in r:
             line += f"  parquet {r['parquet_bytes_per_frame']:.0f} B/frame, mp4 {r['mp4_bytes_per_frame']:.0f} B/frame"
         print(line)
-    print(f"  recorded / plain       {summary['ratio_recorded_over_plain']:.3f}")
-    print(f"  frames+video / frames  {summary['ratio_video_over_frames']:.3f}")
+    for name in ("recorded / plain", "frames+video / frames"):
+        if name in summary:
+            print(f"  {name:<22} {summary[name]:.3f}")
 
 
 if __name__ == "__main__":

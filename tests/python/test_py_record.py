@@ -129,10 +129,11 @@ def check_video(decoded: np.ndarray, rendered: np.ndarray) -> None:
 
 
 def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[dict[str, list]],
-                  task: str, video_key: str | None = None) -> None:
+                  task: str, video_key: str | None = None, cameras: tuple[str, ...] = ()) -> None:
     """The loaded dataset holds exactly the `expected` episodes: states and actions bit for
     bit, flags and rewards exactly, indices and timestamps as LeRobot defines them, frames
-    within the codec tolerance."""
+    within the codec tolerance (`video_key`: the video of `expected`'s `frame`s; `cameras`:
+    videos of observation images, under their feature names in `expected`)."""
     assert summary["num_episodes"] == len(expected)
     lengths = [len(ep["action"]) for ep in expected]
     assert summary["episode_lengths"] == lengths
@@ -140,7 +141,7 @@ def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[d
     assert set(summary["tasks"]) == {task}
     fps = summary["fps"]
     for key in expected[0]:
-        if key == "frame":
+        if key == "frame" or key in cameras:
             continue
         want = np.concatenate([np.asarray(ep[key]).reshape(len(ep[key]), -1) for ep in expected])
         got = arrays[f"raw/{key}"].reshape(len(want), -1)
@@ -161,6 +162,8 @@ def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[d
     if video_key is not None:
         rendered = np.concatenate([np.stack(ep["frame"]) for ep in expected])
         check_video(arrays[video_key], rendered)
+    for key in cameras:
+        check_video(arrays[key], np.concatenate([np.stack(ep[key]) for ep in expected]))
 
 
 # Native, Python-hosted, Dict with a camera -------------------------------------------------
@@ -210,6 +213,44 @@ def test_python_hosted_env_same_step(tmp_path):
     assert summary["features"]["action"] == {"dtype": "int64", "shape": [1]}
 
 
+def test_disabled_autoreset_with_masked_resets(tmp_path):
+    """`autoreset_mode="disabled"`: an episode starts at the masked reset that the caller
+    makes; an episode a full reset cuts short is not written."""
+    env = envhub.make_vec("gym-pendulum", 2, num_workers=1, autoreset_mode="disabled", max_episode_steps=4)
+    root = tmp_path / "disabled"
+    rec = envhub.RecordEpisodes(env, str(root), video=False)
+    rng = np.random.default_rng(6)
+    expected, current = [], [{}, {}]
+    try:
+        obs, _ = rec.reset(seed=0)
+        for t in range(11):
+            if t == 2:  # env 1 starts over two steps late: its episodes end out of step with env 0's
+                obs, _ = rec.reset(options={"reset_mask": np.array([False, True])})
+                current[1] = {}
+            actions = rng.uniform(-2, 2, (2, 1)).astype(np.float32)
+            nobs, rewards, term, trunc, _ = rec.step(actions)
+            for i in range(2):
+                ep = current[i]
+                ep.setdefault("observation.state", []).append(np.array(obs[i]))
+                ep.setdefault("action", []).append(actions[i].copy())
+                ep.setdefault("next.reward", []).append(float(rewards[i]))
+                ep.setdefault("next.terminated", []).append(bool(term[i]))
+                ep.setdefault("next.truncated", []).append(bool(trunc[i]))
+            done = term | trunc
+            obs = nobs
+            for i in np.flatnonzero(done):
+                expected.append(current[i])
+                current[i] = {}
+            if done.any():
+                obs, _ = rec.reset(options={"reset_mask": done})
+        rec.reset(seed=1)  # cuts the episodes in flight short: not written
+    finally:
+        rec.close()
+    assert rec.stats["episodes_cut"] == 3 and len(expected) == 4  # env 1 at step 2, both at the end
+    summary, arrays = load(root)
+    check_against(summary, arrays, expected, envhub.EnvRegistry().get("gym-pendulum").description)
+
+
 def _camera_env():
     import gymnasium
 
@@ -231,12 +272,40 @@ def test_dict_observation_with_a_camera(tmp_path):
     finally:
         rec.close()
     assert len(expected) >= 2
-    for ep in expected:  # the camera frames are compared as a video below
-        ep["frame"] = ep.pop("observation.images.pixels")
     summary, arrays = load(root)
-    check_against(summary, arrays, expected, "balance the pole", video_key="observation.images.pixels")
+    check_against(summary, arrays, expected, "balance the pole", cameras=("observation.images.pixels",))
     # The env renders too (`render_mode="rgb_array"`), so its `render()` frames are a video as well.
     assert summary["video_keys"] == ["observation.images.pixels", "observation.images.render"]
+
+
+def test_a_suites_camera_observations(tmp_path):
+    """A suite's own cameras: robosuite's Lift with agentview and wrist images (in its own
+    Python environment, as `test_py_suites.py` builds it): two videos and sixteen columns.
+    robosuite's envs declare no frame rate: its control rate, 20 Hz, is given."""
+    try:
+        env = envhub.make_vec("robosuite-lift-camera", 1, max_episode_steps=6)
+    except envhub.EnvHubError as e:
+        message = f"robosuite's environment cannot run here ({str(e).splitlines()[0]})"
+        if os.environ.get("ENVHUB_SUITES_REQUIRED"):
+            pytest.fail(f"{message}, and ENVHUB_SUITES_REQUIRED is set")
+        pytest.skip(message)
+    from envhub.recording._features import observation_columns
+
+    paths = {c.name: c.path for c in observation_columns(env.single_observation_space)}
+    cameras = tuple(name for name in paths if name.startswith("observation.images."))
+    assert cameras == ("observation.images.agentview_image", "observation.images.robot0_eye_in_hand_image")
+    root = tmp_path / "lift"
+    rec = envhub.RecordEpisodes(env, str(root), fps=20)
+    rng = np.random.default_rng(5)
+    try:
+        expected = drive(rec, 13, lambda obs: rng.uniform(-1, 1, (1, 7)).astype(np.float32), seed=0, paths=paths)
+    finally:
+        rec.close()
+    assert len(expected) == 2
+    summary, arrays = load(root)
+    check_against(summary, arrays, expected, envhub.EnvRegistry().get("robosuite-lift-camera").description,
+                  cameras=cameras)
+    assert summary["fps"] == 20 and len(summary["features"]) == len(paths) + 5 + 5
 
 
 # Filters, appending, layouts ---------------------------------------------------------------

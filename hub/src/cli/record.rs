@@ -40,6 +40,9 @@ pub(crate) struct Args {
     /// Stop after this many batched steps, however many episodes were kept.
     #[arg(long)]
     max_steps: Option<u64>,
+    /// Frames per second of the dataset (default: the env's `render_fps`).
+    #[arg(long)]
+    fps: Option<u32>,
     /// Video encoder: `libx264` (default), `libsvtav1`, `libaom-av1`, `libopenh264`.
     #[arg(long)]
     codec: Option<String>,
@@ -102,6 +105,9 @@ pub(crate) fn run(
     }
     if let Some(steps) = args.max_steps {
         argv.extend(["--max-steps".into(), steps.to_string().into()]);
+    }
+    if let Some(fps) = args.fps {
+        argv.extend(["--fps".into(), fps.to_string().into()]);
     }
     if let Some(codec) = &args.codec {
         argv.extend(["--codec".into(), codec.into()]);

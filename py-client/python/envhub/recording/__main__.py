@@ -2,7 +2,7 @@
 hub's interpreter:
 
     python -m envhub.recording ID --episodes N --out DIR [--num-envs K] [--policy MODULE:FUNCTION]
-        [--success-only] [--no-video] [--seed S] [--max-steps S] [--codec C] [--when-full wait|drop]
+        [--success-only] [--no-video] [--seed S] [--max-steps S] [--fps F] [--codec C] [--when-full wait|drop]
     python -m envhub.recording ID --video FILE.mp4 [--steps N] [--policy MODULE:FUNCTION] [--seed S]
 """
 
@@ -51,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-video", action="store_true", help="no video of render() frames")
     p.add_argument("--seed", type=int, default=0, help="seed of the first reset and of random actions")
     p.add_argument("--max-steps", type=int, help="stop after this many batched steps")
+    p.add_argument("--fps", type=int, help="frames per second (default: the env's render_fps)")
     p.add_argument("--codec", help="video encoder (libx264, libsvtav1, libaom-av1, libopenh264)")
     p.add_argument("--when-full", choices=["wait", "drop"], default="wait",
                    help="when the writer falls behind: steps wait (default) or drop episodes")
@@ -64,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         policy = load_policy(a.policy) if a.policy else None
         if a.video:
-            n = record_video(a.id, a.video, steps=a.steps, policy=policy, seed=a.seed,
+            n = record_video(a.id, a.video, steps=a.steps, policy=policy, seed=a.seed, fps=a.fps,
                              **({"codec": a.codec} if a.codec else {}))
             print(f"wrote {n} frames to {a.video}")
             return 0
@@ -72,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
             p.error("`--episodes N` and `--out DIR` are required (or `--video FILE`)")
         progress = _Progress()
         try:
-            options: dict = {"when_full": a.when_full}
+            options: dict = {"when_full": a.when_full, "fps": a.fps}
             if a.codec:
                 options["codec"] = a.codec
             stats = record(

@@ -42,7 +42,8 @@ CHUNKS_SIZE = 1000
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
-QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
+#: The index columns, which a commit computes.
+INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 #: envhub's own folder inside a dataset: the lock and files not yet committed.
 PRIVATE = ".envhub"
 
@@ -68,44 +69,56 @@ def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
     return template.format(chunk_index=at[0], file_index=at[1], **kw)
 
 
-def feature_stats(values: np.ndarray) -> dict[str, np.ndarray]:
-    """LeRobot's per-feature statistics of `(frames, dims)` or `(frames,)` values: min, max,
-    mean, std, count and quantiles q01..q99, each of shape `(dims,)` (`(1,)` for scalars)."""
+def _stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
+    """LeRobot's statistics of a column (`(frames,)` or `(frames, dims)`) per episode (rows
+    `starts[e]` on, `lengths[e]` of them) and over all of it: min, max, mean, std (of shape
+    `(dims,)`, `(1,)` for scalars) and count. Quantiles, which LeRobot's newer writer adds, are
+    left out (its `augment_dataset_quantile_stats` adds them to a dataset)."""
     v = np.asarray(values, dtype=np.float64)
     if v.ndim == 1:
         v = v[:, None]
-    out = {
-        "min": v.min(0),
-        "max": v.max(0),
-        "mean": v.mean(0),
-        "std": v.std(0),
-        "count": np.array([len(v)]),
+    n = lengths[:, None].astype(np.float64)
+    mean = np.add.reduceat(v, starts, axis=0) / n
+    centred = v - np.repeat(mean, lengths, axis=0)
+    per_episode = {
+        "min": np.minimum.reduceat(v, starts, axis=0),
+        "max": np.maximum.reduceat(v, starts, axis=0),
+        "mean": mean,
+        "std": np.sqrt(np.add.reduceat(centred * centred, starts, axis=0) / n),
+        "count": lengths[:, None].astype(np.int64),
     }
-    for q, value in zip(QUANTILES, np.quantile(v, QUANTILES, axis=0), strict=True):
-        out[f"q{round(q * 100):02d}"] = value
-    return out
+    whole = {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0), "count": np.array([len(v)])}
+    return per_episode, whole
+
+
+def _nested(values: np.ndarray, leaf: Any) -> Any:
+    """`values` of shape `(rows, *dims)` as a pyarrow column of nested lists (one level per
+    dim), built from the flat buffer."""
+    import pyarrow as pa
+
+    array = pa.array(np.ascontiguousarray(values).reshape(-1), type=leaf)
+    for size in reversed(values.shape[1:]):
+        offsets = np.arange(0, len(array) + 1, size, dtype=np.int32)
+        array = pa.ListArray.from_arrays(pa.array(offsets), array)
+    return array
 
 
 def aggregate(a: dict[str, np.ndarray] | None, b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Statistics over the frames of both (LeRobot's `aggregate_feature_stats`: exact mean and
-    std, quantiles weighted by count)."""
+    std)."""
     if a is None:
         return {k: np.asarray(v) for k, v in b.items()}
     na, nb = float(a["count"][0]), float(b["count"][0])
     n = na + nb
     mean = (a["mean"] * na + b["mean"] * nb) / n
     var = ((a["std"] ** 2 + (a["mean"] - mean) ** 2) * na + (b["std"] ** 2 + (b["mean"] - mean) ** 2) * nb) / n
-    out = {
+    return {
         "min": np.minimum(a["min"], b["min"]),
         "max": np.maximum(a["max"], b["max"]),
         "mean": mean,
         "std": np.sqrt(var),
         "count": np.array([int(n)]),
     }
-    for key in a:
-        if key.startswith("q") and key in b:
-            out[key] = (a[key] * na + b[key] * nb) / n
-    return out
 
 
 def _layout_problems(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
@@ -357,7 +370,8 @@ class Dataset:
 
     def commit(self, episodes: list[Episode]) -> list[int]:
         """Writes `episodes` into the dataset (see the module's doc for the order); returns
-        their episode indices."""
+        their episode indices. Statistics are computed over all of them at once (one
+        `reduceat` per column and statistic), since commits of many episodes are common."""
         if not episodes:
             return []
         first_ep, first_frame = self.info["total_episodes"], self.info["total_frames"]
@@ -365,68 +379,78 @@ class Dataset:
         for task in dict.fromkeys(new_tasks):
             self.tasks[task] = len(self.tasks)
         data_at, meta_at = self._next_data, self._next_meta
+        fps = self.info["fps"]
+        count = len(episodes)
+        lengths = np.array([ep.length for ep in episodes], dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        total = int(lengths.sum())
+        frame_index = np.arange(total, dtype=np.int64) - np.repeat(starts, lengths)
 
-        rows: list[dict[str, Any]] = []
-        frame = first_frame
-        for n, ep in enumerate(episodes):
-            index = first_ep + n
-            row: dict[str, Any] = {
-                "episode_index": index,
-                "tasks": [ep.task],
-                "length": ep.length,
-                "data/chunk_index": data_at[0],
-                "data/file_index": data_at[1],
-                "dataset_from_index": frame,
-                "dataset_to_index": frame + ep.length,
-            }
-            for key in self.video_keys:
-                at = self._next_video[key]
-                self._next_video[key] = _next(*at)
-                self._place(ep.videos[key], _fmt(VIDEO_PATH, at, video_key=key))
-                row |= {
-                    f"videos/{key}/chunk_index": at[0],
-                    f"videos/{key}/file_index": at[1],
-                    f"videos/{key}/from_timestamp": 0.0,
-                    f"videos/{key}/to_timestamp": ep.length / self.info["fps"],
-                }
-            row |= {"meta/episodes/chunk_index": meta_at[0], "meta/episodes/file_index": meta_at[1]}
-            ep.columns["timestamp"] = (np.arange(ep.length) / self.info["fps"]).astype(np.float32)
-            ep.columns["frame_index"] = np.arange(ep.length, dtype=np.int64)
-            ep.columns["episode_index"] = np.full(ep.length, index, dtype=np.int64)
-            ep.columns["index"] = np.arange(frame, frame + ep.length, dtype=np.int64)
-            ep.columns["task_index"] = np.full(ep.length, self.tasks[ep.task], dtype=np.int64)
-            ep_stats = {k: feature_stats(ep.columns[k]) for k in self.features if k not in self.video_keys}
-            ep_stats |= ep.video_stats
-            for key, st in ep_stats.items():
-                self.stats[key] = aggregate(self.stats.get(key), st)
-                for name, value in st.items():
-                    row[f"stats/{key}/{name}"] = np.asarray(value).tolist()
-            row["success"] = ep.success
-            rows.append(row)
-            frame += ep.length
+        columns: dict[str, np.ndarray] = {}
+        for key, f in self.features.items():
+            if f["dtype"] != "video" and key not in INDEX_KEYS:
+                columns[key] = np.concatenate([ep.columns[key] for ep in episodes])
+        columns["timestamp"] = (frame_index / fps).astype(np.float32)
+        columns["frame_index"] = frame_index
+        columns["episode_index"] = np.repeat(np.arange(first_ep, first_ep + count, dtype=np.int64), lengths)
+        columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
+        columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
 
-        self._write_table(self._data_table(episodes), _fmt(DATA_PATH, data_at))
-        self._write_table(self._episodes_table(rows), _fmt(EPISODES_PATH, meta_at))
+        meta: dict[str, Any] = {
+            "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
+            "tasks": [[ep.task] for ep in episodes],
+            "length": lengths,
+            "data/chunk_index": np.full(count, data_at[0]),
+            "data/file_index": np.full(count, data_at[1]),
+            "dataset_from_index": first_frame + starts,
+            "dataset_to_index": first_frame + starts + lengths,
+        }
+        for key in self.video_keys:
+            at = []
+            for ep in episodes:
+                at.append(self._next_video[key])
+                self._next_video[key] = _next(*at[-1])
+                self._place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
+            meta[f"videos/{key}/chunk_index"] = np.array([a[0] for a in at], dtype=np.int64)
+            meta[f"videos/{key}/file_index"] = np.array([a[1] for a in at], dtype=np.int64)
+            meta[f"videos/{key}/from_timestamp"] = np.zeros(count)
+            meta[f"videos/{key}/to_timestamp"] = lengths / fps
+        meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
+        meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
+        for key, values in columns.items():
+            per_episode, whole = _stats(values, starts, lengths)
+            self.stats[key] = aggregate(self.stats.get(key), whole)
+            for name, value in per_episode.items():
+                meta[f"stats/{key}/{name}"] = value
+        for key in self.video_keys:
+            for ep in episodes:
+                self.stats[key] = aggregate(self.stats.get(key), ep.video_stats[key])
+            for name in ("min", "max", "mean", "std", "count"):
+                meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
+        meta["success"] = [ep.success for ep in episodes]
+
+        self._write_table(self._data_table(columns), _fmt(DATA_PATH, data_at))
+        self._write_table(self._episodes_table(meta), _fmt(EPISODES_PATH, meta_at))
         self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
         if new_tasks:
             self._write_tasks()
         self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
                          "meta/stats.json")
-        self.info["total_episodes"] = first_ep + len(episodes)
-        self.info["total_frames"] = frame
+        self.info["total_episodes"] = first_ep + count
+        self.info["total_frames"] = first_frame + total
         self.info["total_tasks"] = len(self.tasks)
         self.info["splits"] = {"train": f"0:{self.info['total_episodes']}"}
         self._write_json(self.info, "meta/info.json")  # the commit point
-        return list(range(first_ep, first_ep + len(episodes)))
+        return list(range(first_ep, first_ep + count))
 
-    def _data_table(self, episodes: list[Episode]) -> Any:
+    def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
         import pyarrow as pa
 
         arrays, names = [], []
         for key, f in self.features.items():
             if f["dtype"] == "video":
                 continue
-            values = np.concatenate([ep.columns[key] for ep in episodes])
+            values = columns[key]
             dtype = pa.from_numpy_dtype(np.dtype(f["dtype"]))
             if list(f["shape"]) == [1]:
                 arrays.append(pa.array(values.reshape(-1), type=dtype))
@@ -438,28 +462,24 @@ class Dataset:
         table = pa.Table.from_arrays(arrays, names=names)
         return self._conform(table, "data")
 
-    def _episodes_table(self, rows: list[dict[str, Any]]) -> Any:
+    def _episodes_table(self, meta: dict[str, Any]) -> Any:
         import pyarrow as pa
 
-        types: dict[str, Any] = {}
-        for key in rows[0]:
+        arrays, names = [], []
+        for key, values in meta.items():
             if key == "tasks":
-                types[key] = pa.list_(pa.string())
+                array = pa.array(values, type=pa.list_(pa.string()))
             elif key == "success":
-                types[key] = pa.bool_()
-            elif key.endswith("_timestamp"):
-                types[key] = pa.float64()
+                array = pa.array(values, type=pa.bool_())
             elif key.startswith("stats/"):
-                depth = np.asarray(rows[0][key]).ndim
-                leaf = pa.int64() if key.endswith("/count") else pa.float64()
-                for _ in range(depth):
-                    leaf = pa.list_(leaf)
-                types[key] = leaf
+                array = _nested(np.asarray(values), pa.int64() if key.endswith("/count") else pa.float64())
+            elif key.endswith("_timestamp"):
+                array = pa.array(np.asarray(values, dtype=np.float64))
             else:
-                types[key] = pa.int64()
-        schema = pa.schema([(k, t) for k, t in types.items()])
-        table = pa.Table.from_pylist(rows, schema=schema)
-        return self._conform(table, "episodes")
+                array = pa.array(np.asarray(values, dtype=np.int64))
+            arrays.append(array)
+            names.append(key)
+        return self._conform(pa.Table.from_arrays(arrays, names=names), "episodes")
 
     def _conform(self, table: Any, kind: str) -> Any:
         """`table` in the schema of the dataset's existing files of this kind, if any: columns

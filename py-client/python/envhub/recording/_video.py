@@ -55,6 +55,7 @@ class EpisodeVideo:
         import av
 
         self.path = path
+        self.shape = (height, width, 3)
         self.frames = 0
         self._container = av.open(str(path), mode="w", format="mp4")
         try:
@@ -75,6 +76,12 @@ class EpisodeVideo:
     def add(self, frame: np.ndarray) -> None:
         import av
 
+        if frame is None or frame.shape != self.shape or frame.dtype != np.uint8:
+            got = "no frame" if frame is None else f"{frame.dtype} {frame.shape}"
+            raise ValueError(
+                f"a frame of {got} in a video of uint8 {self.shape}\nhint: an env's frames must keep "
+                "their size through a recording"
+            )
         self.stats.add(frame)
         vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")
         vf.pts = self.frames

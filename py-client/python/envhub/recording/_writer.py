@@ -190,24 +190,22 @@ class Writer:
         self._rows.append(values, keep_from)
         self._t += 1
         done = np.logical_or(s.terminated, s.truncated)
-        for i in range(self.n):
-            if not s.valid[i]:
-                # An autoreset step: the env's next episode starts with the next row.
-                self._live[i], self._start[i] = True, t + 1
-                continue
-            if not self._live[i]:
-                if done[i]:  # the end of an episode not recorded (dropped); the next one is
-                    self._live[i], self._start[i] = True, t + 1
-                continue
-            if self._start[i] == t:
-                self._task[i] = s.task
-            self._encode(i, s, t)
-            if done[i]:
-                success = s.success[i] if s.success is not None else None
-                self._end(i, t, success)
-                self._start[i] = t + 1
+        # Masks over the envs, so that only envs with something to do cost a Python step.
+        recording = s.valid & self._live
+        for i in np.flatnonzero(recording & (self._start == t)):
+            self._task[i] = s.task
+        if self.video_keys:
+            for i in np.flatnonzero(recording):
+                self._encode(i, s)
+        for i in np.flatnonzero(recording & done):
+            self._end(i, t, s.success[i] if s.success is not None else None)
+        # After an autoreset step, or the end of an episode (recorded or not, after a drop),
+        # the env's next episode starts with the next row.
+        restart = ~s.valid | done
+        self._live[restart] = True
+        self._start[restart] = t + 1
 
-    def _encode(self, i: int, s: Step, t: int) -> None:
+    def _encode(self, i: int, s: Step) -> None:
         if not self.video_keys:
             return
         encoders = self._encoders[i]
