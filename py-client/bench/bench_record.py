@@ -71,7 +71,7 @@ def run(kind: str, a: argparse.Namespace, actions: np.ndarray, tmp: Path) -> dic
             "frames": stats["frames_kept"],
             "parquet_bytes_per_frame": (_bytes(root, "data/*/*.parquet") + _bytes(root, "meta/episodes/*/*.parquet"))
             / frames_kept,
-            "mp4_bytes_per_frame": _bytes(root, "videos/*/*/*/*.mp4") / frames_kept,
+            "mp4_bytes_per_frame": _bytes(root, "videos/*/*/*.mp4") / frames_kept,
             "waited_steps": stats["steps_waited"],
         }
         shutil.rmtree(root)
@@ -92,9 +92,9 @@ def main() -> None:
     a = p.parse_args()
     warnings.simplefilter("ignore")
     probe = envhub.make_vec(a.id, 1)
-    rng = np.random.default_rng(0)
-    space = probe.single_action_space
-    actions = rng.uniform(space.low, space.high, (64, a.envs, *space.shape)).astype(space.dtype)
+    probe.action_space.seed(0)
+    actions = np.stack([probe.action_space.sample() for _ in range(64)])  # batches of one env
+    actions = np.repeat(actions, a.envs, axis=1) if actions.ndim > 1 else np.repeat(actions[:, None], a.envs, 1)
     probe.close()
     results: dict[str, list[dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -9,6 +9,9 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// `python -m envhub.recording`'s exit status when it kept fewer episodes than asked.
+const FEWER_EPISODES: i32 = 3;
+
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// Registry id (`mujoco-ant`).
@@ -77,8 +80,14 @@ fn recorder(
     match status.code() {
         Some(0) => Ok(Outcome::Done),
         // Fewer episodes than asked (`--max-steps`); the recorder said how many.
-        Some(1) => Ok(Outcome::NotFound),
-        _ => anyhow::bail!("recording failed ({status})"),
+        Some(FEWER_EPISODES) => Ok(Outcome::NotFound),
+        // The recorder printed its own `error: ...` (or that it was interrupted).
+        Some(2) => anyhow::bail!("recording failed"),
+        Some(130) => anyhow::bail!("recording interrupted"),
+        _ => anyhow::bail!(
+            "recording failed ({status})\nhint: the recorder runs as `{} -m envhub.recording`: set ENVHUB_PYTHON to an interpreter with the envhub package and `envhub[record]`",
+            python.display()
+        ),
     }
 }
 

@@ -15,6 +15,10 @@ import time
 
 from ..errors import EnvHubError
 
+#: The exit status when fewer episodes than asked were kept (`--max-steps`); `envhub record`
+#: reads it.
+FEWER_EPISODES = 3
+
 
 class _Progress:
     """`[#####     ]  12/100 episodes  3.1/s` on stderr, redrawn in place on a terminal and
@@ -24,12 +28,13 @@ class _Progress:
         self.tty = sys.stderr.isatty()
         self.start = time.monotonic()
         self.shown = -1
+        self.last = -1
 
     def __call__(self, kept: int, total: int) -> None:
         tenth = kept * 10 // total
-        if not self.tty and (tenth == self.shown and kept != total):
+        if kept == self.last or (not self.tty and tenth == self.shown and kept != total):
             return
-        self.shown = tenth
+        self.shown, self.last = tenth, kept
         rate = kept / max(time.monotonic() - self.start, 1e-9)
         bar = "#" * (kept * 30 // total)
         line = f"[{bar:<30}] {kept:>{len(str(total))}}/{total} episodes  {rate:.1f}/s"
@@ -94,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         f"wrote {stats['episodes_written']} episodes ({stats['frames_kept']} frames, {stats['steps']} steps) "
         f"to {os.path.abspath(a.out)}" + (f"; {', '.join(notes)}" if notes else "")
     )
-    return 0 if stats["episodes_written"] >= a.episodes else 1
+    return 0 if stats["episodes_written"] >= a.episodes else FEWER_EPISODES
 
 
 if __name__ == "__main__":

@@ -6,12 +6,14 @@ from __future__ import annotations
 import importlib
 import inspect
 import os
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..errors import EnvHubError
 from ._video import DEFAULT_CODEC, DEFAULT_CRF, EpisodeVideo, check_codec
 from ._wrapper import RecordEpisodes
 from .errors import require
@@ -81,7 +83,22 @@ def record(
     require()
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"`episodes={episodes!r}`\nhint: record at least 1 episode")
-    env = make_vec(id, num_envs, render_mode="rgb_array" if video else None, **make_kwargs)
+    env = None
+    if video:
+        try:
+            env = make_vec(id, num_envs, render_mode="rgb_array", **make_kwargs)
+        except EnvHubError as e:
+            # Envs that draw no frames (robosuite's cameras render into the observation) are
+            # recorded without the render video; said, since `video=True` asked for one.
+            env = make_vec(id, num_envs, **make_kwargs)
+            reason = str(e).strip().splitlines()[-2:]
+            warnings.warn(
+                f"recording `{id}` without a `render()` video: it does not render `rgb_array` frames "
+                f"({' '.join(reason)})\nhint: `video=False` (`--no-video`) says so and skips this attempt",
+                stacklevel=2,
+            )
+    if env is None:
+        env = make_vec(id, num_envs, **make_kwargs)
     try:
         rec = RecordEpisodes(env, str(root), keep=keep, video=video, max_episodes=episodes, **(recorder or {}))
     except BaseException:
