@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import REPO_ROOT, import_envhub, mujoco_or_skip
+from test_py_remote import two_hubs  # noqa: F401 (a fixture: hubs on loopback)
 
 envhub = import_envhub()
 REQUIRED = bool(os.environ.get("ENVHUB_RECORD_REQUIRED"))
@@ -249,6 +250,26 @@ def test_disabled_autoreset_with_masked_resets(tmp_path):
     assert rec.stats["episodes_cut"] == 3 and len(expected) == 4  # env 1 at step 2, both at the end
     summary, arrays = load(root)
     check_against(summary, arrays, expected, envhub.EnvRegistry().get("gym-pendulum").description)
+
+
+def test_envs_on_other_hubs(two_hubs, tmp_path):
+    """Envs on two other hubs (`envhub serve` on loopback, reached over Zenoh), frames
+    included: the recorder sees the same Gymnasium vector env."""
+    mujoco_or_skip(envhub)
+    env = envhub.make_vec("mujoco-hopper", 2, hubs=["pya", "pyb"], render_mode="rgb_array",
+                          max_episode_steps=12, width=32, height=32)
+    assert env.placement == [("pya", 0, 1), ("pyb", 1, 2)]
+    root = tmp_path / "remote"
+    rec = envhub.RecordEpisodes(env, str(root))
+    rng = np.random.default_rng(7)
+    try:
+        expected = drive(rec, 30, lambda obs: rng.uniform(-1, 1, (2, 3)).astype(np.float32), seed=2, frames=True)
+    finally:
+        rec.close()
+    assert len(expected) >= 2
+    summary, arrays = load(root)
+    check_against(summary, arrays, expected, envhub.EnvRegistry().get("mujoco-hopper").description,
+                  video_key="observation.images.render")
 
 
 def _camera_env():
