@@ -8,6 +8,7 @@ envhub's are views of shared memory) and puts it on a bounded queue; the writer 
 
 from __future__ import annotations
 
+import os
 import queue
 import time
 import warnings
@@ -80,7 +81,8 @@ class RecordEpisodes(VectorWrapper):
     its next episode); either way a `QueueFullWarning` says so, and `stats` counts it.
 
     `max_episodes` stops keeping episodes once that many are kept (later ones are counted in
-    `stats["episodes_beyond"]`).
+    `stats["episodes_beyond"]`). Frames are encoded on `encode_threads` threads (default: up to
+    4, one per core), the envs shared among them.
 
     The dataset folder is opened (checked and locked) at the first `reset()`; a folder that
     holds a dataset of another layout raises `DatasetLayoutError` naming the differences.
@@ -102,6 +104,7 @@ class RecordEpisodes(VectorWrapper):
         when_full: str = "wait",
         commit_every: float = 1.0,
         max_episodes: int | None = None,
+        encode_threads: int | None = None,
         robot_type: str | None = None,
     ) -> None:
         super().__init__(env)
@@ -125,6 +128,7 @@ class RecordEpisodes(VectorWrapper):
         self._codec, self._crf, self._gop = codec, int(crf), int(gop)
         self._queue_size, self._commit_every, self._robot_type = queue_size, float(commit_every), robot_type
         self._max_episodes = max_episodes
+        self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
         self.stats: dict[str, Any] = {
             "episodes_kept": 0,  # ended and kept (committed or about to be)
             "episodes_written": 0,  # committed
@@ -210,7 +214,7 @@ class RecordEpisodes(VectorWrapper):
         self._writer = Writer(
             dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
             codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_size, self.stats,
-            self._max_episodes,
+            self._max_episodes, self._encode_threads,
         )
         self._finalizer = weakref.finalize(self, _stop_writer, self._writer, dataset)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -102,6 +103,7 @@ class Writer:
         queue_size: int,
         stats: dict[str, Any],
         max_episodes: int | None = None,
+        encode_threads: int = 1,
     ) -> None:
         self.dataset = dataset
         self.n = num_envs
@@ -122,6 +124,11 @@ class Writer:
         self._live = np.zeros(num_envs, dtype=bool)  # recording the env's current episode
         self._task = [""] * num_envs
         self._encoders: list[dict[str, EpisodeVideo]] = [{} for _ in range(num_envs)]
+        # PyAV releases the GIL while FFmpeg encodes, so envs' frames are encoded in parallel:
+        # env `i`'s on thread `i % threads`, each step's frames before the next step's.
+        threads = min(encode_threads, num_envs) if self.video_keys else 1
+        self._pool = ThreadPoolExecutor(threads, thread_name_prefix="envhub-encoder") if threads > 1 else None
+        self._threads = threads
         self._pending: list[Episode] = []
         self._last_commit = time.monotonic()
         self._serial = 0
@@ -161,6 +168,8 @@ class Writer:
         finally:
             for i in range(self.n):
                 self._abandon(i)
+            if self._pool is not None:
+                self._pool.shutdown()
 
     def _gap(self) -> None:
         """Steps were dropped: every episode in flight misses frames and is dropped; each env
@@ -195,8 +204,7 @@ class Writer:
         for i in np.flatnonzero(recording & (self._start == t)):
             self._task[i] = s.task
         if self.video_keys:
-            for i in np.flatnonzero(recording):
-                self._encode(i, s)
+            self._encode(np.flatnonzero(recording), s)
         for i in np.flatnonzero(recording & done):
             self._end(i, t, s.success[i] if s.success is not None else None)
         # After an autoreset step, or the end of an episode (recorded or not, after a drop),
@@ -205,20 +213,25 @@ class Writer:
         self._live[restart] = True
         self._start[restart] = t + 1
 
-    def _encode(self, i: int, s: Step) -> None:
-        if not self.video_keys:
-            return
-        encoders = self._encoders[i]
-        if not encoders:
-            for key in self.video_keys:
-                h, w, _ = self.dataset.features[key]["shape"]
-                self._serial += 1
-                path = self.dataset.staged(f"env{i}-{self._serial}.mp4")
-                encoders[key] = EpisodeVideo(path, self.fps, h, w, self.codec, self.crf, self.gop)
-        for key in self.videos:
-            encoders[key].add(s.obs[key][i])
-        if self.render_key is not None:
-            encoders[self.render_key].add(s.frames[i])  # type: ignore[index]
+    def _encode(self, envs: np.ndarray, s: Step) -> None:
+        jobs: list[list[tuple[EpisodeVideo, np.ndarray]]] = [[] for _ in range(self._threads)]
+        for i in envs:
+            encoders = self._encoders[i]
+            if not encoders:  # the episode's first frame: its files
+                for key in self.video_keys:
+                    h, w, _ = self.dataset.features[key]["shape"]
+                    self._serial += 1
+                    path = self.dataset.staged(f"env{i}-{self._serial}.mp4")
+                    encoders[key] = EpisodeVideo(path, self.fps, h, w, self.codec, self.crf, self.gop)
+            job = jobs[i % self._threads]
+            for key in self.videos:
+                job.append((encoders[key], s.obs[key][i]))
+            if self.render_key is not None:
+                job.append((encoders[self.render_key], s.frames[i]))  # type: ignore[index]
+        if self._pool is None:
+            _encode_frames(jobs[0])
+        else:
+            list(self._pool.map(_encode_frames, jobs))  # re-raises an encoder's error
 
     def _abandon(self, i: int) -> None:
         for video in self._encoders[i].values():
@@ -259,3 +272,8 @@ class Writer:
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
         self._last_commit = time.monotonic()
+
+
+def _encode_frames(job: list[tuple[EpisodeVideo, np.ndarray]]) -> None:
+    for video, frame in job:
+        video.add(frame)
