@@ -225,6 +225,12 @@ def test_availability_names_what_is_missing_and_the_fix():
     else:
         assert "scene assets are not installed" in reason and adapter.ASSET_MARKER in reason
         assert "download_assets()" in hint and "huggingface.co" in hint
+    with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
+        frameworks = yaml.safe_load(f).get("frameworks") or {}
+    if "libero" in frameworks:
+        # The catalog runs LIBERO in a Python environment of its own (test_py_suites.py runs
+        # it there): making an entry does not depend on this interpreter.
+        return
     with pytest.raises(envhub.AdapterUnavailableError) as caught:
         envhub.make("libero-spatial")
     assert hint in str(caught.value)

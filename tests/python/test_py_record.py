@@ -569,7 +569,7 @@ def test_cli_run_video(tmp_path):
     import av
 
     mujoco_or_skip(envhub)
-    proc = _cli("run", "mujoco-hopper", "--video", "hopper.mp4", "--steps", "20", cwd=tmp_path)
+    proc = _cli("run", "mujoco-hopper", "--video", "hopper.mp4", "--video-steps", "20", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "wrote 21 frames" in proc.stdout
     with av.open(str(tmp_path / "hopper.mp4")) as video:

@@ -53,10 +53,8 @@ enum Command {
     Match(match_cmd::Args),
     /// List the adapters (simulators) and whether they can run here.
     Adapters(adapters::Args),
-    /// Run a random-policy rollout through the hub (or, with `--video`, film one env).
+    /// Run a random-policy rollout through the hub.
     Run(run::Args),
-    /// Record episodes into a LeRobot dataset (Parquet, MP4, JSON).
-    Record(record::Args),
     /// Measure throughput through the hub against in-process stepping, and the round trip.
     Bench(bench::Args),
     /// Run the hub as a daemon that several client processes share (set ENVHUB_HUB to its
@@ -66,6 +64,8 @@ enum Command {
     Hubs(hubs::Args),
     /// The Python environments suites run in (`python_envs:`): list, build, remove.
     Env(env_cmd::Args),
+    /// Record episodes into a LeRobot dataset (v3: Parquet, MP4 per camera, meta/).
+    Record(record::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -113,16 +113,15 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),
-        Command::Run(args) => match args.video() {
-            Some((path, id, steps, seed)) => {
+        Command::Run(args) => match &args.video {
+            Some(path) => {
                 hub()?; // applies the config's `python:` (the recorder's interpreter)
                 record::video(
                     &cli.registries,
                     cli.config.as_deref(),
-                    id,
+                    &args.id,
                     path,
-                    steps,
-                    seed,
+                    args.video_steps,
                 )
             }
             None => run::run(&hub()?, &args),

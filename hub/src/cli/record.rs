@@ -137,7 +137,6 @@ pub(crate) fn video(
     id: &str,
     path: &Path,
     steps: usize,
-    seed: u64,
 ) -> anyhow::Result<Outcome> {
     let argv: Vec<OsString> = vec![
         id.into(),
@@ -145,8 +144,6 @@ pub(crate) fn video(
         path.into(),
         "--steps".into(),
         steps.to_string().into(),
-        "--seed".into(),
-        seed.to_string().into(),
     ];
     recorder(registries, config, &argv)
 }

@@ -10,17 +10,16 @@ use std::time::Instant;
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
     /// Registry id (`gym-cartpole`).
-    id: String,
+    pub(crate) id: String,
     /// Envs in the batch.
     #[arg(long, default_value_t = 8)]
     num_envs: usize,
     /// Worker processes (default: one per core, at most one per env).
     #[arg(long)]
     workers: Option<usize>,
-    /// Env steps in total (over all envs; default 100000), or with `--video` the video's
-    /// frames (default 300).
-    #[arg(long)]
-    steps: Option<usize>,
+    /// Env steps in total (over all envs).
+    #[arg(long, default_value_t = 100_000)]
+    steps: usize,
     /// Seed of the first reset (env i gets seed + i) and of the random policy.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -31,18 +30,13 @@ pub(crate) struct Args {
     /// (`box1,box2,local`: spread by cores) or counts (`box1:48,box2:16`).
     #[arg(long, value_name = "HUBS", default_value = "local")]
     hub: String,
-    /// Instead, write one env's `render()` frames to this MP4 (recorded by the Python package,
-    /// as `envhub record` is).
-    #[arg(long, value_name = "FILE")]
-    video: Option<std::path::PathBuf>,
-}
-
-impl Args {
-    /// `--video`: the file, the env id, the frames and the seed.
-    pub(crate) fn video(&self) -> Option<(&std::path::Path, &str, usize, u64)> {
-        let path = self.video.as_deref()?;
-        Some((path, &self.id, self.steps.unwrap_or(300), self.seed))
-    }
+    /// Write the first env's `render()` frames of a random rollout to this MP4 instead (a
+    /// quick look at an env; through the Python package's recorder).
+    #[arg(long, value_name = "FILE.mp4")]
+    pub(crate) video: Option<std::path::PathBuf>,
+    /// Steps of the video (`--video`).
+    #[arg(long, default_value_t = 300)]
+    pub(crate) video_steps: usize,
 }
 
 pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
@@ -54,7 +48,7 @@ pub(crate) fn run(hub: &Hub, args: &Args) -> anyhow::Result<Outcome> {
     let mut env = hub.make_vec_on(&args.id, args.num_envs, &config, &placement)?;
     let n = env.num_envs();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(args.seed);
-    let batches = args.steps.unwrap_or(100_000).div_ceil(n).max(1);
+    let batches = args.steps.div_ceil(n).max(1);
     let mut returns = vec![0.0f64; n];
     let (mut episodes, mut return_sum) = (0usize, 0.0f64);
     let progress = !args.json && std::io::stderr().is_terminal();

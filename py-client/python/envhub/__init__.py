@@ -101,6 +101,7 @@ __all__ = [
     "HubLostError",
     "HubRefusedError",
     "NetworkError",
+    "RecordEpisodes",
     "UnknownHubError",
     "InvalidActionError",
     "InvalidConfigError",
