@@ -272,6 +272,23 @@ def test_envs_on_other_hubs(two_hubs, tmp_path):
                   video_key="observation.images.render")
 
 
+def test_gymnasiums_own_vector_env(tmp_path):
+    """Not only envhub's envs: Gymnasium's `SyncVectorEnv` records the same way (the task
+    text is env 0's id)."""
+    import gymnasium
+
+    env = gymnasium.vector.SyncVectorEnv([lambda: gymnasium.make("CartPole-v1")] * 2)
+    root = tmp_path / "sync"
+    rec = envhub.RecordEpisodes(env, str(root))
+    rng = np.random.default_rng(8)
+    try:
+        expected = drive(rec, 60, lambda obs: rng.integers(0, 2, 2), seed=4)
+    finally:
+        rec.close()
+    summary, arrays = load(root)
+    check_against(summary, arrays, expected, "CartPole-v1")
+
+
 def _camera_env():
     import gymnasium
 

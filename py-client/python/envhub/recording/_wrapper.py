@@ -413,6 +413,11 @@ def _task_of(env: VectorEnv) -> str:
         except Exception:  # not a catalog id (the drop-in's env factories): fall through
             pass
     spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
+    if spec is None:
+        try:  # a vector env of Gymnasium envs (Sync/AsyncVectorEnv, the drop-in): env 0's
+            spec = env.get_attr("spec")[0]
+        except Exception:
+            spec = None
     if spec is not None and getattr(spec, "id", None):
         return str(spec.id)
     return type(env.unwrapped).__name__
