@@ -47,9 +47,6 @@ MESA_STAMP := .build/mesa.installed
 LAVAPIPE_DIR := .build/lavapipe
 LAVAPIPE_ICD := $(LAVAPIPE_DIR)/lvp_icd.json
 MANISKILL_STAMP := $(VENV)/.maniskill-installed
-# Recording's tests (`envhub.record`): pyarrow + PyAV for the recorder, and LeRobot's own
-# loader (lerobot-dataset with torch and torchvision) as the judge of what it writes.
-RECORD_STAMP := $(VENV)/.record-installed
 ifneq ($(wildcard $(LAVAPIPE_ICD)),)
 export VK_ICD_FILENAMES ?= $(abspath $(LAVAPIPE_ICD))
 endif
@@ -63,8 +60,13 @@ LIBERO_STAMP := $(LIBERO_VENV)/.installed
 # Written by `make libero` once the adapter is available (assets included).
 LIBERO_READY := $(LIBERO_VENV)/.ready
 LIBERO_PACKAGE := hf-libero==0.1.4
+# LeRobot's dataset loader (with torch, ~5 GB) in an interpreter of its own: the judge of the
+# recorder's tests (requirements-lerobot.txt says why it is not .venv/). uv, from .venv/,
+# downloads in parallel.
+LEROBOT_VENV := .venv-lerobot
+LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero wheel env
+.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -75,6 +77,7 @@ help:
 	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
+	@echo "make lerobot  LeRobot's dataset loader in .venv-lerobot, the recorder tests' judge (about 5 GB; make py-test does it)"
 
 # Packages go in with uv (pinned in requirements-dev.txt; pip brings it in first): it resolves
 # fast and links files from its cache (~/.cache/uv) instead of copying them, so a second clone
@@ -112,10 +115,6 @@ $(MESA_STAMP):
 	fi
 
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
-
-$(RECORD_STAMP): $(VENV_STAMP) requirements-record.txt
-	$(UV_PIP) -r requirements-record.txt
-	touch $@
 
 $(MANISKILL_STAMP): $(VENV_STAMP) requirements-maniskill.txt
 	$(UV_PIP) -r requirements-maniskill.txt
@@ -155,6 +154,14 @@ libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
 	$(LIBERO_VPY) -c 'from envhub.hosted.libero import main; raise SystemExit(main(download=True))'
 	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
 	touch $(LIBERO_READY)
+
+$(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_STAMP)
+	rm -rf $(LEROBOT_VENV)
+	$(PYTHON) -m venv $(LEROBOT_VENV)
+	$(UV) pip install --quiet --python $(LEROBOT_VENV)/bin/python -r requirements-lerobot.txt
+	touch $@
+
+lerobot: $(LEROBOT_STAMP)
 
 build: setup
 	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
@@ -217,7 +224,7 @@ wheel: build
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
-py-test: py-install $(RECORD_STAMP)
+py-test: py-install $(LEROBOT_STAMP)
 	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
@@ -228,7 +235,7 @@ test: lint rust-test py-test
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) $(LIBERO_VENV) .build dist
+	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) .build dist
 
 # The variables cargo sees here, for running it by hand: `eval "$$(make -s env)"`.
 env:

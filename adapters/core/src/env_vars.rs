@@ -93,3 +93,12 @@ pub const ENVHUB_PYENV_REQUIRED: &str = "ENVHUB_PYENV_REQUIRED";
 /// robosuite, dm_control, MyoSuite, each in its own Python environment) fail instead of
 /// skipping when an environment cannot be built here; `make py-test` sets it.
 pub const ENVHUB_SUITES_REQUIRED: &str = "ENVHUB_SUITES_REQUIRED";
+
+/// Set (non-empty) to make the recorder's tests (`tests/python/test_py_record.py`) fail
+/// instead of skipping when pyarrow, PyAV or LeRobot's loader is missing; `make py-test` sets
+/// it.
+pub const ENVHUB_RECORD_REQUIRED: &str = "ENVHUB_RECORD_REQUIRED";
+
+/// The interpreter with LeRobot's dataset loader (`lerobot-dataset` and torch) that the
+/// recorder's tests load datasets with (default `.venv-lerobot/bin/python`, `make lerobot`).
+pub const ENVHUB_LEROBOT_PYTHON: &str = "ENVHUB_LEROBOT_PYTHON";

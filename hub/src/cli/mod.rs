@@ -114,10 +114,22 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Match(args) => match_cmd::run(&registry()?, &args),
         Command::Adapters(args) => adapters::run(&hub()?, &args),
         Command::Run(args) => match &args.video {
-            Some(path) => record::video(&cli.registries, &args.id, path, args.video_steps),
+            Some(path) => {
+                hub()?; // applies the config's `python:` (the recorder's interpreter)
+                record::video(
+                    &cli.registries,
+                    cli.config.as_deref(),
+                    &args.id,
+                    path,
+                    args.video_steps,
+                )
+            }
             None => run::run(&hub()?, &args),
         },
-        Command::Record(args) => record::run(&cli.registries, &args),
+        Command::Record(args) => {
+            hub()?;
+            record::run(&cli.registries, cli.config.as_deref(), &args)
+        }
         Command::Bench(args) => bench::run(&hub()?, &args),
         Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),
     }

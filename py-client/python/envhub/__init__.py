@@ -5,6 +5,7 @@
     envs = envhub.make_vec("gym-cartpole", num_envs=64)   # a gymnasium.vector.VectorEnv
     env = gymnasium.make("envhub/gym-cartpole")           # after `import envhub`
     envs = envhub.AsyncVectorEnv([lambda: MyEnv()] * 8)   # gymnasium's AsyncVectorEnv, on envhub
+    envs = envhub.RecordEpisodes(envs, "datasets/run1")    # episodes into a LeRobot dataset
     venv = envhub.sb3.make_vec("mujoco-ant", 8)           # Stable-Baselines3's VecEnv (import envhub.sb3)
 
 Observations are read-only numpy arrays that view the worker's shared memory; the simulator
@@ -47,7 +48,7 @@ from .errors import (
     WorkerBinaryError,
     WorkerDiedError,
 )
-from .record import RecordEpisodes, record  # `envhub.record` is the function; the package stays importable
+from .recording import RecordEpisodes, record
 from .registration import register_envs
 from .registry import EnvEntry, EnvRegistry, MatchResult, TaskSpec, match_task_to_env
 from .vector import VectorEnv
@@ -109,6 +110,7 @@ __all__ = [
     "MatchResult",
     "NoAdapterError",
     "NoMatchError",
+    "RecordEpisodes",
     "RegistryError",
     "TaskSpec",
     "UnknownEnvError",

@@ -1,0 +1,515 @@
+"""A LeRobot dataset (v3.0 layout) on disk, appended to in commits, written with pyarrow.
+
+The layout, as LeRobot's loader reads it:
+
+    meta/info.json                          fps, features, totals, path templates
+    meta/tasks.parquet                      task text -> task_index
+    meta/stats.json                         per-feature statistics over every frame
+    meta/episodes/chunk-C/file-F.parquet    one row per episode: length, its data and video
+                                            files, its rows in the dataset, its statistics
+    data/chunk-C/file-F.parquet             one row per frame
+    videos/KEY/chunk-C/file-F.mp4           frames of a camera
+
+Crash safety: a commit writes new files only (never rewrites data or videos), each under a
+temporary name in `.envhub/` and renamed into place, and `meta/info.json`, whose totals say
+which episodes exist, is renamed into place last. Opening the folder again removes files a
+crash left that `info.json` does not count. LeRobot's loader reads every data file it finds,
+so between the first rename of a commit and the last (a few renames, microseconds) a crash
+leaves files it would read too; the next recording into the folder removes them.
+
+Each commit writes one data file and one episodes file holding every episode it commits, and
+one MP4 per episode and camera (LeRobot's writer concatenates episodes into larger MP4s; that
+would mean rewriting files, which this writer never does).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import shutil
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import DatasetLayoutError, RecordingError
+
+CODEBASE_VERSION = "v3.0"
+CHUNKS_SIZE = 1000
+DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
+EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+#: The index columns, which a commit computes.
+INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+#: envhub's own folder inside a dataset: the lock and files not yet committed.
+PRIVATE = ".envhub"
+
+
+@dataclass
+class Episode:
+    """One ended episode, ready to commit: its columns (one row per frame), its videos
+    (encoded files in the private folder), statistics, task and success."""
+
+    length: int
+    columns: dict[str, np.ndarray]
+    videos: dict[str, Path] = field(default_factory=dict)
+    video_stats: dict[str, dict[str, Any]] = field(default_factory=dict)
+    task: str = ""
+    success: bool | None = None
+
+
+def _next(chunk: int, file: int) -> tuple[int, int]:
+    return (chunk + 1, 0) if file == CHUNKS_SIZE - 1 else (chunk, file + 1)
+
+
+def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
+    return template.format(chunk_index=at[0], file_index=at[1], **kw)
+
+
+def _stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
+    """LeRobot's statistics of a column (`(frames,)` or `(frames, dims)`) per episode (rows
+    `starts[e]` on, `lengths[e]` of them) and over all of it: min, max, mean, std (of shape
+    `(dims,)`, `(1,)` for scalars) and count. Quantiles, which LeRobot's newer writer adds, are
+    left out (its `augment_dataset_quantile_stats` adds them to a dataset)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim == 1:
+        v = v[:, None]
+    n = lengths[:, None].astype(np.float64)
+    mean = np.add.reduceat(v, starts, axis=0) / n
+    centred = v - np.repeat(mean, lengths, axis=0)
+    per_episode = {
+        "min": np.minimum.reduceat(v, starts, axis=0),
+        "max": np.maximum.reduceat(v, starts, axis=0),
+        "mean": mean,
+        "std": np.sqrt(np.add.reduceat(centred * centred, starts, axis=0) / n),
+        "count": lengths[:, None].astype(np.int64),
+    }
+    whole = {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0), "count": np.array([len(v)])}
+    return per_episode, whole
+
+
+def _nested(values: np.ndarray, leaf: Any) -> Any:
+    """`values` of shape `(rows, *dims)` as a pyarrow column of nested lists (one level per
+    dim), built from the flat buffer."""
+    import pyarrow as pa
+
+    array = pa.array(np.ascontiguousarray(values).reshape(-1), type=leaf)
+    for size in reversed(values.shape[1:]):
+        offsets = np.arange(0, len(array) + 1, size, dtype=np.int32)
+        array = pa.ListArray.from_arrays(pa.array(offsets), array)
+    return array
+
+
+def aggregate(a: dict[str, np.ndarray] | None, b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Statistics over the frames of both (LeRobot's `aggregate_feature_stats`: exact mean and
+    std)."""
+    if a is None:
+        return {k: np.asarray(v) for k, v in b.items()}
+    na, nb = float(a["count"][0]), float(b["count"][0])
+    n = na + nb
+    mean = (a["mean"] * na + b["mean"] * nb) / n
+    var = ((a["std"] ** 2 + (a["mean"] - mean) ** 2) * na + (b["std"] ** 2 + (b["mean"] - mean) ** 2) * nb) / n
+    return {
+        "min": np.minimum(a["min"], b["min"]),
+        "max": np.maximum(a["max"], b["max"]),
+        "mean": mean,
+        "std": np.sqrt(var),
+        "count": np.array([int(n)]),
+    }
+
+
+def _layout_problems(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    problems = []
+    if old.get("codebase_version") != new["codebase_version"]:
+        problems.append(
+            f"its version is `{old.get('codebase_version')}`, this recorder writes `{new['codebase_version']}`"
+        )
+    if old.get("fps") != new["fps"]:
+        problems.append(f"fps `{old.get('fps')}` there, `{new['fps']}` here")
+    a, b = old.get("features", {}), new["features"]
+    for key in [*a, *(k for k in b if k not in a)]:
+        fa, fb = a.get(key), b.get(key)
+        if fa is None:
+            problems.append(f"feature `{key}` is recorded here but absent there")
+        elif fb is None:
+            problems.append(f"feature `{key}` is there but not recorded here")
+        elif (fa["dtype"], list(fa["shape"])) != (fb["dtype"], list(fb["shape"])):
+            problems.append(
+                f"feature `{key}` is `{fa['dtype']}` of shape {list(fa['shape'])} there, "
+                f"`{fb['dtype']}` of shape {list(fb['shape'])} here"
+            )
+    return problems
+
+
+def _pandas_tasks_metadata(index_name: str) -> bytes:
+    """The pandas metadata that makes `pandas.read_parquet` give the task text as the index,
+    as LeRobot's loader expects (`tasks.iloc[i].name`)."""
+    return json.dumps(
+        {
+            "index_columns": [index_name],
+            "column_indexes": [
+                {"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object",
+                 "metadata": {"encoding": "UTF-8"}}
+            ],
+            "columns": [
+                {"name": "task_index", "field_name": "task_index", "pandas_type": "int64",
+                 "numpy_type": "int64", "metadata": None},
+                {"name": None if index_name.startswith("__") else index_name, "field_name": index_name,
+                 "pandas_type": "unicode", "numpy_type": "object", "metadata": None},
+            ],
+            "creator": {"library": "envhub"},
+            "pandas_version": "2.2.0",
+        }
+    ).encode()
+
+
+class Dataset:
+    """A LeRobot v3.0 dataset folder this process appends to (it holds the folder's lock).
+
+    `features` maps every recorded feature (the index columns included) to its entry in
+    `info.json`. An existing dataset must have the same version, fps and features (dtype and
+    shape), else `DatasetLayoutError` names each difference."""
+
+    def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+        import pyarrow  # noqa: F401  (fails early, before any file is touched)
+
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        private = self.root / PRIVATE
+        self._ours = private.exists()  # an envhub recording was here (maybe cut short)
+        private.mkdir(exist_ok=True)
+        self._lock = open(private / "lock", "w")  # held until close
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            raise RecordingError(
+                f"the dataset `{self.root}` is being written by another recorder\n"
+                "hint: record into another folder, or wait for that recording to end"
+            ) from None
+        try:
+            self._open(fps, features, robot_type)
+        except BaseException:
+            self._lock.close()
+            raise
+
+    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+        self.staging = self.root / PRIVATE / "staging"
+        shutil.rmtree(self.staging, ignore_errors=True)
+        self.staging.mkdir()
+        info_path = self.root / "meta" / "info.json"
+        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
+        if info_path.exists():
+            try:
+                info = json.loads(info_path.read_text())
+            except (OSError, ValueError) as e:
+                raise DatasetLayoutError(
+                    f"`{info_path}` cannot be read as JSON ({e})\nhint: record into a new folder"
+                ) from e
+            problems = _layout_problems(info, wanted)
+            if problems:
+                raise DatasetLayoutError(
+                    f"the dataset at `{self.root}` has another layout than this recording: "
+                    + "; ".join(problems)
+                    + "\nhint: record into a new folder, or record the same env with the same "
+                    "observation, action, frames and fps to append to this one"
+                )
+            self.info = info
+        else:
+            # Without `info.json`, `data/`, `meta/` and `videos/` are what a crash in the first
+            # commit left, if envhub was recording here; anything else is not ours to remove.
+            ours = (PRIVATE, "data", "meta", "videos") if self._ours else (PRIVATE,)
+            others = [p.name for p in self.root.iterdir() if p.name not in ours]
+            if others:
+                raise DatasetLayoutError(
+                    f"`{self.root}` is not empty and holds no LeRobot dataset (no `meta/info.json`; "
+                    f"it has {', '.join(f'`{n}`' for n in sorted(others)[:5])})\n"
+                    "hint: record into a new or empty folder"
+                )
+            self.info = {
+                "codebase_version": CODEBASE_VERSION,
+                "robot_type": robot_type,
+                "total_episodes": 0,
+                "total_frames": 0,
+                "total_tasks": 0,
+                "chunks_size": CHUNKS_SIZE,
+                "data_files_size_in_mb": 100,
+                "video_files_size_in_mb": 200,
+                "fps": fps,
+                "splits": {},
+                "data_path": DATA_PATH,
+                "video_path": VIDEO_PATH if any(f["dtype"] == "video" for f in features.values()) else None,
+                "features": features,
+            }
+        self.features = self.info["features"]
+        self.video_keys = [k for k, f in self.features.items() if f["dtype"] == "video"]
+        rows = self._committed_episode_rows()
+        self._remove_uncommitted(rows)
+        self._next_data = self._after(rows, "data")
+        self._next_meta = self._after(rows, "meta/episodes")
+        self._next_video = {k: self._after(rows, f"videos/{k}") for k in self.video_keys}
+        self.tasks = self._read_tasks()
+        self.stats = self._read_stats()
+        self._schemas = self._existing_schemas()
+
+    # Reading what is there -----------------------------------------------------------------
+
+    def _episode_files(self) -> list[Path]:
+        return sorted((self.root / "meta" / "episodes").glob("*/*.parquet"))
+
+    def _committed_episode_rows(self) -> list[dict[str, Any]]:
+        """The rows of `meta/episodes` of the episodes `info.json` counts."""
+        import pyarrow.parquet as pq
+
+        total = self.info["total_episodes"]
+        keep = ["episode_index", "data/chunk_index", "data/file_index", "meta/episodes/chunk_index",
+                "meta/episodes/file_index"]
+        for k in self.video_keys:
+            keep += [f"videos/{k}/chunk_index", f"videos/{k}/file_index"]
+        rows: list[dict[str, Any]] = []
+        for path in self._episode_files():
+            names = pq.read_schema(path).names
+            table = pq.read_table(path, columns=[c for c in keep if c in names])
+            rows += [r for r in table.to_pylist() if r["episode_index"] < total]
+        if len(rows) != total:
+            raise DatasetLayoutError(
+                f"the dataset at `{self.root}` counts {total} episodes in `meta/info.json` but "
+                f"`meta/episodes/` describes {len(rows)} of them\nhint: record into a new folder"
+            )
+        return rows
+
+    def _remove_uncommitted(self, rows: list[dict[str, Any]]) -> None:
+        """Removes files of `data/`, `meta/episodes/` and `videos/` that no counted episode
+        refers to: what a crash between a commit's first rename and `info.json` left."""
+        used = {Path(_fmt(DATA_PATH, (r["data/chunk_index"], r["data/file_index"]))) for r in rows}
+        used |= {Path(_fmt(EPISODES_PATH, (r["meta/episodes/chunk_index"], r["meta/episodes/file_index"])))
+                 for r in rows}
+        for k in self.video_keys:
+            used |= {Path(_fmt(VIDEO_PATH, (r[f"videos/{k}/chunk_index"], r[f"videos/{k}/file_index"]),
+                               video_key=k)) for r in rows}
+        removed = []
+        for pattern in ("data/*/*.parquet", "meta/episodes/*/*.parquet", "videos/*/*/*.mp4"):
+            for path in self.root.glob(pattern):
+                rel = path.relative_to(self.root)
+                if rel not in used:
+                    path.unlink()
+                    removed.append(str(rel))
+        if removed:
+            warnings.warn(
+                f"removed {len(removed)} file(s) of episodes that a crash left uncommitted in "
+                f"`{self.root}`: {', '.join(sorted(removed)[:5])}{' ...' if len(removed) > 5 else ''}",
+                stacklevel=4,
+            )
+
+    @staticmethod
+    def _after(rows: list[dict[str, Any]], prefix: str) -> tuple[int, int]:
+        used = [(r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) for r in rows
+                if r.get(f"{prefix}/chunk_index") is not None]
+        return _next(*max(used)) if used else (0, 0)
+
+    def _read_tasks(self) -> dict[str, int]:
+        import pyarrow.parquet as pq
+
+        path = self.root / "meta" / "tasks.parquet"
+        if not path.exists():
+            return {}
+        table = pq.read_table(path)
+        meta = json.loads((table.schema.metadata or {}).get(b"pandas", b"{}"))
+        index = (meta.get("index_columns") or ["task"])[0]
+        name = index if isinstance(index, str) and index in table.column_names else "task"
+        return dict(zip(table.column(name).to_pylist(), table.column("task_index").to_pylist(), strict=True))
+
+    def _read_stats(self) -> dict[str, dict[str, np.ndarray]]:
+        path = self.root / "meta" / "stats.json"
+        if not path.exists():
+            return {}
+        return {k: {s: np.asarray(v) for s, v in d.items()} for k, d in json.loads(path.read_text()).items()}
+
+    def _existing_schemas(self) -> dict[str, Any]:
+        """The schemas of the files already there, which new files follow (the loader reads
+        all files of a folder as one table)."""
+        import pyarrow.parquet as pq
+
+        out: dict[str, Any] = {}
+        data = sorted((self.root / "data").glob("*/*.parquet"))
+        if data:
+            out["data"] = pq.read_schema(data[-1])
+        episodes = self._episode_files()
+        if episodes:
+            out["episodes"] = pq.read_schema(episodes[-1])
+        return out
+
+    # Writing -------------------------------------------------------------------------------
+
+    def staged(self, name: str) -> Path:
+        """A path in the private folder, for a file not committed yet."""
+        return self.staging / name
+
+    def _place(self, tmp: Path, rel: str) -> None:
+        final = self.root / rel
+        final.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp, final)
+
+    def _write_table(self, table: Any, rel: str) -> None:
+        import pyarrow.parquet as pq
+
+        tmp = self.staged(Path(rel).name + ".tmp")
+        pq.write_table(table, tmp, compression="snappy")
+        self._place(tmp, rel)
+
+    def _write_json(self, data: dict[str, Any], rel: str) -> None:
+        tmp = self.staged(Path(rel).name + ".tmp")
+        with open(tmp, "w") as f:
+            json.dump(data, f, indent=4, ensure_ascii=False)
+            f.flush()
+            os.fsync(f.fileno())
+        self._place(tmp, rel)
+
+    def commit(self, episodes: list[Episode]) -> list[int]:
+        """Writes `episodes` into the dataset (see the module's doc for the order); returns
+        their episode indices. Statistics are computed over all of them at once (one
+        `reduceat` per column and statistic), since commits of many episodes are common."""
+        if not episodes:
+            return []
+        first_ep, first_frame = self.info["total_episodes"], self.info["total_frames"]
+        new_tasks = [e.task for e in episodes if e.task not in self.tasks]
+        for task in dict.fromkeys(new_tasks):
+            self.tasks[task] = len(self.tasks)
+        data_at, meta_at = self._next_data, self._next_meta
+        fps = self.info["fps"]
+        count = len(episodes)
+        lengths = np.array([ep.length for ep in episodes], dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+        total = int(lengths.sum())
+        frame_index = np.arange(total, dtype=np.int64) - np.repeat(starts, lengths)
+
+        columns: dict[str, np.ndarray] = {}
+        for key, f in self.features.items():
+            if f["dtype"] != "video" and key not in INDEX_KEYS:
+                columns[key] = np.concatenate([ep.columns[key] for ep in episodes])
+        columns["timestamp"] = (frame_index / fps).astype(np.float32)
+        columns["frame_index"] = frame_index
+        columns["episode_index"] = np.repeat(np.arange(first_ep, first_ep + count, dtype=np.int64), lengths)
+        columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
+        columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
+
+        meta: dict[str, Any] = {
+            "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
+            "tasks": [[ep.task] for ep in episodes],
+            "length": lengths,
+            "data/chunk_index": np.full(count, data_at[0]),
+            "data/file_index": np.full(count, data_at[1]),
+            "dataset_from_index": first_frame + starts,
+            "dataset_to_index": first_frame + starts + lengths,
+        }
+        for key in self.video_keys:
+            at = []
+            for ep in episodes:
+                at.append(self._next_video[key])
+                self._next_video[key] = _next(*at[-1])
+                self._place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
+            meta[f"videos/{key}/chunk_index"] = np.array([a[0] for a in at], dtype=np.int64)
+            meta[f"videos/{key}/file_index"] = np.array([a[1] for a in at], dtype=np.int64)
+            meta[f"videos/{key}/from_timestamp"] = np.zeros(count)
+            meta[f"videos/{key}/to_timestamp"] = lengths / fps
+        meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
+        meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
+        for key, values in columns.items():
+            per_episode, whole = _stats(values, starts, lengths)
+            self.stats[key] = aggregate(self.stats.get(key), whole)
+            for name, value in per_episode.items():
+                meta[f"stats/{key}/{name}"] = value
+        for key in self.video_keys:
+            for ep in episodes:
+                self.stats[key] = aggregate(self.stats.get(key), ep.video_stats[key])
+            for name in ("min", "max", "mean", "std", "count"):
+                meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
+        meta["success"] = [ep.success for ep in episodes]
+
+        self._write_table(self._data_table(columns), _fmt(DATA_PATH, data_at))
+        self._write_table(self._episodes_table(meta), _fmt(EPISODES_PATH, meta_at))
+        self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
+        if new_tasks:
+            self._write_tasks()
+        self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
+                         "meta/stats.json")
+        self.info["total_episodes"] = first_ep + count
+        self.info["total_frames"] = first_frame + total
+        self.info["total_tasks"] = len(self.tasks)
+        self.info["splits"] = {"train": f"0:{self.info['total_episodes']}"}
+        self._write_json(self.info, "meta/info.json")  # the commit point
+        return list(range(first_ep, first_ep + count))
+
+    def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
+        import pyarrow as pa
+
+        arrays, names = [], []
+        for key, f in self.features.items():
+            if f["dtype"] == "video":
+                continue
+            values = columns[key]
+            dtype = pa.from_numpy_dtype(np.dtype(f["dtype"]))
+            if list(f["shape"]) == [1]:
+                arrays.append(pa.array(values.reshape(-1), type=dtype))
+            else:
+                width = int(f["shape"][0])
+                flat = pa.array(np.ascontiguousarray(values).reshape(-1), type=dtype)
+                arrays.append(pa.FixedSizeListArray.from_arrays(flat, width))
+            names.append(key)
+        table = pa.Table.from_arrays(arrays, names=names)
+        return self._conform(table, "data")
+
+    def _episodes_table(self, meta: dict[str, Any]) -> Any:
+        import pyarrow as pa
+
+        arrays, names = [], []
+        for key, values in meta.items():
+            if key == "tasks":
+                array = pa.array(values, type=pa.list_(pa.string()))
+            elif key == "success":
+                array = pa.array(values, type=pa.bool_())
+            elif key.startswith("stats/"):
+                array = _nested(np.asarray(values), pa.int64() if key.endswith("/count") else pa.float64())
+            elif key.endswith("_timestamp"):
+                array = pa.array(np.asarray(values, dtype=np.float64))
+            else:
+                array = pa.array(np.asarray(values, dtype=np.int64))
+            arrays.append(array)
+            names.append(key)
+        return self._conform(pa.Table.from_arrays(arrays, names=names), "episodes")
+
+    def _conform(self, table: Any, kind: str) -> Any:
+        """`table` in the schema of the dataset's existing files of this kind, if any: columns
+        they lack are dropped, columns they have and this lacks are null."""
+        import pyarrow as pa
+
+        schema = self._schemas.get(kind)
+        if schema is None:
+            self._schemas[kind] = table.schema
+            return table
+        columns = []
+        for f in schema:
+            if f.name in table.column_names:
+                columns.append(table.column(f.name).cast(f.type))
+            else:
+                columns.append(pa.nulls(len(table), type=f.type))
+        return pa.Table.from_arrays(columns, schema=schema)
+
+    def _write_tasks(self) -> None:
+        import pyarrow as pa
+
+        order = sorted(self.tasks, key=self.tasks.__getitem__)
+        table = pa.table({"task_index": pa.array([self.tasks[t] for t in order], pa.int64()),
+                          "task": pa.array(order, pa.string())})
+        table = table.replace_schema_metadata({b"pandas": _pandas_tasks_metadata("task")})
+        self._write_table(table, "meta/tasks.parquet")
+
+    def close(self) -> None:
+        """Releases the folder (removing the private folder's files not committed)."""
+        if self._lock.closed:
+            return
+        shutil.rmtree(self.root / PRIVATE, ignore_errors=True)
+        self._lock.close()

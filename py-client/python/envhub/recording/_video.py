@@ -1,0 +1,139 @@
+"""MP4 videos through PyAV (FFmpeg's encoders): one file per episode and camera, encoded frame
+by frame as the episode runs, so no episode's raw frames are ever held in memory.
+
+The default encoder is x264 (`libx264`): an open x264 encoder costs a few MB, so a recorder can
+keep one per env and camera; SVT-AV1 (`libsvtav1`, LeRobot's own default) writes smaller files
+but costs about 80 MB per open encoder. Keyframes every `gop` frames (2, as LeRobot does)
+let a data loader decode any frame quickly.
+"""
+
+from __future__ import annotations
+
+import os
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: Encoder settings per codec: `crf` (quality, lower is better) where the encoder has one.
+CODECS: dict[str, dict[str, str]] = {
+    "libx264": {"preset": "veryfast", "tune": "zerolatency"},
+    "libsvtav1": {"preset": "12"},
+    "libaom-av1": {"cpu-used": "8", "row-mt": "1"},
+    "libopenh264": {},
+}
+DEFAULT_CODEC = "libx264"
+DEFAULT_CRF = 18
+DEFAULT_GOP = 2
+
+
+def check_codec(codec: str) -> None:
+    """Raises a `ValueError` naming the codecs this PyAV build can encode with."""
+    import av
+
+    usable = [c for c in CODECS if c in av.codecs_available]
+    if codec not in CODECS or codec not in av.codecs_available:
+        raise ValueError(
+            f"unknown or unavailable video codec `{codec}`; this PyAV build encodes with "
+            + ", ".join(f"`{c}`" for c in usable)
+            + f"\nhint: codec=`{DEFAULT_CODEC}` (the default) works with many envs at once"
+        )
+
+
+def pix_fmt(width: int, height: int) -> str:
+    """`yuv420p` (what every player reads) when both sides are even, which 4:2:0 needs;
+    `yuv444p` otherwise."""
+    return "yuv420p" if width % 2 == 0 and height % 2 == 0 else "yuv444p"
+
+
+class EpisodeVideo:
+    """One episode of one camera, encoded into `path` frame by frame (frame `k` at time
+    `k / fps`)."""
+
+    def __init__(self, path: Path, fps: int, height: int, width: int, codec: str, crf: int, gop: int) -> None:
+        import av
+
+        self.path = path
+        self.shape = (height, width, 3)
+        self.frames = 0
+        self._container = av.open(str(path), mode="w", format="mp4")
+        try:
+            options = dict(CODECS[codec])
+            if codec != "libopenh264":
+                options["crf"] = str(crf)
+            options["g"] = str(gop)
+            stream = self._container.add_stream(codec, rate=fps, options=options)
+            stream.width, stream.height = width, height
+            stream.pix_fmt = pix_fmt(width, height)
+            stream.codec_context.time_base = Fraction(1, fps)
+            self._stream = stream
+        except BaseException:
+            self._container.close()
+            raise
+        self.stats = _ChannelStats()
+
+    def add(self, frame: np.ndarray) -> None:
+        import av
+
+        if frame is None or frame.shape != self.shape or frame.dtype != np.uint8:
+            got = "no frame" if frame is None else f"{frame.dtype} {frame.shape}"
+            raise ValueError(
+                f"a frame of {got} in a video of uint8 {self.shape}\nhint: an env's frames must keep "
+                "their size through a recording"
+            )
+        self.stats.add(frame)
+        vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")
+        vf.pts = self.frames
+        vf.time_base = self._stream.codec_context.time_base
+        self._container.mux(self._stream.encode(vf))
+        self.frames += 1
+
+    def finish(self) -> None:
+        """Flushes the encoder and closes the file."""
+        self._container.mux(self._stream.encode(None))
+        self._container.close()
+
+    def abandon(self) -> None:
+        """Closes and removes the file (an episode that is not kept)."""
+        try:
+            self._container.close()
+        except Exception:  # a half-written file is removed either way
+            pass
+        try:
+            os.unlink(self.path)
+        except FileNotFoundError:
+            pass
+
+
+class _ChannelStats:
+    """Per-channel min, max, mean and std of an episode's frames in [0, 1], as LeRobot keeps
+    for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels a side."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.lo = np.full(3, np.inf)
+        self.hi = np.full(3, -np.inf)
+        self.sum = np.zeros(3)
+        self.sumsq = np.zeros(3)
+
+    def add(self, frame: np.ndarray) -> None:
+        step = max(1, max(frame.shape[:2]) // 150)
+        px = frame[::step, ::step].reshape(-1, 3).astype(np.float64) / 255.0
+        self.n += len(px)
+        self.lo = np.minimum(self.lo, px.min(0))
+        self.hi = np.maximum(self.hi, px.max(0))
+        self.sum += px.sum(0)
+        self.sumsq += np.square(px).sum(0)
+
+    def result(self, frames: int) -> dict[str, Any]:
+        mean = self.sum / max(self.n, 1)
+        std = np.sqrt(np.maximum(self.sumsq / max(self.n, 1) - mean**2, 0.0))
+        shape = (3, 1, 1)
+        return {
+            "min": self.lo.reshape(shape),
+            "max": self.hi.reshape(shape),
+            "mean": mean.reshape(shape),
+            "std": std.reshape(shape),
+            "count": np.array([frames]),
+        }

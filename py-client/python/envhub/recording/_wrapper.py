@@ -1,0 +1,423 @@
+"""`RecordEpisodes`: a Gymnasium vector wrapper that writes every env's ended episodes into a
+LeRobot dataset, off the stepping thread.
+
+The step path only copies what the step returned (the caller may change arrays in place, and
+envhub's are views of shared memory) and puts it on a bounded queue; the writer thread
+(`_writer.py`) does everything else.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import time
+import warnings
+import weakref
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+
+from ._dataset import Dataset
+from ._features import INDEX_FEATURES, RENDER_KEY, STEP_COLUMNS, action_column, observation_columns
+from ._video import DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, check_codec, pix_fmt
+from ._writer import STOP, Reset, Step, Writer
+from .errors import DatasetLayoutError, QueueFullWarning, RecordingError, require
+
+# Codec names as `info.json` has them (LeRobot writes FFmpeg's canonical names), both ways.
+_CANONICAL = {"libx264": "h264", "libopenh264": "h264", "libsvtav1": "av1", "libaom-av1": "av1"}
+_ENCODER = {"h264": "libx264", "av1": "libsvtav1"}
+
+
+def _mode(env: VectorEnv) -> AutoresetMode:
+    mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+    if isinstance(mode, AutoresetMode):
+        return mode
+    for m in AutoresetMode:
+        if str(mode).lower().replace("_", "") == m.value.lower():
+            return m
+    return AutoresetMode.NEXT_STEP
+
+
+def _success(info: dict[str, Any], i: int, same_step: bool) -> bool | None:
+    """Env `i`'s `success` / `is_success` info at the end of its episode (`None`: it reports
+    none). Under `same_step` autoreset the final step's info is `info["final_info"]`."""
+    sources = []
+    if same_step and isinstance(info.get("final_info"), dict):
+        sources.append(info["final_info"])
+    sources.append(info)
+    for source in sources:
+        for key in ("success", "is_success"):
+            if key not in source:
+                continue
+            mask = source.get(f"_{key}")
+            if mask is not None and not np.asarray(mask)[i]:
+                continue
+            return bool(np.asarray(source[key])[i])
+    return None
+
+
+class RecordEpisodes(VectorWrapper):
+    """Records the episodes of every env of `env` into the LeRobot dataset (v3.0) at `root`,
+    created or appended to.
+
+    Frame `t` of an episode holds the observation the policy saw, the action taken, and what
+    that step returned (`next.reward`, `next.done`, `next.terminated`, `next.truncated`);
+    timestamps are `t / fps` (`fps`: the env's `render_fps` unless given). A plain
+    observation is `observation.state`; a Dict observation's camera images (uint8
+    `(h, w, 3)`) become videos `observation.images.<key>` and its other entries
+    `observation.<key>`. With `video=True` and an env made with `render_mode="rgb_array"`,
+    `render()` frames become the video `observation.images.render`. The task text is `task`,
+    else the catalog entry's description (envhub envs), else the env's id.
+
+    Episodes are written when they end, `keep="success"` keeping only those whose last
+    `success` / `is_success` info is true; an episode a `reset()` cuts short is not written.
+    Ended episodes reach the disk within `commit_every` seconds, so a crash loses at most the
+    episodes in flight and those, and never leaves a dataset that does not load.
+
+    Stepping is not blocked by the disk or the encoder: steps go through a queue of
+    `queue_size` to a writer thread. If it is full, `when_full="wait"` makes the step wait and
+    `"drop"` drops the step, and with it the episodes in flight (each env records again from
+    its next episode); either way a `QueueFullWarning` says so, and `stats` counts it.
+
+    `max_episodes` stops keeping episodes once that many are kept (later ones are counted in
+    `stats["episodes_beyond"]`). Frames are encoded on `encode_threads` threads (default: up to
+    4, one per core), the envs shared among them.
+
+    The dataset folder is opened (checked and locked) at the first `reset()`; a folder that
+    holds a dataset of another layout raises `DatasetLayoutError` naming the differences.
+    """
+
+    def __init__(
+        self,
+        env: VectorEnv,
+        root: str,
+        *,
+        task: str | None = None,
+        fps: int | None = None,
+        keep: str = "all",
+        video: bool = True,
+        codec: str | None = None,
+        crf: int = DEFAULT_CRF,
+        gop: int = DEFAULT_GOP,
+        queue_size: int = 64,
+        when_full: str = "wait",
+        commit_every: float = 1.0,
+        max_episodes: int | None = None,
+        encode_threads: int | None = None,
+        robot_type: str | None = None,
+    ) -> None:
+        super().__init__(env)
+        require()
+        if keep not in ("all", "success"):
+            raise ValueError(f"unknown `keep={keep!r}`\nhint: use `keep=\"all\"` or `keep=\"success\"`")
+        if when_full not in ("wait", "drop"):
+            raise ValueError(f"unknown `when_full={when_full!r}`\nhint: use `when_full=\"wait\"` or `\"drop\"`")
+        if queue_size < 1:
+            raise ValueError(f"`queue_size={queue_size}` must be at least 1")
+        if codec is not None:
+            check_codec(codec)
+        self.root = str(root)
+        self.keep, self.when_full = keep, when_full
+        self._mode = _mode(env)
+        self.fps = self._fps(env, fps)
+        self.task = task if task is not None else _task_of(env)
+        self._obs_columns = observation_columns(env.single_observation_space)
+        self._action = action_column(env.single_action_space)
+        self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
+        self._codec, self._crf, self._gop = codec, int(crf), int(gop)
+        self._queue_size, self._commit_every, self._robot_type = queue_size, float(commit_every), robot_type
+        self._max_episodes = max_episodes
+        self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
+        self.stats: dict[str, Any] = {
+            "episodes_kept": 0,  # ended and kept (committed or about to be)
+            "episodes_written": 0,  # committed
+            "episodes_filtered": 0,
+            "episodes_dropped": 0,
+            "episodes_cut": 0,
+            "episodes_beyond": 0,
+            "frames_kept": 0,
+            "steps_dropped": 0,
+            "steps_waited": 0,
+            "seconds_waited": 0.0,
+        }
+        self._writer: Writer | None = None
+        self._dataset: Dataset | None = None
+        self._prev: tuple[dict[str, np.ndarray], list[np.ndarray] | None] | None = None
+        self._fresh = np.ones(self.num_envs, dtype=bool)  # envs whose next step is not recorded
+        self._gap = False
+        self._warned = False
+        self._closed = False
+        # Stops the writer (committing what ended) on `close()`, when the wrapper is collected,
+        # or at interpreter exit; holds no reference to the wrapper.
+        self._finalizer: weakref.finalize | None = None
+
+    @staticmethod
+    def _fps(env: VectorEnv, fps: int | None) -> int:
+        value = fps if fps is not None else env.metadata.get("render_fps")
+        if value is None:
+            raise ValueError(
+                "the env declares no frame rate (`metadata[\"render_fps\"]`), which the dataset's "
+                "timestamps need\nhint: pass `fps=` (steps per second of env time)"
+            )
+        if float(value) <= 0 or not float(value).is_integer():
+            raise ValueError(
+                f"the dataset's fps must be a positive whole number (LeRobot's), got `{value}`\n"
+                "hint: pass `fps=` with the nearest whole number"
+            )
+        return int(value)
+
+    # Opening the dataset at the first reset ------------------------------------------------
+
+    def _open(self, frames: list[np.ndarray] | None) -> None:
+        features: dict[str, dict] = {}
+        codec = self._codec or DEFAULT_CODEC
+        video_shapes = {c.name: c.shape for c in self._obs_columns if c.video}
+        if self._render:
+            if frames is None or any(f is None for f in frames):
+                raise RecordingError(
+                    "the env was made with `render_mode=\"rgb_array\"` but `render()` gave no frame\n"
+                    "hint: pass `video=False` to record without frames"
+                )
+            video_shapes[RENDER_KEY] = tuple(np.asarray(frames[0]).shape)
+        for c in [*self._obs_columns, self._action, *STEP_COLUMNS]:
+            if c.video:
+                continue
+            features[c.name] = c.feature(self.fps)
+        for key, (h, w, ch) in video_shapes.items():
+            features[key] = {
+                "dtype": "video",
+                "shape": [h, w, ch],
+                "names": ["height", "width", "channels"],
+                "info": {
+                    "video.height": h,
+                    "video.width": w,
+                    "video.codec": _CANONICAL[codec],
+                    "video.pix_fmt": pix_fmt(w, h),
+                    "video.is_depth_map": False,
+                    "video.fps": self.fps,
+                    "video.channels": ch,
+                    "has_audio": False,
+                },
+            }
+        features |= INDEX_FEATURES
+        dataset = Dataset(self.root, self.fps, features, self._robot_type)
+        try:
+            codec = self._dataset_codec(dataset, codec)
+            check_codec(codec)
+        except BaseException:
+            dataset.close()
+            raise
+        self._dataset = dataset
+        numeric = [c.name for c in self._obs_columns if not c.video]
+        videos = [c.name for c in self._obs_columns if c.video]
+        self._writer = Writer(
+            dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
+            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_size, self.stats,
+            self._max_episodes, self._encode_threads,
+        )
+        self._finalizer = weakref.finalize(self, _stop_writer, self._writer, dataset)
+
+    def _dataset_codec(self, dataset: Dataset, codec: str) -> str:
+        """The encoder for this dataset: its videos' codec when appending (an explicit other
+        codec is an error, since `info.json` describes one per camera)."""
+        for key in dataset.video_keys:
+            there = dataset.features[key].get("info", {}).get("video.codec")
+            if there is None or dataset.info["total_episodes"] == 0:
+                continue
+            if self._codec is None:
+                return _ENCODER.get(there, codec)
+            if _CANONICAL[self._codec] != there:
+                raise DatasetLayoutError(
+                    f"the dataset at `{dataset.root}` holds `{there}` videos, this recording "
+                    f"encodes `{_CANONICAL[self._codec]}` (`{self._codec}`)\n"
+                    f"hint: leave `codec` out to append with the dataset's codec"
+                )
+        return codec
+
+    # The step path ------------------------------------------------------------------------
+
+    def _observe(self, obs: Any) -> dict[str, np.ndarray]:
+        return {c.name: np.array(c.batch(obs, self.num_envs), copy=True) for c in self._obs_columns}
+
+    def _frames(self) -> list[np.ndarray] | None:
+        if not self._render:
+            return None
+        frames = self.env.render()
+        return None if frames is None else list(frames)
+
+    def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        self._check()
+        obs, info = self.env.reset(seed=seed, options=options)
+        mask = (options or {}).get("reset_mask")
+        mask = None if mask is None else np.array(mask, dtype=bool, copy=True)
+        frames = self._frames()
+        if self._writer is None:
+            self._open(frames)
+        self._put(Reset(mask))
+        self._prev = (self._observe(obs), frames)
+        if mask is None:
+            self._fresh[:] = False
+        else:
+            self._fresh[mask] = False
+        return obs, info
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        self._check()
+        if self._prev is None:
+            raise RecordingError("`step` before `reset`\nhint: call `reset()` first, as Gymnasium requires")
+        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        terminated_ = np.array(terminated, dtype=bool, copy=True)
+        truncated_ = np.array(truncated, dtype=bool, copy=True)
+        done = terminated_ | truncated_
+        valid = ~self._fresh
+        success = None
+        if done.any():
+            same_step = self._mode == AutoresetMode.SAME_STEP
+            success = [_success(info, i, same_step) if done[i] else None for i in range(self.num_envs)]
+            if self.keep == "success":
+                unknown = [i for i in np.flatnonzero(done & valid) if success[i] is None]
+                if unknown:
+                    raise RecordingError(
+                        f"env {unknown[0]} ended an episode without a `success` or `is_success` info, "
+                        "so `keep=\"success\"` cannot tell whether to keep it\n"
+                        "hint: record with `keep=\"all\"`, or wrap the env so its info says `success`"
+                    )
+        prev_obs, prev_frames = self._prev
+        self._put(
+            Step(
+                obs=prev_obs,
+                frames=prev_frames,
+                action=np.array(self._action.batch(actions, self.num_envs), copy=True),
+                reward=np.array(rewards, dtype=np.float64, copy=True),
+                terminated=terminated_,
+                truncated=truncated_,
+                valid=valid,
+                success=success,
+                task=self.task,
+            )
+        )
+        self._prev = (self._observe(obs), self._frames())
+        if self._mode == AutoresetMode.NEXT_STEP:
+            self._fresh = done
+        elif self._mode == AutoresetMode.DISABLED:
+            self._fresh = self._fresh | done
+        return obs, rewards, terminated, truncated, info
+
+    def _put(self, item: Step | Reset) -> None:
+        assert self._writer is not None
+        q = self._writer.queue
+        item.gap = self._gap
+        try:
+            q.put_nowait(item)
+            self._gap = False
+            return
+        except queue.Full:
+            pass
+        if self.when_full == "drop" and isinstance(item, Step):
+            self.stats["steps_dropped"] += 1
+            self._gap = True
+            self._warn(
+                f"the recorder's queue ({self._queue_size} steps) is full: a step is dropped, and "
+                "with it the episodes in flight (each env records again from its next episode)"
+            )
+            return
+        self.stats["steps_waited"] += 1
+        self._warn(f"the recorder's queue ({self._queue_size} steps) is full: steps wait for the writer")
+        start = time.monotonic()
+        while True:
+            self._check()
+            try:
+                q.put(item, timeout=0.5)
+                break
+            except queue.Full:
+                continue
+        self.stats["seconds_waited"] += time.monotonic() - start
+        self._gap = False
+
+    def _warn(self, message: str) -> None:
+        if not self._warned:
+            self._warned = True
+            warnings.warn(
+                f"{message}\nhint: a larger `queue_size`, fewer envs or cameras, or `video=False`; "
+                "`stats` counts every wait and drop",
+                QueueFullWarning,
+                stacklevel=4,
+            )
+
+    def _check(self) -> None:
+        if self._writer is not None and self._writer.error is not None:
+            err = self._writer.error
+            raise RecordingError(f"the recording writer failed: {type(err).__name__}: {err}") from err
+        if self._writer is not None and not self._writer.thread.is_alive() and not self._closed:
+            raise RecordingError("the recording writer stopped\nhint: this is a bug; the dataset keeps what it committed")
+
+    def send(self, *args: Any, **kwargs: Any) -> None:
+        raise RecordingError(
+            "`RecordEpisodes` records lock-step `step()` calls; `send`/`recv` would bypass it\n"
+            "hint: step the wrapper with `step()`"
+        )
+
+    recv = send
+
+    def close(self, **kwargs: Any) -> None:
+        """Commits the ended episodes, stops the writer, then closes the env."""
+        if not self._closed:
+            self._closed = True
+            try:
+                if self._finalizer is not None:
+                    self._finalizer()
+            finally:
+                if self.stats["steps_dropped"] or self.stats["steps_waited"]:
+                    s = self.stats
+                    warnings.warn(
+                        f"recording into `{self.root}`: the writer's queue was full; {s['steps_waited']} "
+                        f"steps waited ({s['seconds_waited']:.1f} s), {s['steps_dropped']} steps dropped "
+                        f"({s['episodes_dropped']} episodes dropped)",
+                        QueueFullWarning,
+                        stacklevel=2,
+                    )
+            err = self._writer.error if self._writer is not None else None
+            self.env.close(**kwargs)
+            if err is not None:
+                raise RecordingError(f"the recording writer failed: {type(err).__name__}: {err}") from err
+        else:
+            self.env.close(**kwargs)
+
+
+def _stop_writer(writer: Writer, dataset: Dataset) -> None:
+    """Lets the writer commit what ended and stop, then releases the dataset."""
+    try:
+        if writer.thread.is_alive():
+            while writer.thread.is_alive():
+                try:
+                    writer.queue.put(STOP, timeout=0.5)
+                    break
+                except queue.Full:
+                    continue
+            writer.thread.join()
+    finally:
+        dataset.close()
+
+
+def _task_of(env: VectorEnv) -> str:
+    """The catalog entry's description for an envhub env (its `registry_id`), else the id of
+    the env's spec, else its class name."""
+    registry_id = getattr(env.unwrapped, "registry_id", None)
+    if isinstance(registry_id, str):
+        try:
+            from ..registry import EnvRegistry
+
+            entry = EnvRegistry().get(registry_id)
+            return entry.description or entry.name or registry_id
+        except Exception:  # not a catalog id (the drop-in's env factories): fall through
+            pass
+    spec = getattr(env, "spec", None) or getattr(env.unwrapped, "spec", None)
+    if spec is None:
+        try:  # a vector env of Gymnasium envs (Sync/AsyncVectorEnv, the drop-in): env 0's
+            spec = env.get_attr("spec")[0]
+        except Exception:
+            spec = None
+    if spec is not None and getattr(spec, "id", None):
+        return str(spec.id)
+    return type(env.unwrapped).__name__

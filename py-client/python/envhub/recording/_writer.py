@@ -1,0 +1,279 @@
+"""The writer thread: turns the steps the recorder hands it into episodes on disk.
+
+It keeps every column time-major (`(steps, envs, ...)`, one copy per step, whatever the
+number of envs) from the oldest step of an episode in flight, encodes each env's camera frames
+into that episode's MP4 as they arrive, and when an env's episode ends cuts its rows out with
+one slice per column. Ended episodes are committed together, at most every `commit_every`
+seconds and when the recorder closes.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._dataset import Dataset, Episode
+from ._video import EpisodeVideo
+
+
+@dataclass
+class Step:
+    """One lock-step `step` of every env: the observation before it (`obs` by column), the
+    camera frames of that observation (`frames`: `render()`'s, or `None`), the actions, what
+    the step returned, and which envs really stepped (`valid`: not an autoreset step)."""
+
+    obs: dict[str, np.ndarray]
+    frames: list[np.ndarray] | None
+    action: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    valid: np.ndarray
+    success: list[bool | None] | None
+    task: str
+    gap: bool = False  # steps before this one were dropped (queue full)
+
+
+@dataclass
+class Reset:
+    """A reset of the envs in `mask` (all when `None`): their episodes in flight end unfinished."""
+
+    mask: np.ndarray | None
+    gap: bool = False
+
+
+STOP = object()
+
+
+class _Rows:
+    """Time-major storage of the numeric columns, from row `base` on."""
+
+    def __init__(self) -> None:
+        self.base = 0
+        self.count = 0  # rows stored
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def append(self, values: dict[str, np.ndarray], keep_from: int) -> None:
+        if not self.arrays:
+            self.arrays = {k: np.empty((64, *v.shape), v.dtype) for k, v in values.items()}
+        cap = next(iter(self.arrays.values())).shape[0]
+        if self.count == cap:
+            drop = max(0, keep_from - self.base)
+            live = self.count - drop
+            if live * 2 > cap:  # grow
+                self.arrays = {
+                    k: np.concatenate([a[drop:], np.empty_like(a)]) for k, a in self.arrays.items()
+                }
+            else:  # compact in place
+                for a in self.arrays.values():
+                    a[:live] = a[drop : self.count]
+            self.base += drop
+            self.count = live
+        for k, v in values.items():
+            self.arrays[k][self.count] = v
+        self.count += 1
+
+    def episode(self, name: str, env: int, start: int, end: int) -> np.ndarray:
+        """Rows `start..end` (global, inclusive) of env `env`."""
+        return self.arrays[name][start - self.base : end + 1 - self.base, env].copy()
+
+
+class Writer:
+    """The thread that owns the dataset once recording starts."""
+
+    def __init__(
+        self,
+        dataset: Dataset,
+        num_envs: int,
+        numeric: list[str],
+        videos: list[str],
+        render_key: str | None,
+        fps: int,
+        codec: str,
+        crf: int,
+        gop: int,
+        keep: str,
+        commit_every: float,
+        queue_size: int,
+        stats: dict[str, Any],
+        max_episodes: int | None = None,
+        encode_threads: int = 1,
+    ) -> None:
+        self.dataset = dataset
+        self.n = num_envs
+        self.numeric = numeric
+        self.videos = videos  # observation images, by column
+        self.render_key = render_key
+        self.video_keys = [*videos, *([render_key] if render_key else [])]
+        self.fps, self.codec, self.crf, self.gop = fps, codec, crf, gop
+        self.keep = keep
+        self.max_episodes = max_episodes
+        self.commit_every = commit_every
+        self.stats = stats
+        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.error: BaseException | None = None
+        self._rows = _Rows()
+        self._t = 0  # global index of the next row
+        self._start = np.zeros(num_envs, dtype=np.int64)
+        self._live = np.zeros(num_envs, dtype=bool)  # recording the env's current episode
+        self._task = [""] * num_envs
+        self._encoders: list[dict[str, EpisodeVideo]] = [{} for _ in range(num_envs)]
+        # PyAV releases the GIL while FFmpeg encodes, so envs' frames are encoded in parallel:
+        # env `i`'s on thread `i % threads`, each step's frames before the next step's.
+        threads = min(encode_threads, num_envs) if self.video_keys else 1
+        self._pool = ThreadPoolExecutor(threads, thread_name_prefix="envhub-encoder") if threads > 1 else None
+        self._threads = threads
+        self._pending: list[Episode] = []
+        self._last_commit = time.monotonic()
+        self._serial = 0
+        self.thread = threading.Thread(target=self._run, name="envhub-recorder", daemon=True)
+        self.thread.start()
+
+    # The thread ----------------------------------------------------------------------------
+
+    def _run(self) -> None:
+        try:
+            while True:
+                wait = max(0.0, self.commit_every - (time.monotonic() - self._last_commit))
+                try:
+                    item = self.queue.get(timeout=wait if self._pending else None)
+                except queue.Empty:
+                    self._commit()
+                    continue
+                if item is STOP:
+                    break
+                if item.gap:
+                    self._gap()
+                if isinstance(item, Reset):
+                    self._reset(item.mask)
+                else:
+                    self._step(item)
+                if self._pending and time.monotonic() - self._last_commit >= self.commit_every:
+                    self._commit()
+            self._commit()
+        except BaseException as e:  # reported by the recorder on its next call
+            self.error = e
+            while True:  # let the recorder's blocked `put`s through until it sees the error
+                try:
+                    if self.queue.get(timeout=1.0) is STOP:
+                        break
+                except queue.Empty:
+                    continue
+        finally:
+            for i in range(self.n):
+                self._abandon(i)
+            if self._pool is not None:
+                self._pool.shutdown()
+
+    def _gap(self) -> None:
+        """Steps were dropped: every episode in flight misses frames and is dropped; each env
+        records again from its next episode."""
+        for i in np.flatnonzero(self._live):
+            self._abandon(i)
+            self.stats["episodes_dropped"] += 1
+        self._live[:] = False
+
+    def _reset(self, mask: np.ndarray | None) -> None:
+        envs = range(self.n) if mask is None else np.flatnonzero(mask)
+        for i in envs:
+            if self._live[i] and self._start[i] < self._t:
+                self.stats["episodes_cut"] += 1
+            self._abandon(i)
+            self._live[i] = True
+            self._start[i] = self._t
+
+    def _step(self, s: Step) -> None:
+        t = self._t
+        keep_from = int(self._start[self._live].min()) if self._live.any() else t
+        values = {name: s.obs[name] for name in self.numeric if name in s.obs}
+        values["action"] = s.action
+        values["next.reward"] = s.reward
+        values["next.terminated"] = s.terminated
+        values["next.truncated"] = s.truncated
+        self._rows.append(values, keep_from)
+        self._t += 1
+        done = np.logical_or(s.terminated, s.truncated)
+        # Masks over the envs, so that only envs with something to do cost a Python step.
+        recording = s.valid & self._live
+        for i in np.flatnonzero(recording & (self._start == t)):
+            self._task[i] = s.task
+        if self.video_keys:
+            self._encode(np.flatnonzero(recording), s)
+        for i in np.flatnonzero(recording & done):
+            self._end(i, t, s.success[i] if s.success is not None else None)
+        # After an autoreset step, or the end of an episode (recorded or not, after a drop),
+        # the env's next episode starts with the next row.
+        restart = ~s.valid | done
+        self._live[restart] = True
+        self._start[restart] = t + 1
+
+    def _encode(self, envs: np.ndarray, s: Step) -> None:
+        jobs: list[list[tuple[EpisodeVideo, np.ndarray]]] = [[] for _ in range(self._threads)]
+        for i in envs:
+            encoders = self._encoders[i]
+            if not encoders:  # the episode's first frame: its files
+                for key in self.video_keys:
+                    h, w, _ = self.dataset.features[key]["shape"]
+                    self._serial += 1
+                    path = self.dataset.staged(f"env{i}-{self._serial}.mp4")
+                    encoders[key] = EpisodeVideo(path, self.fps, h, w, self.codec, self.crf, self.gop)
+            job = jobs[i % self._threads]
+            for key in self.videos:
+                job.append((encoders[key], s.obs[key][i]))
+            if self.render_key is not None:
+                job.append((encoders[self.render_key], s.frames[i]))  # type: ignore[index]
+        if self._pool is None:
+            _encode_frames(jobs[0])
+        else:
+            list(self._pool.map(_encode_frames, jobs))  # re-raises an encoder's error
+
+    def _abandon(self, i: int) -> None:
+        for video in self._encoders[i].values():
+            video.abandon()
+        self._encoders[i] = {}
+
+    def _end(self, i: int, t: int, success: bool | None) -> None:
+        start = int(self._start[i])
+        if self.keep == "success" and not success:
+            self._abandon(i)
+            self.stats["episodes_filtered"] += 1
+            return
+        if self.max_episodes is not None and self.stats["episodes_kept"] >= self.max_episodes:
+            self._abandon(i)
+            self.stats["episodes_beyond"] += 1
+            return
+        columns = {}
+        for name in [*self.numeric, "action", "next.reward", "next.terminated", "next.truncated"]:
+            values = self._rows.episode(name, i, start, t)
+            if list(self.dataset.features[name]["shape"]) == [1]:
+                values = values.reshape(-1)
+            columns[name] = values
+        columns["next.done"] = np.logical_or(columns["next.terminated"], columns["next.truncated"])
+        videos, video_stats = {}, {}
+        for key, video in self._encoders[i].items():
+            video.finish()
+            videos[key] = video.path
+            video_stats[key] = video.stats.result(video.frames)
+        self._encoders[i] = {}
+        length = t - start + 1
+        self._pending.append(Episode(length, columns, videos, video_stats, self._task[i], success))
+        self.stats["frames_kept"] += length
+        self.stats["episodes_kept"] += 1
+
+    def _commit(self) -> None:
+        if self._pending:
+            pending, self._pending = self._pending, []
+            self.dataset.commit(pending)
+            self.stats["episodes_written"] += len(pending)
+        self._last_commit = time.monotonic()
+
+
+def _encode_frames(job: list[tuple[EpisodeVideo, np.ndarray]]) -> None:
+    for video, frame in job:
+        video.add(frame)

@@ -1,0 +1,55 @@
+"""Loads a dataset with LeRobot's own loader and dumps what it gives, for test_py_record.py.
+
+Runs in the LeRobot interpreter (`.venv-lerobot/`, with `lerobot-dataset` and torch), not
+envhub's: `python lerobot_load.py ROOT OUT.npz`. Writes, per feature, the values of every
+frame as `ds[i]` returns them (videos decoded by the loader, as uint8 `(h, w, 3)`), the raw
+columns of `ds.hf_dataset` as stored (`raw/<key>`), the task text of every frame, and a JSON summary.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import numpy as np
+from ledataset.datasets.lerobot_dataset import LeRobotDataset
+
+
+def main(root: str, out: str) -> None:
+    ds = LeRobotDataset("envhub/test", root=root)
+    video_keys = list(ds.meta.video_keys)
+    items = [ds[i] for i in range(len(ds))]
+    arrays: dict[str, np.ndarray] = {}
+    for key in items[0] if items else []:
+        if key == "task":
+            continue
+        values = [item[key].numpy() for item in items]
+        if key in video_keys:  # (c, h, w) floats in [0, 1] -> (h, w, c) uint8
+            values = [np.round(v.transpose(1, 2, 0) * 255.0).astype(np.uint8) for v in values]
+        arrays[key] = np.stack(values)
+    # The columns exactly as stored (the numpy and torch formats turn float64 into float32).
+    table = ds.hf_dataset.with_format("arrow")[:]
+    for key in table.column_names:
+        column = table.column(key).combine_chunks()
+        if hasattr(column.type, "list_size"):
+            values = column.flatten().to_numpy(zero_copy_only=False).reshape(len(column), column.type.list_size)
+        else:
+            values = column.to_numpy(zero_copy_only=False)
+        arrays[f"raw/{key}"] = values
+    episodes = ds.meta.episodes
+    summary = {
+        "num_episodes": ds.num_episodes,
+        "num_frames": ds.num_frames,
+        "fps": ds.fps,
+        "video_keys": video_keys,
+        "features": {k: {"dtype": f["dtype"], "shape": list(f["shape"])} for k, f in ds.features.items()},
+        "tasks": [item["task"] for item in items],
+        "episode_lengths": [int(x) for x in episodes["length"]],
+        "episode_success": list(episodes["success"]) if "success" in episodes.column_names else None,
+        "stats_keys": sorted(ds.meta.stats or {}),
+    }
+    np.savez(out, summary=np.array(json.dumps(summary)), **arrays)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])
