@@ -28,6 +28,7 @@ pub struct HubNode {
     _clients: zenoh::pubsub::Subscriber<()>,
     _echo: zenoh::pubsub::Subscriber<()>,
     sessions: Arc<Sessions>,
+    exposure_warning: Option<String>,
 }
 
 impl HubNode {
@@ -39,6 +40,12 @@ impl HubNode {
     /// Remote sessions open now.
     pub fn session_count(&self) -> usize {
         self.sessions.len()
+    }
+
+    /// Set when the hub is open to the network without credentials (`--insecure-listen`):
+    /// the warning to show its operator.
+    pub fn exposure_warning(&self) -> Option<&str> {
+        self.exposure_warning.as_deref()
     }
 }
 
@@ -66,7 +73,7 @@ pub fn join(
     policy: ServePolicy,
 ) -> Result<HubNode, HubError> {
     keys::check_name(name)?;
-    let session = envhub_net::open(net, true)?;
+    let (session, exposure_warning) = envhub_net::open_hub(net, &policy)?;
     let zerr = |what: &str| {
         let what = what.to_string();
         move |e: zenoh::Error| HubError::Network {
@@ -95,6 +102,9 @@ pub fn join(
         sessions: sessions.clone(),
         zenoh: session.clone(),
     });
+    // Queries being answered now: each takes a thread (opening starts workers, seconds), so
+    // their number is bounded; past it a query is answered "busy" on Zenoh's thread.
+    let in_flight = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let mut queryables = Vec::new();
     for (op, key) in [
         ("info", keys::hub_info(name)),
@@ -102,13 +112,25 @@ pub fn join(
         ("adapters", keys::hub_adapters(name)),
         ("open", keys::hub_open(name)),
     ] {
-        let state = state.clone();
+        let (state, in_flight) = (state.clone(), in_flight.clone());
         let q = session
             .declare_queryable(key)
             .callback(move |query| {
+                let Some(slot) = QuerySlot::take(&in_flight) else {
+                    state.reply(&query, Err(state.busy(op)));
+                    return;
+                };
                 let state = state.clone();
                 // Opening starts workers (seconds): never on Zenoh's own threads.
-                std::thread::spawn(move || state.answer(op, query));
+                let spawned = std::thread::Builder::new()
+                    .name(format!("envhub-query-{op}"))
+                    .spawn(move || {
+                        let _slot = slot;
+                        state.answer(op, query);
+                    });
+                if let Err(e) = spawned {
+                    tracing::warn!(op, error = %e, "cannot start a thread for a query");
+                }
             })
             .wait()
             .map_err(zerr("declare queryable"))?;
@@ -189,7 +211,29 @@ pub fn join(
         _clients: clients,
         _echo: echo,
         sessions,
+        exposure_warning,
     })
+}
+
+/// A place among the queries answered at once, given back when dropped.
+struct QuerySlot(Arc<std::sync::atomic::AtomicUsize>);
+
+impl QuerySlot {
+    fn take(in_flight: &Arc<std::sync::atomic::AtomicUsize>) -> Option<QuerySlot> {
+        use std::sync::atomic::Ordering;
+        in_flight
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < envhub_net::MAX_QUERIES_IN_FLIGHT).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| QuerySlot(in_flight.clone()))
+    }
+}
+
+impl Drop for QuerySlot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+    }
 }
 
 struct State {
@@ -202,7 +246,23 @@ struct State {
 
 impl State {
     fn answer(&self, op: &str, query: zenoh::query::Query) {
-        let reply = match self.handle(op, &query) {
+        let result = self.handle(op, &query);
+        self.reply(&query, result);
+    }
+
+    fn busy(&self, op: &str) -> HubError {
+        tracing::warn!(op, "too many queries at once: refused");
+        self.refuse(
+            format!(
+                "it is answering {} queries already",
+                envhub_net::MAX_QUERIES_IN_FLIGHT
+            ),
+            "try again in a moment",
+        )
+    }
+
+    fn reply(&self, query: &zenoh::query::Query, result: Result<Value, HubError>) {
+        let reply = match result {
             Ok(ok) => json!({ "ok": ok }),
             Err(e) => json!({ "err": e.to_string(), "error": e }),
         };
@@ -210,7 +270,7 @@ impl State {
             .reply(query.key_expr().clone(), reply.to_string())
             .wait()
         {
-            tracing::warn!(op, error = %e, "could not answer a query");
+            tracing::warn!(key = %query.key_expr(), error = %e, "could not answer a query");
         }
     }
 
@@ -310,14 +370,24 @@ impl State {
                 ),
                 e => e,
             })?;
+        let step_timeout = Duration::from_millis(request.step_timeout_ms.max(1));
+        if step_timeout > self.policy.max_step_timeout {
+            return Err(self.refuse(
+                format!(
+                    "a step timeout of {:?} exceeds its limit of {:?}",
+                    step_timeout, self.policy.max_step_timeout
+                ),
+                "ask for a shorter `step_timeout`; the hub's owner sets the limit with `envhub serve --max-step-timeout SECS`",
+            ));
+        }
         let mut options: SessionOptions = self.hub.options().clone();
         options.restart_on_crash = request.restart_on_crash;
-        options.step_timeout = Duration::from_millis(request.step_timeout_ms.max(1));
+        options.step_timeout = step_timeout;
         // Reserve the envs and workers before anything starts, so two clients cannot both
         // pass the limits.
         let reservation = self
             .sessions
-            .reserve(num_envs, workers, &self.policy)
+            .reserve(&request.client, num_envs, workers, &self.policy)
             .map_err(|(reason, hint)| self.refuse(reason, &hint))?;
         let vec = VecEnv::start(&request.id, route.clone(), options, &Launcher::local())?;
         let spec = envhub_shm::ReadySpec {
@@ -335,6 +405,7 @@ impl State {
             &request.client,
             vec,
             reservation,
+            self.policy.idle_timeout,
         )?;
         tracing::info!(id = %request.id, num_envs, workers, client = %request.client, %session, "remote session opened");
         Ok(OpenReply {

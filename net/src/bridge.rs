@@ -6,16 +6,16 @@
 //! without stepping twice; an older one is ignored. Anything unreadable is answered with an
 //! error naming what was wrong, and the session goes on.
 
-use crate::policy::ServePolicy;
+use crate::policy::{SESSION_QUEUE, ServePolicy};
 use envhub_protocol::wire::{self, RowsOut};
 use envhub_protocol::{HubError, keys};
 use envhub_session::{Batch, VecEnv};
 use envhub_shm::{BatchLayout, Layout, command, frames_section, status};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 /// How often an idle session looks at its stop flag.
@@ -25,7 +25,7 @@ struct Entry {
     client: String,
     envs: usize,
     workers: usize,
-    requests: Option<Sender<Vec<u8>>>,
+    requests: Option<SyncSender<Vec<u8>>>,
     stop: Arc<AtomicBool>,
 }
 
@@ -36,28 +36,47 @@ pub struct Sessions {
     /// Clients whose token went away (the latest few): a session still starting for one of
     /// them when it went is ended as soon as it is registered.
     gone: Mutex<std::collections::VecDeque<String>>,
-    /// Envs and workers reserved by sessions still starting.
-    starting: Mutex<(usize, usize)>,
+    /// What sessions still starting have reserved.
+    starting: Mutex<Starting>,
+}
+
+/// Envs, workers and sessions (by client) set aside by sessions still starting.
+#[derive(Default)]
+struct Starting {
+    envs: usize,
+    workers: usize,
+    by_client: HashMap<String, usize>,
 }
 
 /// Envs and workers set aside for a session being started; given back if it fails.
 pub struct Reservation<'a> {
     sessions: &'a Sessions,
+    client: String,
     envs: usize,
     workers: usize,
 }
 
 impl Drop for Reservation<'_> {
     fn drop(&mut self) {
-        let mut starting = self.sessions.starting.lock().expect("not poisoned");
-        starting.0 -= self.envs;
-        starting.1 -= self.workers;
+        let mut starting = self.sessions.starting();
+        starting.envs -= self.envs;
+        starting.workers -= self.workers;
+        if let Some(n) = starting.by_client.get_mut(&self.client) {
+            *n -= 1;
+            if *n == 0 {
+                starting.by_client.remove(&self.client);
+            }
+        }
     }
 }
 
 impl Sessions {
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, Entry>> {
         self.entries.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn starting(&self) -> std::sync::MutexGuard<'_, Starting> {
+        self.starting.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Sessions open now.
@@ -77,9 +96,11 @@ impl Sessions {
             .fold((0, 0), |(e, w), s| (e + s.envs, w + s.workers))
     }
 
-    /// Sets aside `envs` and `workers` if the limits allow; else why not and what would fit.
+    /// Sets aside `envs` and `workers` for a session of `client` if the limits allow; else
+    /// why not and what would fit.
     pub fn reserve(
         &self,
+        client: &str,
         envs: usize,
         workers: usize,
         policy: &ServePolicy,
@@ -87,38 +108,58 @@ impl Sessions {
         // `starting` is held while the open sessions are counted: a session that moves from
         // starting to open meanwhile (its entry added, then its reservation given back, which
         // waits for this lock) is counted once or twice, never zero times.
-        let mut starting = self.starting.lock().expect("not poisoned");
-        let (open_envs, open_workers) = self.totals();
-        let used_envs = open_envs + starting.0;
-        let used_workers = open_workers + starting.1;
+        let mut starting = self.starting();
+        let (open_envs, open_workers, open_of_client) = {
+            let entries = self.lock();
+            entries.values().fold((0, 0, 0), |(e, w, c), s| {
+                (
+                    e + s.envs,
+                    w + s.workers,
+                    c + usize::from(s.client == client),
+                )
+            })
+        };
+        let used_envs = open_envs + starting.envs;
+        let used_workers = open_workers + starting.workers;
+        let of_client = open_of_client + starting.by_client.get(client).copied().unwrap_or(0);
         if let Some(max) = policy.max_envs
-            && used_envs + envs > max
+            && used_envs.saturating_add(envs) > max
         {
             return Err((
                 format!("{envs} envs would exceed its limit of {max} (it runs {used_envs})"),
                 format!(
-                    "ask for at most {} envs here, or place the rest on other hubs",
+                    "ask for at most {} envs here, or place the rest on other hubs; its owner sets the limit with `envhub serve --max-envs N`",
                     max.saturating_sub(used_envs)
                 ),
             ));
         }
         if let Some(max) = policy.max_workers
-            && used_workers + workers > max
+            && used_workers.saturating_add(workers) > max
         {
             return Err((
                 format!(
                     "{workers} workers would exceed its limit of {max} (it runs {used_workers})"
                 ),
                 format!(
-                    "ask for at most {} workers here (`workers=`), or place envs on other hubs",
+                    "ask for at most {} workers here (`workers=`), or place envs on other hubs; its owner sets the limit with `envhub serve --max-workers N`",
                     max.saturating_sub(used_workers)
                 ),
             ));
         }
-        starting.0 += envs;
-        starting.1 += workers;
+        if let Some(max) = policy.max_sessions_per_client
+            && of_client >= max
+        {
+            return Err((
+                format!("this client holds {of_client} sessions here, its limit is {max}"),
+                "close sessions it no longer uses; the hub's owner sets the limit with `envhub serve --max-sessions-per-client N`".to_string(),
+            ));
+        }
+        starting.envs += envs;
+        starting.workers += workers;
+        *starting.by_client.entry(client.to_string()).or_default() += 1;
         Ok(Reservation {
             sessions: self,
+            client: client.to_string(),
             envs,
             workers,
         })
@@ -177,6 +218,7 @@ pub fn start(
     client: &str,
     vec: VecEnv,
     reservation: Reservation<'_>,
+    idle_timeout: Option<Duration>,
 ) -> Result<String, HubError> {
     let id = session_id()?;
     let publisher = zenoh
@@ -189,7 +231,7 @@ pub fn start(
             reason: format!("cannot declare the session's publisher: {e}"),
             hint: "the hub's Zenoh session is failing; see its log".into(),
         })?;
-    let (tx, rx) = std::sync::mpsc::channel();
+    let (tx, rx) = std::sync::mpsc::sync_channel(SESSION_QUEUE);
     let mut entries = sessions.lock();
     // The client may have gone while the workers started (it was killed, or gave up).
     let client_gone = sessions
@@ -214,7 +256,7 @@ pub fn start(
     std::thread::Builder::new()
         .name(format!("envhub-session-{id}"))
         .spawn(move || {
-            run(vec, rx, &publisher, &stop);
+            run(vec, rx, &publisher, &stop, idle_timeout);
             sessions.lock().remove(&thread_id);
             tracing::info!(session = %thread_id, "remote session closed");
         })
@@ -235,15 +277,24 @@ pub fn dispatch(
     };
     let seq = seq_of(&payload);
     let sent = match sessions.lock().get(id).and_then(|s| s.requests.as_ref()) {
-        Some(tx) => tx.send(payload).is_ok(),
-        None => false,
+        Some(tx) => tx.try_send(payload),
+        None => Err(TrySendError::Disconnected(Vec::new())),
     };
-    if !sent {
-        tracing::warn!(session = id, "request for an unknown or closed session");
-        let message = format!("hub `{hub}` has no open session `{id}` (closed, or never opened)");
-        let answer = wire::encode_response(seq, status::ERROR, 0, &[], message.as_bytes());
-        let _ = zenoh.put(keys::responses(hub, id), answer).wait();
-    }
+    let message = match sent {
+        Ok(()) => return,
+        Err(TrySendError::Full(_)) => {
+            tracing::warn!(session = id, "requests flood a session: refused");
+            format!(
+                "hub `{hub}`: session `{id}` already has {SESSION_QUEUE} requests waiting; this one is refused (a client sends one at a time)"
+            )
+        }
+        Err(TrySendError::Disconnected(_)) => {
+            tracing::warn!(session = id, "request for an unknown or closed session");
+            format!("hub `{hub}` has no open session `{id}` (closed, or never opened)")
+        }
+    };
+    let answer = wire::encode_response(seq, status::ERROR, 0, &[], message.as_bytes());
+    let _ = zenoh.put(keys::responses(hub, id), answer).wait();
 }
 
 fn seq_of(payload: &[u8]) -> u64 {
@@ -283,6 +334,7 @@ fn run(
     rx: Receiver<Vec<u8>>,
     publisher: &zenoh::pubsub::Publisher<'_>,
     stop: &AtomicBool,
+    idle_timeout: Option<Duration>,
 ) {
     let layout = Layout::new(vec.num_envs(), vec.action_space().byte_len());
     let rows_layout = BatchLayout::new(
@@ -292,12 +344,23 @@ fn run(
     );
     let mut last: Option<(u64, zenoh::bytes::ZBytes)> = None;
     let spin = spin_budget();
+    let mut last_heard = Instant::now();
     while !stop.load(Ordering::Relaxed) {
         let bytes = match next_request(&rx, spin) {
             Ok(b) => b,
-            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Timeout) => {
+                if idle_timeout.is_some_and(|idle| last_heard.elapsed() >= idle) {
+                    tracing::warn!(
+                        idle_s = last_heard.elapsed().as_secs(),
+                        "closing a remote session whose client sent nothing (`envhub serve --idle-timeout`)"
+                    );
+                    break;
+                }
+                continue;
+            }
             Err(RecvTimeoutError::Disconnected) => break,
         };
+        last_heard = Instant::now();
         let seq = seq_of(&bytes);
         if let Some((last_seq, answer)) = &last
             && seq == *last_seq
@@ -528,8 +591,7 @@ mod tests {
         let sessions = Sessions::default();
         let policy = ServePolicy {
             max_envs: Some(MAX),
-            max_workers: None,
-            ..ServePolicy::default()
+            ..ServePolicy::unlimited()
         };
         let over = AtomicBool::new(false);
         let passed = std::sync::atomic::AtomicUsize::new(0);
@@ -541,7 +603,7 @@ mod tests {
                     let mut k = 0;
                     while Instant::now() < deadline && !over.load(Ordering::Relaxed) {
                         k += 1;
-                        let Ok(reservation) = sessions.reserve(1, 1, policy) else {
+                        let Ok(reservation) = sessions.reserve("c", 1, 1, policy) else {
                             continue;
                         };
                         passed.fetch_add(1, Ordering::Relaxed);
@@ -571,6 +633,49 @@ mod tests {
         assert!(
             !over.load(Ordering::Relaxed),
             "more than {MAX} envs were open at once"
+        );
+    }
+
+    #[test]
+    fn a_client_holds_at_most_its_sessions_and_others_are_not_counted() {
+        let sessions = Sessions::default();
+        let policy = ServePolicy {
+            max_sessions_per_client: Some(2),
+            ..ServePolicy::unlimited()
+        };
+        let a1 = sessions.reserve("a", 1, 1, &policy).expect("first");
+        let _a2 = sessions.reserve("a", 1, 1, &policy).expect("second");
+        let (reason, hint) = sessions
+            .reserve("a", 1, 1, &policy)
+            .err()
+            .expect("third refused");
+        assert!(reason.contains("limit is 2"), "{reason}");
+        assert!(hint.contains("--max-sessions-per-client"), "{hint}");
+        let _b = sessions
+            .reserve("b", 1, 1, &policy)
+            .expect("another client is not counted");
+        drop(a1);
+        let _a3 = sessions
+            .reserve("a", 1, 1, &policy)
+            .expect("a reservation given back frees its place");
+    }
+
+    #[test]
+    fn the_default_policy_has_every_limit_on() {
+        let p = ServePolicy::default();
+        assert!(
+            p.max_envs.is_some() && p.max_workers.is_some() && p.max_sessions_per_client.is_some()
+        );
+        assert!(p.idle_timeout.is_some() && p.max_step_timeout < Duration::MAX);
+        assert!(!p.allow_remote_files && !p.allow_provision && !p.insecure_listen);
+        let sessions = Sessions::default();
+        let (reason, hint) = sessions
+            .reserve("c", 200_000, 1, &p)
+            .err()
+            .expect("200,000 envs refused by default");
+        assert!(
+            reason.contains("200000 envs") && hint.contains("--max-envs"),
+            "{reason} / {hint}"
         );
     }
 }

@@ -111,17 +111,47 @@ fn json_list(items: &[String]) -> String {
     serde_json::to_string(items).expect("strings serialize")
 }
 
-/// Opens a Zenoh session, naming the endpoints on failure.
-pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
+/// Opens a hub's Zenoh session: listening on loopback only unless credentials are configured
+/// or the policy's `insecure_listen` allows it (see [`crate::exposure`]). Returns the warning to print when the
+/// hub is open to the network without credentials.
+pub fn open_hub(
+    net: &NetConfig,
+    policy: &crate::ServePolicy,
+) -> Result<(zenoh::Session, Option<String>), HubError> {
     use zenoh::Wait;
-    let config = net.zenoh_config(listen_default)?;
-    zenoh::open(config).wait().map_err(|e| HubError::Network {
+    let mut config = net.zenoh_config(true)?;
+    let warning = crate::exposure::guard(&mut config, policy.insecure_listen)?;
+    // Zenoh drops larger messages before they reach envhub.
+    config
+        .insert_json5(
+            "transport/link/rx/max_message_size",
+            &policy.max_request_bytes.to_string(),
+        )
+        .map_err(|e| HubError::InvalidConfig {
+            what: "zenoh config",
+            reason: format!("`transport/link/rx/max_message_size`: {e}"),
+        })?;
+    let session = zenoh::open(config)
+        .wait()
+        .map_err(|e| open_failed(net, e))?;
+    Ok((session, warning))
+}
+
+fn open_failed(net: &NetConfig, e: zenoh::Error) -> HubError {
+    HubError::Network {
         reason: format!("cannot open a Zenoh session: {e}"),
         hint: format!(
             "check the endpoints (connect {:?}, listen {:?}) and the config file {:?}",
             net.connect, net.listen, net.config
         ),
-    })
+    }
+}
+
+/// Opens a Zenoh session, naming the endpoints on failure.
+pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
+    use zenoh::Wait;
+    let config = net.zenoh_config(listen_default)?;
+    zenoh::open(config).wait().map_err(|e| open_failed(net, e))
 }
 
 #[cfg(test)]

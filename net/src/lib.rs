@@ -9,12 +9,18 @@
 mod bridge;
 mod client;
 mod config;
+mod exposure;
 mod link;
 mod opener;
 mod policy;
 
 pub use bridge::{Sessions, dispatch, start};
 pub use client::{DISCOVERY, Network, unknown_hub};
-pub use config::{DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, NetConfig, open};
+pub use config::{DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, NetConfig, open, open_hub};
+pub use exposure::LOOPBACK_LISTENER;
 pub use opener::ZenohSlices;
-pub use policy::ServePolicy;
+pub use policy::{
+    DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_ENVS, DEFAULT_MAX_REQUEST_BYTES,
+    DEFAULT_MAX_SESSIONS_PER_CLIENT, DEFAULT_MAX_STEP_TIMEOUT, DEFAULT_WORKERS_PER_CORE,
+    MAX_QUERIES_IN_FLIGHT, SESSION_QUEUE, ServePolicy,
+};

@@ -14,6 +14,7 @@ mod rapier_rollouts;
 mod remote_hubs;
 mod remote_netns;
 mod rendering;
+mod serve_defaults;
 mod session_owner;
 mod small_shm;
 mod worker_lifetime;

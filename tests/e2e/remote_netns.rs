@@ -242,7 +242,19 @@ impl TwoHosts {
     /// interface it picks, the veth (the only other one is loopback).
     fn hub_a(&self) -> Proc {
         let listen = format!("tcp/{}:7447", self.addr[0]);
-        let hub = self.envhub(0, "hub-a", &["serve", "--name", "a", "--listen", &listen]);
+        // Beyond loopback without credentials: allowed by the flag, with a warning.
+        let hub = self.envhub(
+            0,
+            "hub-a",
+            &[
+                "serve",
+                "--name",
+                "a",
+                "--listen",
+                &listen,
+                "--insecure-listen",
+            ],
+        );
         let deadline = Instant::now() + Duration::from_secs(15);
         while !hub.stdout().contains("on the network as hub `a`") {
             assert!(
@@ -252,6 +264,12 @@ impl TwoHosts {
             );
             std::thread::sleep(Duration::from_millis(20));
         }
+        assert!(
+            hub.stderr().contains("without credentials")
+                && hub.stderr().contains("--insecure-listen"),
+            "the hub open to the network without credentials printed no warning; {}",
+            hub.said()
+        );
         // The isolation holds: the hub sees other network and mount namespaces than ours.
         let ns_of = |pid: &str, kind: &str| std::fs::read_link(format!("/proc/{pid}/ns/{kind}"));
         for kind in ["net", "mnt", "ipc"] {

@@ -4,6 +4,7 @@ use super::Outcome;
 use envhub::{Hub, NetConfig, ServePolicy};
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::time::Duration;
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
@@ -13,19 +14,37 @@ pub(crate) struct Args {
     /// Name of this hub on the network (default: the host name).
     #[arg(long)]
     name: Option<String>,
-    /// Zenoh endpoint to listen on (`tcp/0.0.0.0:7447`); repeat for several. Default: Zenoh's
-    /// (every interface, a free port), found by multicast scouting.
+    /// Zenoh endpoint to listen on (`tcp/127.0.0.1:7447`); repeat for several. Default:
+    /// loopback on a free port (found by multicast scouting) unless the Zenoh config gives
+    /// credentials. An address beyond loopback without credentials needs `--insecure-listen`.
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
+    /// Listen (or connect) beyond loopback without credentials: anyone who reaches the hub
+    /// can run envs on it and read or steer every session. Prints a warning.
+    #[arg(long)]
+    insecure_listen: bool,
     /// Stay off the network: serve only this machine's clients on the Unix socket.
     #[arg(long)]
     local_only: bool,
-    /// Envs this hub runs for remote clients at once, over all their sessions.
-    #[arg(long)]
-    max_envs: Option<usize>,
-    /// Worker processes this hub runs for remote clients at once.
-    #[arg(long)]
+    /// Envs this hub runs for remote clients at once, over all their sessions (0: no limit).
+    #[arg(long, value_name = "N", default_value_t = envhub::DEFAULT_MAX_ENVS)]
+    max_envs: usize,
+    /// Worker processes this hub runs for remote clients at once (0: no limit). Default: 4
+    /// per core.
+    #[arg(long, value_name = "N")]
     max_workers: Option<usize>,
+    /// Sessions one client may hold here at once (0: no limit).
+    #[arg(long, value_name = "N", default_value_t = envhub::DEFAULT_MAX_SESSIONS_PER_CLIENT)]
+    max_sessions_per_client: usize,
+    /// The longest step timeout a remote client may ask for, in seconds.
+    #[arg(long, value_name = "SECS", default_value_t = envhub::DEFAULT_MAX_STEP_TIMEOUT.as_secs())]
+    max_step_timeout: u64,
+    /// Close a remote session whose client sent nothing for this long, in seconds (0: never).
+    #[arg(long, value_name = "SECS", default_value_t = envhub::DEFAULT_IDLE_TIMEOUT.as_secs())]
+    idle_timeout: u64,
+    /// The largest message the hub accepts from the network, in bytes.
+    #[arg(long, value_name = "BYTES", default_value_t = envhub::DEFAULT_MAX_REQUEST_BYTES)]
+    max_request_bytes: usize,
     /// Let remote clients name files on this machine (`asset_path`, `xml_file`, ...). Off by
     /// default: remote clients run this hub's registry entries as they are.
     #[arg(long)]
@@ -50,13 +69,25 @@ pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outco
         None
     } else {
         let name = args.name.clone().unwrap_or_else(envhub::host_name);
+        let limit = |n: usize| (n > 0).then_some(n);
+        let defaults = ServePolicy::default();
         let policy = ServePolicy {
-            max_envs: args.max_envs,
-            max_workers: args.max_workers,
+            max_envs: limit(args.max_envs),
+            max_workers: args.max_workers.map_or(defaults.max_workers, limit),
+            max_sessions_per_client: limit(args.max_sessions_per_client),
+            max_step_timeout: Duration::from_secs(args.max_step_timeout),
+            idle_timeout: (args.idle_timeout > 0).then(|| Duration::from_secs(args.idle_timeout)),
+            max_request_bytes: args.max_request_bytes,
             allow_remote_files: args.allow_remote_files,
             allow_provision: args.allow_provision,
+            insecure_listen: args.insecure_listen,
         };
-        Some(envhub::join(hub.clone(), &name, &net, policy)?)
+        let node = envhub::join(hub.clone(), &name, &net, policy)?;
+        if let Some(warning) = node.exposure_warning() {
+            eprintln!("{warning}");
+            tracing::warn!("{warning}");
+        }
+        Some(node)
     };
     envhub::serve(&socket, hub, || {
         // For scripts and tests waiting for the daemon to be up. A closed stdout must not
