@@ -81,6 +81,7 @@ impl NetConfig {
             })?,
             None => zenoh::Config::default(),
         };
+        let default_listener = listens_by_default(&config);
         let mut set = |key: &str, value: String| {
             config
                 .insert_json5(key, &value)
@@ -94,7 +95,9 @@ impl NetConfig {
         }
         if !self.listen.is_empty() {
             set("listen/endpoints", json_list(&self.listen))?;
-        } else if !listen_default && self.config.is_none() {
+        } else if !listen_default && default_listener {
+            // A client connects out only, also when its config file (TLS, credentials) says
+            // nothing of listening.
             set("listen/endpoints", "[]".into())?;
         }
         if let Some(on) = self.multicast {
@@ -105,6 +108,12 @@ impl NetConfig {
         set("transport/link/tx/keep_alive", "4".into())?;
         Ok(config)
     }
+}
+
+/// Whether `config` keeps Zenoh's default listener (every interface).
+fn listens_by_default(config: &zenoh::Config) -> bool {
+    let listen = |c: &zenoh::Config| c.get_json("listen/endpoints").ok();
+    listen(config) == listen(&zenoh::Config::default())
 }
 
 fn json_list(items: &[String]) -> String {

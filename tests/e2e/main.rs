@@ -17,4 +17,5 @@ mod rendering;
 mod serve_defaults;
 mod session_owner;
 mod small_shm;
+mod tls;
 mod worker_lifetime;
