@@ -22,7 +22,7 @@ use envhub_protocol::HubError;
 use envhub_shm::WorkerJob;
 use serde_json::{Value, json};
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::process::Child;
@@ -104,9 +104,21 @@ impl Connection {
 
     fn run(mut self, stream: UnixStream) -> std::io::Result<()> {
         let mut writer = stream.try_clone()?;
-        let reader = BufReader::new(stream);
-        for line in reader.lines() {
-            let line = line?;
+        let mut reader = BufReader::new(stream);
+        let mut line = String::new();
+        loop {
+            use crate::daemon_guard::{MAX_LINE, read_line_bounded};
+            match read_line_bounded(&mut reader, MAX_LINE, &mut line) {
+                Ok(0) => break,
+                Ok(_) => {}
+                Err(e) => {
+                    // The rest of an overlong line cannot be told from the next request.
+                    tracing::warn!(error = %e, "unreadable request: closing the connection");
+                    let reply = json!({ "err": format!("unreadable request: {e}") });
+                    let _ = writer.write_all(format!("{reply}\n").as_bytes());
+                    break;
+                }
+            }
             let reply = match serde_json::from_str::<Value>(&line) {
                 Ok(request) => match self.handle(&request) {
                     Ok(ok) => json!({ "ok": ok }),

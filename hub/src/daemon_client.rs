@@ -12,7 +12,7 @@ use envhub_protocol::HubError;
 use envhub_protocol::Route;
 use envhub_shm::{ReadySpec, WorkerJob};
 use serde_json::{Value, json};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufReader, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -22,6 +22,9 @@ use std::time::Duration;
 pub struct DaemonClient {
     socket: PathBuf,
     conn: Mutex<(BufReader<UnixStream>, UnixStream)>,
+    /// The daemon's pid, from the kernel (`SO_PEERCRED`): the workers it reports must be its
+    /// children.
+    pid: u32,
 }
 
 impl std::fmt::Debug for DaemonClient {
@@ -50,13 +53,23 @@ impl DaemonClient {
             socket: socket.display().to_string(),
             reason: format!("cannot connect: {e}"),
         })?;
-        let reader = BufReader::new(stream.try_clone().map_err(|e| HubError::Daemon {
+        let fail = |reason: String| HubError::Daemon {
             socket: socket.display().to_string(),
-            reason: e.to_string(),
-        })?);
+            reason,
+        };
+        // Whoever listens there must be this user (or root): workers it starts run our jobs.
+        let (pid, uid) = crate::daemon_guard::peer_cred(&stream)
+            .map_err(|e| fail(format!("cannot ask who listens: {e}")))?;
+        if !crate::daemon_guard::peer_allowed(uid) {
+            return Err(fail(format!(
+                "the socket is served by uid {uid}, not this user\nhint: start your own daemon (`envhub serve --socket PATH`) and set ENVHUB_HUB to its socket"
+            )));
+        }
+        let reader = BufReader::new(stream.try_clone().map_err(|e| fail(e.to_string()))?);
         let client = DaemonClient {
             socket: socket.to_path_buf(),
             conn: Mutex::new((reader, stream)),
+            pid,
         };
         client.call(json!({"op": "ping"}))?;
         Ok(Arc::new(client))
@@ -74,6 +87,29 @@ impl DaemonClient {
             // May ask Python adapters what they host (an interpreter's start, imports).
             Some("adapters" | "route") => Duration::from_secs(120),
             _ => Duration::from_secs(5),
+        }
+    }
+
+    /// A daemon's error as this process may raise it: kinds that describe the request or the
+    /// daemon's envs pass; kinds that describe this process (`Interrupted`, which Python
+    /// raises as `KeyboardInterrupt`, a lost or refusing hub) become text.
+    fn checked(&self, error: HubError) -> HubError {
+        match error {
+            HubError::Registry(_)
+            | HubError::NoAdapter { .. }
+            | HubError::Unavailable { .. }
+            | HubError::InvalidConfig { .. }
+            | HubError::MakeFailed(_)
+            | HubError::InvalidAction { .. }
+            | HubError::InvalidState(_)
+            | HubError::PythonEnv { .. }
+            | HubError::WorkerBinary { .. }
+            // A worker the daemon started for us that died starting: ours to report.
+            | HubError::WorkerDied { .. }
+            | HubError::DataPlane(_)
+            | HubError::Daemon { .. }
+            | HubError::Remote(_) => error,
+            other => self.fail(format!("reported: {other}")),
         }
     }
 
@@ -112,7 +148,12 @@ impl DaemonClient {
             .write_all(line.as_bytes())
             .map_err(|e| self.fail(format!("send: {e}")))?;
         let mut reply = String::new();
-        let n = reader.read_line(&mut reply).map_err(|e| {
+        let n = crate::daemon_guard::read_line_bounded(
+            reader,
+            crate::daemon_guard::MAX_LINE,
+            &mut reply,
+        )
+        .map_err(|e| {
             if matches!(
                 e.kind(),
                 std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
@@ -135,7 +176,7 @@ impl DaemonClient {
         if let Some(error) = reply.get_mut("error").map(Value::take)
             && let Ok(error) = serde_json::from_value::<HubError>(error)
         {
-            return Err(error);
+            return Err(self.checked(error));
         }
         if let Some(err) = reply.get("err") {
             return Err(HubError::Remote(
@@ -143,6 +184,24 @@ impl DaemonClient {
             ));
         }
         Ok(reply.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+    }
+
+    /// Holds the worker the daemon reports as `pid` by a pidfd, once it is checked to be the
+    /// daemon's child (alive and unreaped, so its pid cannot have been reused yet).
+    pub(crate) fn hold_worker(&self, pid: u32) -> Result<envhub_shm::PidFd, HubError> {
+        let fd = envhub_shm::PidFd::open(pid).map_err(|e| {
+            self.fail(format!(
+                "reported worker pid {pid}, which has no process: {e}"
+            ))
+        })?;
+        match fd.parent() {
+            Some(parent) if parent == self.pid => Ok(fd),
+            Some(parent) => Err(self.fail(format!(
+                "reported worker pid {pid}, whose parent is {parent}, not the daemon ({})",
+                self.pid
+            ))),
+            None => Err(self.fail(format!("reported worker pid {pid}, which has exited"))),
+        }
     }
 
     /// Asks the daemon to start a worker for `job`.

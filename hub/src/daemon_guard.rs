@@ -66,6 +66,12 @@ pub(crate) fn restrict_socket(socket: &Path) -> Result<(), String> {
 
 /// The uid of the process at the other end of `stream`.
 pub(crate) fn peer_uid(stream: &UnixStream) -> std::io::Result<u32> {
+    peer_cred(stream).map(|(_, uid)| uid)
+}
+
+/// The pid and uid of the process at the other end of `stream`, as the kernel recorded them
+/// when the connection was made.
+pub(crate) fn peer_cred(stream: &UnixStream) -> std::io::Result<(u32, u32)> {
     let mut cred = libc::ucred {
         pid: 0,
         uid: 0,
@@ -85,10 +91,50 @@ pub(crate) fn peer_uid(stream: &UnixStream) -> std::io::Result<u32> {
     if rc != 0 {
         return Err(std::io::Error::last_os_error());
     }
-    Ok(cred.uid)
+    Ok((cred.pid as u32, cred.uid))
 }
 
 /// Whether a peer of uid `peer` may use this daemon: its own user, or root.
 pub(crate) fn peer_allowed(peer: u32) -> bool {
     peer == uid() || peer == 0
+}
+
+/// The longest line a daemon request or reply may be: a launch carries the job (a pickled
+/// env function of a drop-in at most a few MiB), a reply the adapters' list.
+pub(crate) const MAX_LINE: usize = 16 << 20;
+
+/// Reads one line of at most `max` bytes into `line` (0 at the end of the stream); a longer
+/// one is an error, and the connection cannot be read further.
+pub(crate) fn read_line_bounded(
+    reader: &mut impl std::io::BufRead,
+    max: usize,
+    line: &mut String,
+) -> std::io::Result<usize> {
+    use std::io::{BufRead, Read};
+    line.clear();
+    let n = reader.take(max as u64 + 1).read_line(line)?;
+    if n > max || (n == max + 1 && !line.ends_with('\n')) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("a line longer than {max} bytes"),
+        ));
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lines_are_read_up_to_their_bound() {
+        let mut input = std::io::Cursor::new(b"{\"op\":\"ping\"}\nxxxxxxxxxxxxxxxxxxxx\n".to_vec());
+        let mut line = String::new();
+        assert_eq!(read_line_bounded(&mut input, 16, &mut line).unwrap(), 14);
+        assert_eq!(line, "{\"op\":\"ping\"}\n");
+        let err = read_line_bounded(&mut input, 16, &mut line).unwrap_err();
+        assert!(err.to_string().contains("longer than 16 bytes"), "{err}");
+        let mut empty = std::io::Cursor::new(Vec::new());
+        assert_eq!(read_line_bounded(&mut empty, 16, &mut line).unwrap(), 0);
+    }
 }

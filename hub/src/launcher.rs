@@ -28,8 +28,9 @@ pub(crate) enum WorkerProcess {
     Local(Child),
     /// The daemon's child.
     Daemon {
-        /// Its pid.
-        pid: u32,
+        /// The process, held by a pidfd: killing it can never hit a process that took its
+        /// pid after the daemon reaped it.
+        pidfd: envhub_shm::PidFd,
         /// The daemon that started it.
         daemon: Arc<DaemonClient>,
     },
@@ -46,20 +47,24 @@ impl Process for WorkerProcess {
     fn pid(&self) -> u32 {
         match self {
             WorkerProcess::Local(child) => child.id(),
-            WorkerProcess::Daemon { pid, .. } => *pid,
+            WorkerProcess::Daemon { pidfd, .. } => pidfd.pid(),
         }
     }
 
     fn kill(&mut self) {
-        envhub_shm::kill(self.pid());
+        self.kill_now();
         let _ = self.exit_status(Duration::from_secs(2));
     }
 
     /// Our own child is reaped, which takes no time once it is killed.
     fn kill_now(&mut self) {
-        envhub_shm::kill(self.pid());
-        if let WorkerProcess::Local(child) = self {
-            let _ = child.wait();
+        match self {
+            // `Child::kill` after the child was reaped signals nothing.
+            WorkerProcess::Local(child) => {
+                let _ = child.kill();
+                let _ = child.wait();
+            }
+            WorkerProcess::Daemon { pidfd, .. } => pidfd.kill(),
         }
     }
 
@@ -70,7 +75,9 @@ impl Process for WorkerProcess {
                 WorkerProcess::Local(child) => {
                     child.try_wait().ok().flatten().map(|s| s.to_string())
                 }
-                WorkerProcess::Daemon { pid, daemon } => daemon.exit_status(*pid).ok().flatten(),
+                WorkerProcess::Daemon { pidfd, daemon } => {
+                    daemon.exit_status(pidfd.pid()).ok().flatten()
+                }
             };
             if status.is_some() || std::time::Instant::now() >= deadline {
                 return status;
@@ -93,9 +100,10 @@ impl Launch for Launcher {
             }
             Launcher::Daemon(daemon) => {
                 let spec = daemon.launch(job, start_timeout)?;
+                let pidfd = daemon.hold_worker(spec.pid)?;
                 Ok((
                     Box::new(WorkerProcess::Daemon {
-                        pid: spec.pid,
+                        pidfd,
                         daemon: daemon.clone(),
                     }),
                     spec,

@@ -475,3 +475,140 @@ fn a_daemon_that_never_answers_is_an_error_within_seconds() {
     silent.join().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A socket in front of a real daemon that passes every request on and hands its replies
+/// back through `rewrite` (a daemon that lies).
+fn lying_proxy(
+    daemon: &Daemon,
+    name: &str,
+    rewrite: impl Fn(&str, serde_json::Value) -> serde_json::Value + Send + 'static,
+) -> (PathBuf, std::thread::JoinHandle<()>) {
+    use std::io::Write;
+    let dir = std::env::temp_dir().join(format!("e2e-lying-daemon-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let socket = dir.join("hub.sock");
+    let _ = std::fs::remove_file(&socket);
+    let listener = std::os::unix::net::UnixListener::bind(&socket).unwrap();
+    let real = daemon.socket.clone();
+    let proxy = std::thread::spawn(move || {
+        let (client, _) = listener.accept().unwrap();
+        let upstream = std::os::unix::net::UnixStream::connect(&real).unwrap();
+        let mut from_client = std::io::BufReader::new(client.try_clone().unwrap());
+        let mut from_daemon = std::io::BufReader::new(upstream.try_clone().unwrap());
+        let (mut to_client, mut to_daemon) = (client, upstream);
+        let mut line = String::new();
+        while from_client.read_line(&mut line).unwrap_or(0) > 0 {
+            let op = serde_json::from_str::<serde_json::Value>(&line).unwrap()["op"]
+                .as_str()
+                .unwrap_or_default()
+                .to_string();
+            to_daemon.write_all(line.as_bytes()).unwrap();
+            line.clear();
+            from_daemon.read_line(&mut line).unwrap();
+            let reply = rewrite(&op, serde_json::from_str(&line).unwrap());
+            to_client
+                .write_all(format!("{reply}\n").as_bytes())
+                .unwrap();
+            line.clear();
+        }
+    });
+    (socket, proxy)
+}
+
+#[test]
+fn a_daemon_that_reports_a_foreign_pid_or_a_foreign_error_kind_is_not_believed() {
+    let daemon = Daemon::start("lying");
+    // A process that is not the daemon's child (nor this process's, which plays the daemon
+    // here): a shell's child, the worker the lying daemon reports.
+    let mut shell = Command::new("sh")
+        .args(["-c", "sleep 30 & echo $!; wait"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut said = String::new();
+    std::io::BufReader::new(shell.stdout.take().unwrap())
+        .read_line(&mut said)
+        .unwrap();
+    let foreign_pid: u32 = said.trim().parse().unwrap();
+    assert_eq!(parent_of(foreign_pid), shell.id());
+    let (socket, proxy) = lying_proxy(&daemon, "pid", move |op, mut reply| {
+        if op == "launch" {
+            reply["ok"]["pid"] = serde_json::json!(foreign_pid);
+        }
+        reply
+    });
+    let hub = Hub::connect(&socket, Registry::builtin())
+        .unwrap()
+        .with_options(SessionOptions {
+            namespace: daemon.namespace.clone(),
+            ..SessionOptions::default()
+        });
+    let err = hub
+        .make_vec("gym-cartpole", 1, &EnvConfig::default())
+        .err()
+        .expect("a session with a worker the daemon did not start");
+    assert!(
+        err.to_string().contains(&format!("pid {foreign_pid}"))
+            && err.to_string().contains("not the daemon"),
+        "{err}"
+    );
+    drop(hub);
+    assert_eq!(
+        parent_of(foreign_pid),
+        shell.id(),
+        "the foreign process was killed"
+    );
+    envhub_shm::kill(foreign_pid);
+    let _ = shell.wait();
+    proxy.join().unwrap();
+
+    // An error kind that describes the client itself (Interrupted: Python's
+    // KeyboardInterrupt) comes back as the daemon's error, not as that kind.
+    let (socket, proxy) = lying_proxy(&daemon, "kind", |op, reply| {
+        if op == "route" {
+            serde_json::json!({
+                "err": "interrupted",
+                "error": serde_json::to_value(HubError::Interrupted).unwrap(),
+            })
+        } else {
+            reply
+        }
+    });
+    let hub = Hub::connect(&socket, Registry::builtin()).unwrap();
+    match hub.make_vec("gym-cartpole", 1, &EnvConfig::default()) {
+        Err(HubError::Daemon { reason, .. }) => assert!(reason.contains("nterrupted"), "{reason}"),
+        Err(e) => panic!("expected the daemon's error, got {e:?}"),
+        Ok(_) => panic!("a session from a refused route"),
+    }
+    drop(hub);
+    proxy.join().unwrap();
+}
+
+#[test]
+fn an_overlong_request_line_ends_that_connection_only() {
+    use std::io::Write;
+    let daemon = Daemon::start("overlong");
+    let mut stream = std::os::unix::net::UnixStream::connect(&daemon.socket).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    // 17 MiB without a newline: past the 16 MiB bound.
+    let chunk = vec![b'x'; 1 << 20];
+    for _ in 0..17 {
+        if stream.write_all(&chunk).is_err() {
+            break; // the daemon closed the connection mid-way
+        }
+    }
+    let mut reply = String::new();
+    let _ = std::io::BufReader::new(&stream).read_line(&mut reply);
+    assert!(
+        reply.contains("longer than"),
+        "the daemon answered {reply:?}"
+    );
+    // The daemon still serves others.
+    let hub = daemon.hub();
+    let mut env = hub
+        .make_vec("gym-cartpole", 1, &EnvConfig::default())
+        .unwrap();
+    env.reset(Some(0)).unwrap();
+}

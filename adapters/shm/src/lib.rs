@@ -30,7 +30,7 @@ pub use layout::{
     ResponseHeader, command, env_flag, status,
 };
 pub use pingpong::{ping, pong};
-pub use process::{ProcessWatch, die_with_parent, kill};
+pub use process::{PidFd, ProcessWatch, die_with_parent, kill};
 pub use serve::{ServedBatch, serve_batch};
 pub use slots::{
     Bell, Doorbells, MAX_SLOTS, Side, Slot, SlotLease, SlotMap, SlotPool, SlotsName,
