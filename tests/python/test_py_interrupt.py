@@ -66,7 +66,9 @@ def test_ctrl_c_interrupts_a_long_step_within_100_ms(null_registry, tmp_path):
         time.sleep(0.3)  # the step is under way and blocked on the workers
         sent = time.monotonic()
         child.send_signal(signal.SIGINT)
-        out, err = child.communicate(timeout=10)
+        # The interrupt's latency is the printed time, not this bound: it only ends a child
+        # that never returns (a missed Ctrl-C prints "stepped" after the 20 s step).
+        out, err = child.communicate(timeout=40)
     finally:
         if child.poll() is None:
             child.kill()
