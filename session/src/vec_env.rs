@@ -140,10 +140,7 @@ impl VecEnv {
             workers
         };
         let session = envhub_protocol::session_id();
-        let slots = SlotsName {
-            prefix: options.namespace.clone(),
-            session: session.clone(),
-        };
+        let slots = SlotsName::new(options.namespace.clone(), session.clone());
         let policy = options.wait_policy(local_workers.max(1));
         let mut planned = Vec::new();
         let mut offset = 0;

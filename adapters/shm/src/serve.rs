@@ -300,10 +300,7 @@ mod tests {
                 prefix: prefix.into(),
                 service: "envhub/serve-test/0/0".into(),
             },
-            slots: SlotsName {
-                prefix: prefix.into(),
-                session: format!("{}-serve-test", std::process::id()),
-            },
+            slots: SlotsName::new(prefix, format!("{}-serve-test", std::process::id())),
             worker_index: 0,
             session_workers: 0,
             owner_pid: std::process::id(),

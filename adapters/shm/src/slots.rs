@@ -24,19 +24,38 @@ use std::sync::Arc;
 /// Most lendable slots a session has (the scratch slot's index is one past them).
 pub const MAX_SLOTS: usize = 1024;
 
-/// Where a session's slots live: shared-memory objects `/<prefix>slots_<session>_<k>`.
+/// Where a session's slots live: shared-memory objects `/<prefix>slots_<session>_ns<pidns>_<k>`.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SlotsName {
     /// The iceoryx2 namespace prefix of the session (keeps namespaces apart).
     pub prefix: String,
     /// The session id; starts with the creating process's pid (`<pid>-...`).
     pub session: String,
+    /// The creating process's PID namespace (its `/proc/self/ns/pid` inode): its pid means
+    /// something only there, so only a process of the same namespace judges it stale.
+    #[serde(default)]
+    pub pid_ns: u64,
+}
+
+/// This process's PID namespace: the inode of `/proc/self/ns/pid` (0 if unreadable).
+pub fn pid_namespace() -> u64 {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self/ns/pid").map_or(0, |m| m.ino())
 }
 
 impl SlotsName {
+    /// The slots of session `session` in namespace `prefix`, created by this process.
+    pub fn new(prefix: impl Into<String>, session: impl Into<String>) -> SlotsName {
+        SlotsName {
+            prefix: prefix.into(),
+            session: session.into(),
+            pid_ns: pid_namespace(),
+        }
+    }
+
     /// The file name (in `/dev/shm`) of every slot of this session, without the index.
     fn stem(&self) -> String {
-        format!("{}slots_{}_", self.prefix, self.session)
+        format!("{}slots_{}_ns{:x}_", self.prefix, self.session, self.pid_ns)
     }
 
     fn path(&self, index: u32) -> Result<CString, DataPlaneError> {
@@ -82,13 +101,20 @@ fn os_error(what: &'static str) -> DataPlaneError {
 }
 
 /// Removes the slots of sessions in `prefix`'s namespace whose creating process is gone (a
-/// client killed together with its workers, before anyone could clean up).
+/// client killed together with its workers, before anyone could clean up). Only slots made in
+/// this process's PID namespace are judged: a pid of another namespace (a container sharing
+/// `/dev/shm`) names another process here, so those are left alone, as are names of another
+/// form.
 pub fn remove_stale_slots(prefix: &str) {
     let stem = format!("{prefix}slots_");
+    let ours = format!("ns{:x}", pid_namespace());
     for name in shm_names() {
         let Some(rest) = name.strip_prefix(&stem) else {
             continue;
         };
+        if !rest.split('_').any(|part| part == ours) {
+            continue;
+        }
         let pid = rest
             .split(['-', '_'])
             .next()
@@ -549,5 +575,41 @@ impl SlotMap {
     /// The names of the session's slots (to remove them when the owner died).
     pub fn name(&self) -> &SlotsName {
         &self.name
+    }
+}
+
+#[cfg(test)]
+mod stale_tests {
+    use super::*;
+
+    #[test]
+    fn only_slots_of_dead_owners_in_this_pid_namespace_are_removed() {
+        let prefix = format!("stale_test_{}_", std::process::id());
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        let ours = format!("ns{:x}", pid_namespace());
+        let names = [
+            format!("{prefix}slots_{dead}-0-0_{ours}_0"),
+            format!("{prefix}slots_{dead}-0-0_ns1_0"),
+            format!("{prefix}slots_{dead}-0-0_0"),
+            format!("{prefix}slots_{}-0-0_{ours}_0", std::process::id()),
+        ];
+        for n in &names {
+            std::fs::write(format!("/dev/shm/{n}"), b"").unwrap();
+        }
+        remove_stale_slots(&prefix);
+        let left: Vec<bool> = names
+            .iter()
+            .map(|n| std::path::Path::new(&format!("/dev/shm/{n}")).exists())
+            .collect();
+        for n in &names {
+            let _ = std::fs::remove_file(format!("/dev/shm/{n}"));
+        }
+        assert_eq!(
+            left,
+            [false, true, true, true],
+            "removed: a dead owner's of this namespace; kept: another namespace's, an old name, a live owner's"
+        );
     }
 }

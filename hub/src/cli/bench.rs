@@ -81,10 +81,7 @@ fn inproc_throughput(
             prefix: String::new(),
             service: String::new(),
         },
-        slots: SlotsName {
-            prefix: String::new(),
-            session: String::new(),
-        },
+        slots: SlotsName::new("", ""),
         worker_index: 0,
         session_workers: 0,
         owner_pid: std::process::id(),
