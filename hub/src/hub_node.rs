@@ -28,7 +28,7 @@ pub struct HubNode {
     _clients: zenoh::pubsub::Subscriber<()>,
     _echo: zenoh::pubsub::Subscriber<()>,
     sessions: Arc<Sessions>,
-    exposure_warning: Option<String>,
+    exposure_notice: Option<String>,
 }
 
 impl HubNode {
@@ -42,10 +42,11 @@ impl HubNode {
         self.sessions.len()
     }
 
-    /// Set when the hub is open to the network without credentials (`--insecure-listen`):
-    /// the warning to show its operator.
-    pub fn exposure_warning(&self) -> Option<&str> {
-        self.exposure_warning.as_deref()
+    /// What to tell the operator about the hub's reach: a warning when it is open to the
+    /// network without credentials (`--insecure-listen`), or how to open it up when it was
+    /// kept on loopback.
+    pub fn exposure_notice(&self) -> Option<&str> {
+        self.exposure_notice.as_deref()
     }
 }
 
@@ -73,7 +74,7 @@ pub fn join(
     policy: ServePolicy,
 ) -> Result<HubNode, HubError> {
     keys::check_name(name)?;
-    let (session, exposure_warning) = envhub_net::open_hub(net, &policy)?;
+    let (session, exposure_notice) = envhub_net::open_hub(net, &policy)?;
     let zerr = |what: &str| {
         let what = what.to_string();
         move |e: zenoh::Error| HubError::Network {
@@ -211,7 +212,7 @@ pub fn join(
         _clients: clients,
         _echo: echo,
         sessions,
-        exposure_warning,
+        exposure_notice,
     })
 }
 

@@ -14,8 +14,9 @@ use std::net::IpAddr;
 /// clients through multicast scouting, or named with `--listen`).
 pub const LOOPBACK_LISTENER: &str = "tcp/127.0.0.1:0";
 
-/// Applies the exposure rule to a hub's Zenoh config. Returns the warning to print when the
-/// hub is exposed without credentials because `insecure` allowed it.
+/// Applies the exposure rule to a hub's Zenoh config. Returns what to tell the operator: the
+/// warning when the hub is exposed without credentials because `insecure` allowed it, or how
+/// to open it up when it was kept on loopback.
 pub(crate) fn guard(
     config: &mut zenoh::Config,
     insecure: bool,
@@ -34,6 +35,7 @@ pub(crate) fn guard(
     };
     let connect = endpoints(&get(config, "connect/endpoints"), &mode);
     let authenticated = |endpoint: &str| usrpwd || (mtls && protocol(endpoint) == "tls");
+    let mut note = None;
     if listen.is_empty() && !usrpwd {
         config
             .insert_json5("listen/endpoints", &format!("[\"{LOOPBACK_LISTENER}\"]"))
@@ -41,6 +43,12 @@ pub(crate) fn guard(
                 what: "zenoh config",
                 reason: format!("cannot set the loopback listener: {e}"),
             })?;
+        note = Some(
+            "note: no credentials, so this hub listens on loopback only (this machine's clients); \
+             to serve other machines give credentials with `--zenoh-config` and `--listen` \
+             (docs/security.md), or `--insecure-listen` on a network you trust"
+                .to_string(),
+        );
     }
     let exposed: Vec<&String> = listen
         .iter()
@@ -48,7 +56,7 @@ pub(crate) fn guard(
         .filter(|e| !is_loopback(e) && !authenticated(e))
         .collect();
     if exposed.is_empty() {
-        return Ok(None);
+        return Ok(note);
     }
     let list = exposed
         .iter()
@@ -157,7 +165,13 @@ mod tests {
     #[test]
     fn a_hub_without_credentials_listens_on_loopback_only() {
         let mut c = config("mode = \"peer\"");
-        assert_eq!(guard(&mut c, false).unwrap(), None);
+        let note = guard(&mut c, false)
+            .unwrap()
+            .expect("a note on how to open it up");
+        assert!(
+            note.contains("loopback only") && note.contains("--insecure-listen"),
+            "{note}"
+        );
         assert_eq!(
             c.get_json("listen/endpoints").unwrap(),
             format!("[\"{LOOPBACK_LISTENER}\"]")

@@ -101,8 +101,13 @@ fn a_hub_started_without_listen_or_credentials_listens_on_loopback_only() {
         addresses = listening_addresses(hub.id());
     }
     let _ = hub.kill();
-    let _ = hub.wait();
+    let out = hub.wait_with_output().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("loopback only") && said.contains("--insecure-listen"),
+        "the hub did not say how to open it up: {said}"
+    );
     assert!(
         !addresses.is_empty(),
         "the hub listened on no TCP socket within 15 s"

@@ -83,9 +83,8 @@ pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outco
             insecure_listen: args.insecure_listen,
         };
         let node = envhub::join(hub.clone(), &name, &net, policy)?;
-        if let Some(warning) = node.exposure_warning() {
-            eprintln!("{warning}");
-            tracing::warn!("{warning}");
+        if let Some(notice) = node.exposure_notice() {
+            eprintln!("{notice}");
         }
         Some(node)
     };
