@@ -19,9 +19,14 @@ envhub = import_envhub()
 
 CLIENT = textwrap.dedent(
     """\
-    import sys, time
+    import signal, sys, time
     import numpy as np
     import envhub
+
+    # As in a terminal: a program started in the background of a non-interactive shell (a CI
+    # runner's `cmd &`) inherits SIGINT ignored, and Python then installs no
+    # KeyboardInterrupt handler.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
     envs = envhub.make_vec("null-env", 2, num_workers=2, registry=sys.argv[1], sleep_ms=20000)
     envs.reset(seed=0)
