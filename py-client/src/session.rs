@@ -87,6 +87,7 @@ enum Place {
         rewards: usize,
         terminated: usize,
         truncated: usize,
+        info_cols: usize,
     },
     /// Copied (results in the scratch slot, or gathered).
     Copied {
@@ -94,6 +95,7 @@ enum Place {
         rewards: Vec<f64>,
         terminated: Vec<bool>,
         truncated: Vec<bool>,
+        info_cols: Vec<u8>,
     },
 }
 
@@ -115,12 +117,14 @@ impl Results {
                 rewards: batch.rewards.as_ptr() as usize,
                 terminated: batch.terminated.as_ptr() as usize,
                 truncated: batch.truncated.as_ptr() as usize,
+                info_cols: batch.info_columns().as_ptr() as usize,
             },
             None => Place::Copied {
                 obs: batch.obs.to_vec(),
                 rewards: batch.rewards.to_vec(),
                 terminated: batch.terminated.to_vec(),
                 truncated: batch.truncated.to_vec(),
+                info_cols: batch.info_columns().to_vec(),
             },
         };
         let final_obs = if same_step {
@@ -223,6 +227,9 @@ pub(crate) struct Session {
     action_leaves: String,
     obs: ArrayLayout,
     act: ArrayLayout,
+    /// Bytes per env of the slots' typed info columns (0: none).
+    #[pyo3(get)]
+    info_row_bytes: usize,
 }
 
 pub(crate) fn leaves_json(space: &envhub::Space) -> String {
@@ -251,7 +258,7 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 /// usual way. With `adapter`, `id` is that adapter's env id and no registry is involved
 /// (`envhub.AsyncVectorEnv`'s factories, which no daemon's registry could know).
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None, info_row_bytes=0))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
@@ -264,6 +271,7 @@ pub(crate) fn make_session(
     pool_bytes: Option<usize>,
     adapter: Option<String>,
     hubs: Option<String>,
+    info_row_bytes: usize,
 ) -> PyResult<Session> {
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
@@ -308,6 +316,7 @@ pub(crate) fn make_session(
             if let Some(bytes) = pool_bytes {
                 options.pool_bytes = bytes;
             }
+            options.info_row_bytes = info_row_bytes;
             let hub = hub.with_options(options);
             let vec = match adapter {
                 Some(adapter) => {
@@ -352,6 +361,7 @@ pub(crate) fn make_session(
         action_leaves: leaves_json(v.action_space()),
         obs: ArrayLayout::of(v.observation_space()),
         act: ArrayLayout::of(v.action_space()),
+        info_row_bytes,
         pid: st.pid,
         state: Mutex::new(st),
         interrupted,
@@ -460,8 +470,13 @@ impl Session {
         py: Python<'py>,
         place: Place,
         n: Option<usize>,
-    ) -> PyResult<[Bound<'py, PyAny>; 4]> {
+    ) -> PyResult<[Bound<'py, PyAny>; 5]> {
         let count = n.unwrap_or(1);
+        let cols = ArrayLayout {
+            dtype: Some(envhub_core::DType::Uint8),
+            shape: vec![self.info_row_bytes],
+            bytes: self.info_row_bytes,
+        };
         match place {
             Place::Lent {
                 lease,
@@ -469,6 +484,7 @@ impl Session {
                 rewards,
                 terminated,
                 truncated,
+                info_cols,
             } => {
                 let owner = Bound::new(
                     py,
@@ -498,7 +514,17 @@ impl Session {
                             terminated as *const u8,
                             owner.clone(),
                         )?,
-                        arrays::view(&arrays::FLAGS, Some(count), truncated as *const u8, owner)?,
+                        arrays::view(
+                            &arrays::FLAGS,
+                            Some(count),
+                            truncated as *const u8,
+                            owner.clone(),
+                        )?,
+                        if self.info_row_bytes == 0 {
+                            py.None().into_bound(py)
+                        } else {
+                            arrays::view(&cols, Some(count), info_cols as *const u8, owner)?
+                        },
                     ])
                 }
             }
@@ -507,16 +533,24 @@ impl Session {
                 rewards,
                 terminated,
                 truncated,
+                info_cols,
             } => Ok([
                 arrays::copy(py, &self.obs, n, &obs),
                 PyArray1::from_vec(py, rewards).into_any(),
                 PyArray1::from_vec(py, terminated).into_any(),
                 PyArray1::from_vec(py, truncated).into_any(),
+                if self.info_row_bytes == 0 {
+                    py.None().into_bound(py)
+                } else {
+                    arrays::copy(py, &cols, Some(count), &info_cols)
+                },
             ]),
         }
     }
 
-    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids])`.
+    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids],
+    /// info columns or None)`: the columns as a `[n, info_row_bytes]` uint8 array (a view of
+    /// the slot when the others are), read with the schemas the infos announce.
     fn batch_tuple<'py>(
         &self,
         py: Python<'py>,
@@ -524,7 +558,7 @@ impl Session {
         with_ids: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = r.env_ids.len();
-        let [obs, rewards, terminated, truncated] = self.arrays(py, r.place, Some(n))?;
+        let [obs, rewards, terminated, truncated, cols] = self.arrays(py, r.place, Some(n))?;
         let infos = match &r.infos {
             None => py.None().into_bound(py),
             Some(infos) => {
@@ -553,6 +587,7 @@ impl Session {
             let ids: Vec<i64> = r.env_ids.iter().map(|&i| i as i64).collect();
             items.push(PyArray1::from_vec(py, ids).into_any());
         }
+        items.push(cols);
         PyTuple::new(py, items)
     }
 
