@@ -438,7 +438,9 @@ mod targets {
                         || (c.nbytes > 0 && c.offset < 8)
                         || c.offset % item != 0
                     {
-                        return Err(format!("schema passed with a bad column {c:?} in a row of {row}"));
+                        return Err(format!(
+                            "schema passed with a bad column {c:?} in a row of {row}"
+                        ));
                     }
                 }
             }

@@ -131,7 +131,10 @@ impl InfoSchema {
                 .find(|(d, _)| *d == c.dtype)
                 .ok_or_else(|| bad(format!("dtype `{}` is not a column dtype", c.dtype)))?;
             if c.shape.len() > MAX_DIMS {
-                return Err(bad(format!("{} dimensions, more than {MAX_DIMS}", c.shape.len())));
+                return Err(bad(format!(
+                    "{} dimensions, more than {MAX_DIMS}",
+                    c.shape.len()
+                )));
             }
             if c.kind != ValueKind::Array && !c.shape.is_empty() {
                 return Err(bad("a scalar with a shape".into()));
@@ -151,13 +154,20 @@ impl InfoSchema {
                 .checked_add(nbytes)
                 .filter(|&e| e <= row_bytes)
                 .ok_or_else(|| bad(format!("value at {offset} past a row of {row_bytes} bytes")))?;
-            if offset % item != 0 {
-                return Err(bad(format!("value at {offset}, not aligned to {item} bytes")));
+            if !offset.is_multiple_of(item) {
+                return Err(bad(format!(
+                    "value at {offset}, not aligned to {item} bytes"
+                )));
             }
             let mask = usize::try_from(c.mask)
                 .ok()
                 .filter(|&m| m < row_bytes)
-                .ok_or_else(|| bad(format!("flag at {} past a row of {row_bytes} bytes", c.mask)))?;
+                .ok_or_else(|| {
+                    bad(format!(
+                        "flag at {} past a row of {row_bytes} bytes",
+                        c.mask
+                    ))
+                })?;
             if nbytes > 0 {
                 taken.push((offset, end));
             }
@@ -217,10 +227,26 @@ mod tests {
             (one("x", "<f8", "[]", 8, 10, "py"), 32, "overlap"),
             (one("x", "<f8", "[]", 8, 32, "py"), 32, "flag at 32"),
             (one("x", "|O", "[]", 8, 20, "py"), 32, "not a column dtype"),
-            (one("x", "<f8", "[2]", 8, 30, "np"), 32, "scalar with a shape"),
-            (one("x", "<f8", "[4611686018427387904, 4]", 8, 30, "array"), 32, "does not fit"),
-            (one("x", "<f8", "[18446744073709551615]", 8, 30, "array"), 32, "does not fit"),
-            (one("x", "<f8", "[]", 18446744073709551615, 30, "py"), 32, "past a row"),
+            (
+                one("x", "<f8", "[2]", 8, 30, "np"),
+                32,
+                "scalar with a shape",
+            ),
+            (
+                one("x", "<f8", "[4611686018427387904, 4]", 8, 30, "array"),
+                32,
+                "does not fit",
+            ),
+            (
+                one("x", "<f8", "[18446744073709551615]", 8, 30, "array"),
+                32,
+                "does not fit",
+            ),
+            (
+                one("x", "<f8", "[]", 18446744073709551615, 30, "py"),
+                32,
+                "past a row",
+            ),
             (one("_x", "<f8", "[]", 8, 30, "py"), 32, "starts with"),
             (one("x", "<f8", "[]", 8, 30, "what"), 32, "not a schema"),
             (r#"{"id": 0, "keys": []}"#.to_string(), 32, "id 0"),

@@ -191,14 +191,11 @@ impl BatchLayout {
     /// [`BLOCK_ALIGN`], so every row starts aligned) after the other blocks; `None` when
     /// `row_bytes` is not such a multiple or the slot would not fit in an `isize`.
     pub fn with_info_columns(self, row_bytes: usize) -> Option<BatchLayout> {
-        if row_bytes % BLOCK_ALIGN != 0 {
+        if !row_bytes.is_multiple_of(BLOCK_ALIGN) {
             return None;
         }
         let base = self.info_cols;
-        let size = self
-            .num_envs
-            .checked_mul(row_bytes)?
-            .checked_add(base)?;
+        let size = self.num_envs.checked_mul(row_bytes)?.checked_add(base)?;
         (size <= isize::MAX as usize).then_some(BatchLayout {
             info_row_bytes: row_bytes,
             size,
@@ -368,7 +365,10 @@ mod tests {
     fn info_columns_come_last_and_leave_the_other_blocks_in_place() {
         let plain = BatchLayout::new(5, 12, true);
         let cols = plain.with_info_columns(64).unwrap();
-        assert_eq!((cols.obs, cols.rewards, cols.final_obs), (plain.obs, plain.rewards, plain.final_obs));
+        assert_eq!(
+            (cols.obs, cols.rewards, cols.final_obs),
+            (plain.obs, plain.rewards, plain.final_obs)
+        );
         assert_eq!(cols.info_cols, plain.size());
         assert_eq!(cols.size(), plain.size() + 5 * 64);
         assert!(plain.with_info_columns(12).is_none());
