@@ -1,0 +1,74 @@
+"""Camera observations from a Python worker (another interpreter) reach the caller without a
+copy on the way: a 224×224×3 uint8 frame is written once by the worker into its row of the
+shared-memory batch slot and the caller's array views that row, for one env and for a
+batch; the bytes are the env's, and arrays kept from earlier steps stay unchanged."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from conftest import import_envhub
+from test_py_dropin import STEP_TIMEOUT
+from test_py_zero_copy import in_shared_memory, slot_of
+
+envhub = import_envhub()
+
+SHAPE = (224, 224, 3)
+
+
+class CameraEnv(gym.Env):
+    """An env whose observation is a camera frame: a pattern that changes every step."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, shape: tuple[int, ...] = SHAPE) -> None:
+        self.observation_space = gym.spaces.Box(0, 255, shape, np.uint8)
+        self.action_space = gym.spaces.Discrete(2)
+        self.t = 0
+        self.base = np.zeros(shape, np.uint8)
+
+    def frame(self) -> np.ndarray:
+        return (self.base + np.uint8(self.t % 251)).astype(np.uint8)
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        super().reset(seed=seed)
+        self.t = 0
+        self.base = self.np_random.integers(0, 255, self.observation_space.shape, dtype=np.uint8)
+        return self.frame(), {}
+
+    def step(self, action: Any) -> Any:
+        self.t += 1
+        return self.frame(), 0.0, False, self.t >= 50, {}
+
+
+@pytest.mark.parametrize("num_envs", [1, 4])
+def test_camera_frames_are_views_of_the_slot_with_no_copy(num_envs):
+    fns = [CameraEnv for _ in range(num_envs)]
+    ours = envhub.AsyncVectorEnv(fns, num_workers=min(2, num_envs), step_timeout=STEP_TIMEOUT)
+    ref = gym.vector.SyncVectorEnv(fns)
+    try:
+        got, _ = ours.reset(seed=3)
+        want, _ = ref.reset(seed=3)
+        np.testing.assert_array_equal(got, want)
+        kept = []
+        for _ in range(6):
+            got = ours.step(np.zeros(num_envs, np.int64))[0]
+            want = ref.step(np.zeros(num_envs, np.int64))[0]
+            assert got.shape == (num_envs, *SHAPE) and got.dtype == np.uint8
+            np.testing.assert_array_equal(got, want)
+            # The frame is the slot's row: its memory is the shared mapping, owned by the slot.
+            assert in_shared_memory(got) is not None
+            assert slot_of(got) is not None
+            kept.append((got, want.copy()))
+        # Kept frames are other slots' rows, unchanged by later steps.
+        assert not np.shares_memory(kept[-1][0], kept[-2][0])
+        for got, want in kept[-3:]:
+            np.testing.assert_array_equal(got, want)
+        # No observation byte was copied between the worker's write and the caller's array.
+        assert ours._session.obs_bytes_copied == 0
+    finally:
+        ours.close()
+        ref.close()
