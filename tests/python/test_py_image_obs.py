@@ -72,3 +72,36 @@ def test_camera_frames_are_views_of_the_slot_with_no_copy(num_envs):
     finally:
         ours.close()
         ref.close()
+
+
+@pytest.mark.parametrize("shape", [(6, 5), (6, 5, 1), (6, 5, 3), (6, 5, 4)])
+def test_rendered_frames_of_any_channel_count_travel_as_rgb(shape):
+    # What `HostedBatch.render_rgb` sends for a frame Gymnasium's `render()` returns: gray
+    # repeated over the three channels, alpha dropped, colour as it is.
+    from envhub.worker import _rgb
+
+    frame = np.arange(int(np.prod(shape)), dtype=np.uint8).reshape(shape)
+    h, w, data = _rgb(frame)
+    got = np.frombuffer(data, np.uint8).reshape(h, w, 3)
+    want = np.dstack([frame] * 3) if frame.ndim == 2 else frame[..., [0, 0, 0]] if shape[-1] == 1 else frame[..., :3]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_a_grayscale_env_renders_through_a_worker():
+    class Gray(CameraEnv):
+        metadata = {"render_modes": ["rgb_array"]}
+
+        def __init__(self) -> None:
+            super().__init__((4, 4, 3))
+            self.render_mode = "rgb_array"
+
+        def render(self) -> np.ndarray:
+            return np.full((3, 2), 7 * (self.t + 1), np.uint8)
+
+    from envhub._spaces import from_gymnasium
+    from envhub.worker import HostedBatch, HostedEnv
+
+    env = Gray()
+    hosted = HostedEnv(env, from_gymnasium(env.observation_space), from_gymnasium(env.action_space))
+    (frame,) = HostedBatch([hosted], "next_step").render_rgb([True])
+    assert frame[:2] == (3, 2) and frame[2] == bytes([7] * 18)

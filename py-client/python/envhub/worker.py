@@ -74,10 +74,19 @@ def _whole(node: Any) -> _Leaf | None:
 
 
 def _rgb(frame: Any) -> tuple[int, int, bytes] | None:
+    """A frame as the data plane carries it: height, width and RGB bytes. A grayscale frame
+    (H×W or H×W×1) has its one channel repeated; an alpha channel is dropped."""
     if frame is None:
         return None
-    a = np.ascontiguousarray(frame, dtype=np.uint8)
-    return int(a.shape[0]), int(a.shape[1]), a[..., :3].tobytes()
+    a = np.asarray(frame, dtype=np.uint8)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[2] not in (1, 3, 4):
+        raise ValueError(
+            f"render() returned a frame of shape {a.shape}; an `rgb_array` frame is H×W×3 (or H×W, H×W×1, H×W×4)"
+        )
+    a = np.repeat(a, 3, axis=2) if a.shape[2] == 1 else a[..., :3]
+    return int(a.shape[0]), int(a.shape[1]), np.ascontiguousarray(a).tobytes()
 
 
 class HostedEnv:
