@@ -731,6 +731,21 @@ mod tests {
     }
 
     #[test]
+    fn a_multi_discrete_shape_must_hold_its_counts() {
+        let md = |shape| Space::MultiDiscrete {
+            nvec: vec![2; 6],
+            start: vec![0; 6],
+            shape,
+        };
+        assert_eq!(md(Some(vec![2, 3])).check().unwrap(), 48);
+        assert_eq!(md(Some(vec![2, 3])).shape(), Some(vec![2, 3]));
+        assert_eq!(md(None).shape(), Some(vec![6]));
+        for bad in [vec![4, 2], vec![usize::MAX, 2], vec![1; 40]] {
+            assert!(md(Some(bad.clone())).check().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
     fn samples_are_contained() {
         let spaces = [
             Space::box_f32(&[4], -2.0, 2.0),
