@@ -85,7 +85,7 @@ def measure(env_id: str, args: argparse.Namespace) -> None:
         announced += json.loads(section) if section else []
     client = AsyncVectorEnv.__new__(AsyncVectorEnv)
     client._columns = ColumnReader(INFO_ROW_BYTES)
-    assert client._columns.learn(announced) is None
+    assert not client._columns.learn(announced)
     cols_np = np.frombuffer(cols, np.uint8).reshape(n, INFO_ROW_BYTES)
     info = raws[0].step(action)[4]
 
