@@ -104,12 +104,22 @@ struct Results {
     env_ids: Vec<usize>,
     place: Place,
     infos: Option<Vec<serde_json::Value>>,
-    final_obs: Option<Vec<Option<Vec<u8>>>>,
+    final_obs: Option<Vec<Option<FinalObs>>>,
+}
+
+/// One env's final observation (same_step): where it lies in the lent slot, or a copy.
+enum FinalObs {
+    /// The address of its row in the slot's final-observation block (the slot is lent with
+    /// the other results, so the row stays valid and unchanged while they are viewed).
+    At(usize),
+    /// Copied (results in the scratch slot, or gathered).
+    Copy(Vec<u8>),
 }
 
 impl Results {
     fn of(batch: &Batch<'_>, lease: Option<SlotLease>, same_step: bool) -> Results {
         let n = batch.env_ids.len();
+        let lent = lease.is_some();
         let place = match lease {
             Some(lease) => Place::Lent {
                 lease,
@@ -128,8 +138,16 @@ impl Results {
             },
         };
         let final_obs = if same_step {
-            let all: Vec<Option<Vec<u8>>> = (0..n)
-                .map(|k| batch.final_obs(k).map(<[u8]>::to_vec))
+            let all: Vec<Option<FinalObs>> = (0..n)
+                .map(|k| {
+                    batch.final_obs(k).map(|row| {
+                        if lent {
+                            FinalObs::At(row.as_ptr() as usize)
+                        } else {
+                            FinalObs::Copy(row.to_vec())
+                        }
+                    })
+                })
                 .collect();
             all.iter().any(Option::is_some).then_some(all)
         } else {
@@ -470,7 +488,7 @@ impl Session {
         py: Python<'py>,
         place: Place,
         n: Option<usize>,
-    ) -> PyResult<[Bound<'py, PyAny>; 5]> {
+    ) -> PyResult<([Bound<'py, PyAny>; 5], Option<Bound<'py, PyAny>>)> {
         let count = n.unwrap_or(1);
         let cols = ArrayLayout {
             dtype: Some(envhub_core::DType::Uint8),
@@ -500,32 +518,40 @@ impl Session {
                 // f64, flags 0/1 bytes), and the lease in `owner`, the arrays' base, keeps the
                 // slot mapped and unwritten while any of them lives.
                 unsafe {
-                    Ok([
-                        arrays::view(&self.obs, n, obs as *const u8, owner.clone())?,
-                        arrays::view(
-                            &arrays::REWARDS,
-                            Some(count),
-                            rewards as *const u8,
-                            owner.clone(),
-                        )?,
-                        arrays::view(
-                            &arrays::FLAGS,
-                            Some(count),
-                            terminated as *const u8,
-                            owner.clone(),
-                        )?,
-                        arrays::view(
-                            &arrays::FLAGS,
-                            Some(count),
-                            truncated as *const u8,
-                            owner.clone(),
-                        )?,
-                        if self.info_row_bytes == 0 {
-                            py.None().into_bound(py)
-                        } else {
-                            arrays::view(&cols, Some(count), info_cols as *const u8, owner)?
-                        },
-                    ])
+                    Ok((
+                        [
+                            arrays::view(&self.obs, n, obs as *const u8, owner.clone())?,
+                            arrays::view(
+                                &arrays::REWARDS,
+                                Some(count),
+                                rewards as *const u8,
+                                owner.clone(),
+                            )?,
+                            arrays::view(
+                                &arrays::FLAGS,
+                                Some(count),
+                                terminated as *const u8,
+                                owner.clone(),
+                            )?,
+                            arrays::view(
+                                &arrays::FLAGS,
+                                Some(count),
+                                truncated as *const u8,
+                                owner.clone(),
+                            )?,
+                            if self.info_row_bytes == 0 {
+                                py.None().into_bound(py)
+                            } else {
+                                arrays::view(
+                                    &cols,
+                                    Some(count),
+                                    info_cols as *const u8,
+                                    owner.clone(),
+                                )?
+                            },
+                        ],
+                        Some(owner),
+                    ))
                 }
             }
             Place::Copied {
@@ -534,17 +560,20 @@ impl Session {
                 terminated,
                 truncated,
                 info_cols,
-            } => Ok([
-                arrays::copy(py, &self.obs, n, &obs),
-                PyArray1::from_vec(py, rewards).into_any(),
-                PyArray1::from_vec(py, terminated).into_any(),
-                PyArray1::from_vec(py, truncated).into_any(),
-                if self.info_row_bytes == 0 {
-                    py.None().into_bound(py)
-                } else {
-                    arrays::copy(py, &cols, Some(count), &info_cols)
-                },
-            ]),
+            } => Ok((
+                [
+                    arrays::copy(py, &self.obs, n, &obs),
+                    PyArray1::from_vec(py, rewards).into_any(),
+                    PyArray1::from_vec(py, terminated).into_any(),
+                    PyArray1::from_vec(py, truncated).into_any(),
+                    if self.info_row_bytes == 0 {
+                        py.None().into_bound(py)
+                    } else {
+                        arrays::copy(py, &cols, Some(count), &info_cols)
+                    },
+                ],
+                None,
+            )),
         }
     }
 
@@ -558,7 +587,8 @@ impl Session {
         with_ids: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = r.env_ids.len();
-        let [obs, rewards, terminated, truncated, cols] = self.arrays(py, r.place, Some(n))?;
+        let ([obs, rewards, terminated, truncated, cols], owner) =
+            self.arrays(py, r.place, Some(n))?;
         let infos = match &r.infos {
             None => py.None().into_bound(py),
             Some(infos) => {
@@ -572,11 +602,24 @@ impl Session {
         let final_obs = match &r.final_obs {
             None => py.None().into_bound(py),
             Some(all) => {
+                let row = ArrayLayout {
+                    dtype: Some(envhub_core::DType::Uint8),
+                    shape: vec![self.obs.bytes],
+                    bytes: self.obs.bytes,
+                };
                 let list = PyList::empty(py);
                 for f in all {
-                    match f {
-                        Some(bytes) => list.append(PyBytes::new(py, bytes))?,
-                        None => list.append(py.None())?,
+                    match (f, &owner) {
+                        (None, _) => list.append(py.None())?,
+                        // SAFETY: the row lies in the slot that `owner`'s lease keeps mapped
+                        // and unwritten, `obs.bytes` bytes of it.
+                        (Some(FinalObs::At(at)), Some(owner)) => list.append(unsafe {
+                            arrays::view(&row, None, *at as *const u8, owner.clone())?
+                        })?,
+                        (Some(FinalObs::Copy(bytes)), _) => list.append(PyBytes::new(py, bytes))?,
+                        (Some(FinalObs::At(_)), None) => {
+                            unreachable!("a final observation in place comes with a lent slot")
+                        }
                     }
                 }
                 list.into_any()
@@ -621,7 +664,7 @@ impl Session {
                 truncated.first().copied().unwrap_or(false),
             ),
         };
-        let [obs, ..] = self.arrays(py, r.place, None)?;
+        let ([obs, ..], _) = self.arrays(py, r.place, None)?;
         let info = match &info {
             Some(i) => info_to_py(py, i)?,
             None => pyo3::types::PyDict::new(py).into_any(),

@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from conftest import import_envhub
-from test_py_dropin import STEP_TIMEOUT
+from test_py_dropin import STEP_TIMEOUT, assert_same
 from test_py_zero_copy import in_shared_memory, slot_of
 
 envhub = import_envhub()
@@ -24,10 +24,10 @@ class CameraEnv(gym.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, shape: tuple[int, ...] = SHAPE) -> None:
+    def __init__(self, shape: tuple[int, ...] = SHAPE, limit: int = 50) -> None:
         self.observation_space = gym.spaces.Box(0, 255, shape, np.uint8)
         self.action_space = gym.spaces.Discrete(2)
-        self.t = 0
+        self.t, self.limit = 0, limit
         self.base = np.zeros(shape, np.uint8)
 
     def frame(self) -> np.ndarray:
@@ -41,7 +41,7 @@ class CameraEnv(gym.Env):
 
     def step(self, action: Any) -> Any:
         self.t += 1
-        return self.frame(), 0.0, False, self.t >= 50, {}
+        return self.frame(), 0.0, False, self.t >= self.limit, {}
 
 
 @pytest.mark.parametrize("num_envs", [1, 4])
@@ -105,3 +105,25 @@ def test_a_grayscale_env_renders_through_a_worker():
     hosted = HostedEnv(env, from_gymnasium(env.observation_space), from_gymnasium(env.action_space))
     (frame,) = HostedBatch([hosted], "next_step").render_rgb([True])
     assert frame[:2] == (3, 2) and frame[2] == bytes([7] * 18)
+
+
+def test_same_step_final_frames_are_views_of_the_slot():
+    # The last frame of an episode (same_step's `final_obs`) is the slot's row too, not a copy.
+    fns = [lambda i=i: CameraEnv(limit=2 + i) for i in range(3)]
+    mode = gym.vector.AutoresetMode.SAME_STEP
+    ours = envhub.AsyncVectorEnv(fns, num_workers=2, autoreset_mode=mode, step_timeout=STEP_TIMEOUT)
+    ref = gym.vector.SyncVectorEnv(fns, autoreset_mode=mode)
+    try:
+        assert_same(ours.reset(seed=1), ref.reset(seed=1), "reset")
+        finals = 0
+        for t in range(8):
+            got, want = ours.step(np.zeros(3, np.int64)), ref.step(np.zeros(3, np.int64))
+            assert_same(got, want, f"step {t}")
+            info = got[4]
+            for k in np.flatnonzero(info.get("_final_obs", np.zeros(3, bool))):
+                assert slot_of(info["final_obs"][k]) is not None, (t, k)
+                finals += 1
+        assert finals >= 4
+    finally:
+        ours.close()
+        ref.close()

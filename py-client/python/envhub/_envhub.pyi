@@ -87,7 +87,7 @@ _Batch = tuple[
     npt.NDArray[np.bool_],
     npt.NDArray[np.bool_],
     list[dict[str, object]] | None,
-    list[bytes | None] | None,
+    list[bytes | npt.NDArray[np.uint8] | None] | None,
     npt.NDArray[np.uint8] | None,
 ]
 
@@ -112,7 +112,7 @@ class Session:
         npt.NDArray[np.bool_],
         npt.NDArray[np.bool_],
         list[dict[str, object]] | None,
-        list[bytes | None] | None,
+        list[bytes | npt.NDArray[np.uint8] | None] | None,
         npt.NDArray[np.int64],
         npt.NDArray[np.uint8] | None,
     ]: ...

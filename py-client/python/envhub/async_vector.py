@@ -253,7 +253,7 @@ class AsyncVectorEnv(VectorEnv):
         return pending
 
     def _info(
-        self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int, cols: Any = None
+        self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: Any = None
     ) -> dict[str, Any]:
         if cols is not None:
             columns = self._columns

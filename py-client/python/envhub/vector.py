@@ -258,7 +258,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     # ---------------------------------------------------------------------------------------
 
     def _info(
-        self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int, cols: Any = None
+        self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: Any = None
     ) -> dict[str, Any]:
         if final is None and infos is not None:
             flat = flat_infos(infos, n)
