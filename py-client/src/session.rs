@@ -107,6 +107,10 @@ struct Results {
     final_obs: Option<Vec<Option<FinalObs>>>,
 }
 
+/// `(obs, rewards, terminated, truncated, info columns)` arrays, and the slot owner that is
+/// their base when they view the slot.
+type Arrays<'py> = ([Bound<'py, PyAny>; 5], Option<Bound<'py, PyAny>>);
+
 /// One env's final observation (same_step): where it lies in the lent slot, or a copy.
 enum FinalObs {
     /// The address of its row in the slot's final-observation block (the slot is lent with
@@ -481,14 +485,15 @@ impl Session {
         })
     }
 
-    /// `(obs, rewards, terminated, truncated)` arrays of `results`: views of the batch slot
-    /// with its lease as their base, or fresh arrays. `n` `None`: one env, no leading axis.
+    /// `(obs, rewards, terminated, truncated, info columns)` arrays of `results`: views of
+    /// the batch slot with its lease as their base (returned too, for the final
+    /// observations), or fresh arrays. `n` `None`: one env, no leading axis.
     fn arrays<'py>(
         &self,
         py: Python<'py>,
         place: Place,
         n: Option<usize>,
-    ) -> PyResult<([Bound<'py, PyAny>; 5], Option<Bound<'py, PyAny>>)> {
+    ) -> PyResult<Arrays<'py>> {
         let count = n.unwrap_or(1);
         let cols = ArrayLayout {
             dtype: Some(envhub_core::DType::Uint8),
