@@ -220,3 +220,20 @@ def test_the_writer_declines_what_gymnasium_would_not_batch_as_it():
     assert writer.write(rows, 0, {"_x": 1.0}) is False  # would collide with a mask's name
     assert writer.write(rows, 0, {"big": np.zeros(100)}) is False  # does not fit the row
     assert rows[:8].tobytes() == bytes(8)  # a declined row says so: its info goes as JSON
+
+
+def test_keys_the_session_adds_to_a_row_s_info_are_kept():
+    # A restarted worker's envs get `worker_restarted` from the session as JSON, beside the
+    # row their info was written in: the env's dict is the row's values, then those keys.
+    writer = ColumnWriter(64)
+    rows = memoryview(bytearray(2 * 64))
+    text = writer.write(rows, 0, {"x": 1.5, "n": np.int16(3)})
+    assert writer.write(rows, 1, {"x": 2.5, "n": np.int16(4)}) is None
+    client = envhub.AsyncVectorEnv.__new__(envhub.AsyncVectorEnv)
+    client._columns = ColumnReader(64)
+    infos = client._columns.learn([{"__envhub_schema__": text}, {"worker_restarted": True}])
+    got = client._info(infos, None, 2, np.frombuffer(rows, np.uint8).reshape(2, 64))
+    batch = type("B", (), {"_add_info": gym.vector.VectorEnv._add_info, "num_envs": 2})()
+    want = batch._add_info({}, {"x": 1.5, "n": np.int16(3)}, 0)
+    want = batch._add_info(want, {"x": 2.5, "n": np.int16(4), "worker_restarted": True}, 1)
+    assert_same(got, want, "merged")

@@ -266,11 +266,13 @@ class AsyncVectorEnv(VectorEnv):
                 if not ids.any():
                     return {}
             if ids.any():
-                # Some infos in rows, some as JSON: each env's dict, batched as below.
+                # Some infos in rows, some as JSON: each env's dict (a row's values first, then
+                # any keys the session added, as a restart's), batched as below.
+                json_infos = infos if infos is not None else [None] * n
                 infos = [
-                    columns.env_info(cols, k, int(ids[k]))  # type: ignore[union-attr]
+                    {**columns.env_info(cols, k, int(ids[k])), **(json_infos[k] or {})}  # type: ignore[union-attr]
                     if ids[k]
-                    else (infos[k] if infos is not None else None)
+                    else json_infos[k]
                     for k in range(n)
                 ]
         # Gymnasium's own batching of each env's info, once unwrapped; same_step infos are
