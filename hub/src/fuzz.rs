@@ -1,6 +1,7 @@
 //! Fuzz targets for every parser of bytes that another process sends: a remote session's
 //! request and response frames, rendered frames, an open reply with its spaces, a hub's or
-//! daemon's error, a worker's failure report, a daemon request, a registry file.
+//! daemon's error, a worker's failure report, a daemon request, a registry file, a Python
+//! worker's info-column schema.
 //!
 //! Each target runs as a normal test: first its corpus (`hub/fuzz/corpus/<target>/`, the
 //! seeds and every input that once found a bug), then inputs that proptest makes by mutating
@@ -408,6 +409,41 @@ mod targets {
             let text = String::from_utf8_lossy(bytes);
             let mut registry = envhub_catalog::Registry::from_entries(Vec::new(), "fuzz");
             let _ = registry.add_yaml(&text, "fuzz.yaml", std::path::Path::new("/nonexistent"));
+            Ok(())
+        });
+    }
+
+    #[test]
+    fn fuzz_info_schema() {
+        use envhub_protocol::info_columns::InfoSchema;
+        let seeds = vec![
+            br#"{"id": 9, "keys": [{"key": "x", "dtype": "<f8", "shape": [], "offset": 8, "mask": 40, "kind": "py"}, {"key": "v", "dtype": "<f4", "shape": [2, 3], "offset": 16, "mask": 41, "kind": "array"}]}"#.to_vec(),
+            br#"{"id": 1, "keys": [{"key": "ok", "dtype": "|b1", "shape": [], "offset": 8, "mask": 9, "kind": "np"}]}"#.to_vec(),
+        ];
+        fuzz("info_schema", seeds, |bytes| {
+            let text = String::from_utf8_lossy(bytes);
+            for row in [0usize, 16, 48, 512] {
+                let Ok(schema) = InfoSchema::parse(&text, row) else {
+                    continue;
+                };
+                // What a reader relies on to lay views over a row: everything inside it,
+                // aligned, and the id's bytes left alone.
+                for c in &schema.columns {
+                    let item: usize = c.dtype[2..].parse().unwrap_or(1);
+                    let whole = c.shape.iter().try_fold(item, |a, &d| a.checked_mul(d));
+                    if whole != Some(c.nbytes)
+                        || c.offset + c.nbytes > row
+                        || c.mask >= row
+                        || c.mask < 8
+                        || (c.nbytes > 0 && c.offset < 8)
+                        || c.offset % item != 0
+                    {
+                        return Err(format!(
+                            "schema passed with a bad column {c:?} in a row of {row}"
+                        ));
+                    }
+                }
+            }
             Ok(())
         });
     }

@@ -12,6 +12,7 @@
 mod error;
 mod frame;
 mod ids;
+pub mod info_columns;
 pub mod keys;
 mod messages;
 mod route;

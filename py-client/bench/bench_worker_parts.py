@@ -1,11 +1,11 @@
 """CPU cost per env step of the Python halves of a Python-hosted env's path, in one process,
 so that a loaded machine's scheduling does not enter (issue 20): what the worker's Python adds
-to an env's `step` (`HostedEnv.step_into` over the drop-in's `DropInEnv`: the action viewed
-and copied, the observation written into its row, the info encoded as JSON) and what the
-client's Python does with the batch's infos (decoding and batching them into Gymnasium's
-vector layout), against the batching `SyncVectorEnv` does in-process. The Rust halves (the
-info parsed and re-serialized in the worker and the client, the shared-memory hand-off) are
-not in these figures; `bench_overhead.py` measures the whole.
+to the envs' `step` (`HostedBatch.step_into` over the drop-in's `DropInEnv`, one call per
+batch: the actions copied once, each observation written into its row, each info packed
+into its row of typed columns) and what the client's Python does with the batch's infos
+(viewing the columns as Gymnasium's vector layout), against the batching `SyncVectorEnv`
+does in-process. The Rust halves (the shared-memory hand-off) are not in these figures;
+`bench_overhead.py` measures the whole.
 
     .venv/bin/python py-client/bench/bench_worker_parts.py [--env Hopper-v5 HalfCheetah-v5] [--steps 2000] [--rounds 5]
 
@@ -21,11 +21,11 @@ from collections.abc import Callable
 
 import gymnasium
 import numpy as np
-from envhub._pickled import decode_info
+from envhub._info_columns import ColumnReader
 from envhub._spaces import from_gymnasium
-from envhub.async_vector import AsyncVectorEnv
+from envhub.async_vector import INFO_ROW_BYTES, AsyncVectorEnv
 from envhub.hosted.env_fns import DropInEnv
-from envhub.worker import HostedEnv
+from envhub.worker import HostedBatch, HostedEnv
 
 
 class _Batch:
@@ -45,55 +45,69 @@ def best_us(fn: Callable[[], None], count: int, rounds: int) -> float:
 
 
 def measure(env_id: str, args: argparse.Namespace) -> None:
-    raw = gymnasium.make(env_id)
-    raw.reset(seed=0)
+    n = args.envs
+    raws = [gymnasium.make(env_id) for _ in range(n)]
+    raw = raws[0]
     raw.action_space.seed(0)
     action = raw.action_space.sample()
-    hosted = HostedEnv(DropInEnv(raw), from_gymnasium(raw.observation_space), from_gymnasium(raw.action_space))
-    act = memoryview(np.ascontiguousarray(action).tobytes())
-    out = memoryview(bytearray(int(np.prod(raw.observation_space.shape)) * raw.observation_space.dtype.itemsize))
+    obs_desc, act_desc = from_gymnasium(raw.observation_space), from_gymnasium(raw.action_space)
+    batch = HostedBatch([HostedEnv(DropInEnv(e), obs_desc, act_desc) for e in raws], "next_step", INFO_ROW_BYTES)
+    ob = int(np.prod(raw.observation_space.shape)) * raw.observation_space.dtype.itemsize
+    acts = memoryview(np.ascontiguousarray(np.stack([action] * n)).tobytes())
+    obs, rewards = memoryview(bytearray(n * ob)), memoryview(bytearray(8 * n))
+    term, trunc, fmask = (memoryview(bytearray(n)) for _ in range(3))
+    cols = memoryview(bytearray(n * INFO_ROW_BYTES))
+    selected = [True] * n
+    steps = max(1, args.steps // n)
 
     # Both reset at each episode's end (a fallen Hopper steps at another cost) and start
-    # from the same state.
+    # from the same states.
     def bare() -> None:
-        raw.reset(seed=0)
-        for _ in range(args.steps):
-            if any(raw.step(action)[2:4]):
-                raw.reset()
+        for i, e in enumerate(raws):
+            e.reset(seed=i)
+        for _ in range(steps):
+            for e in raws:
+                if any(e.step(action)[2:4]):
+                    e.reset()
 
     def worker() -> None:
-        raw.reset(seed=0)
-        for _ in range(args.steps):
-            if any(hosted.step_into(act, out)[1:3]):
-                raw.reset()
+        for i, e in enumerate(raws):
+            e.reset(seed=i)
+        for _ in range(steps):
+            batch.step_into(selected, acts, obs, rewards, term, trunc, fmask, None, cols)
 
-    # The client's infos: as the worker encodes them, parsed from JSON as the session does.
-    info = raw.step(action)[4]
-    got = hosted.step_into(act, out)[3]  # JSON text, or a dict that Rust writes as JSON
-    text = got if isinstance(got, str) else json.dumps(got)
-    infos = [json.loads(text) for _ in range(args.envs)]
-    n = args.envs
+    # The client's infos: the columns the worker wrote, with the schemas it announced.
+    for i, e in enumerate(raws):
+        e.reset(seed=i)
+    announced = []
+    for _ in range(3):  # past the reset's schema
+        section, _ = batch.step_into(selected, acts, obs, rewards, term, trunc, fmask, None, cols)
+        announced += json.loads(section) if section else []
     client = AsyncVectorEnv.__new__(AsyncVectorEnv)
-    batches = max(1, args.steps // n)
+    client._columns = ColumnReader(INFO_ROW_BYTES)
+    assert not client._columns.learn(announced)
+    cols_np = np.frombuffer(cols, np.uint8).reshape(n, INFO_ROW_BYTES)
+    info = raws[0].step(action)[4]
 
     def client_infos() -> None:
-        for _ in range(batches):
-            client._info([dict(i) for i in infos], None, n)
+        for _ in range(steps):
+            client._info(None, None, n, cols_np)
 
     def gymnasium_infos() -> None:
         b = _Batch(n)
-        for _ in range(batches):
+        for _ in range(steps):
             merged: dict = {}
             for k in range(n):
                 merged = b._add_info(merged, info, k)
 
     t_bare = t_worker = float("inf")
     for _ in range(args.rounds):  # in alternation
-        t_bare = min(t_bare, best_us(bare, args.steps, 1))
-        t_worker = min(t_worker, best_us(worker, args.steps, 1))
-    t_client = best_us(client_infos, batches * n, args.rounds)
-    t_sync = best_us(gymnasium_infos, batches * n, args.rounds)
-    assert decode_info(infos[0]).keys() == info.keys()
+        t_bare = min(t_bare, best_us(bare, steps * n, 1))
+        t_worker = min(t_worker, best_us(worker, steps * n, 1))
+    t_client = best_us(client_infos, steps * n, args.rounds)
+    t_sync = best_us(gymnasium_infos, steps * n, args.rounds)
+    got = client._info(None, None, n, cols_np)
+    assert list(got) == list(gymnasium_infos_once(info, n)), (list(got), list(info))
     print(
         json.dumps(
             {
@@ -106,8 +120,16 @@ def measure(env_id: str, args: argparse.Namespace) -> None:
         ),
         flush=True,
     )
-    raw.close()
+    for e in raws:
+        e.close()
 
+
+def gymnasium_infos_once(info: dict, n: int) -> dict:
+    merged: dict = {}
+    b = _Batch(n)
+    for k in range(n):
+        merged = b._add_info(merged, info, k)
+    return merged
 
 
 def main() -> None:

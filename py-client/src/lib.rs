@@ -12,6 +12,7 @@
 mod arrays;
 mod convert;
 mod errors;
+mod info_columns;
 mod registry;
 mod session;
 mod worker;
@@ -77,6 +78,7 @@ fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(refresh_adapters, m)?)?;
     m.add_function(wrap_pyfunction!(session::make_session, m)?)?;
     m.add_function(wrap_pyfunction!(worker::serve_worker, m)?)?;
+    m.add_function(wrap_pyfunction!(info_columns::info_schema, m)?)?;
     m.add_function(wrap_pyfunction!(worker::serve_vector_worker, m)?)?;
     m.add_function(wrap_pyfunction!(worker::space_leaves_json, m)?)?;
     m.add_class::<session::Session>()?;

@@ -87,6 +87,7 @@ enum Place {
         rewards: usize,
         terminated: usize,
         truncated: usize,
+        info_cols: usize,
     },
     /// Copied (results in the scratch slot, or gathered).
     Copied {
@@ -94,6 +95,7 @@ enum Place {
         rewards: Vec<f64>,
         terminated: Vec<bool>,
         truncated: Vec<bool>,
+        info_cols: Vec<u8>,
     },
 }
 
@@ -102,12 +104,26 @@ struct Results {
     env_ids: Vec<usize>,
     place: Place,
     infos: Option<Vec<serde_json::Value>>,
-    final_obs: Option<Vec<Option<Vec<u8>>>>,
+    final_obs: Option<Vec<Option<FinalObs>>>,
+}
+
+/// `(obs, rewards, terminated, truncated, info columns)` arrays, and the slot owner that is
+/// their base when they view the slot.
+type Arrays<'py> = ([Bound<'py, PyAny>; 5], Option<Bound<'py, PyAny>>);
+
+/// One env's final observation (same_step): where it lies in the lent slot, or a copy.
+enum FinalObs {
+    /// The address of its row in the slot's final-observation block (the slot is lent with
+    /// the other results, so the row stays valid and unchanged while they are viewed).
+    At(usize),
+    /// Copied (results in the scratch slot, or gathered).
+    Copy(Vec<u8>),
 }
 
 impl Results {
     fn of(batch: &Batch<'_>, lease: Option<SlotLease>, same_step: bool) -> Results {
         let n = batch.env_ids.len();
+        let lent = lease.is_some();
         let place = match lease {
             Some(lease) => Place::Lent {
                 lease,
@@ -115,17 +131,27 @@ impl Results {
                 rewards: batch.rewards.as_ptr() as usize,
                 terminated: batch.terminated.as_ptr() as usize,
                 truncated: batch.truncated.as_ptr() as usize,
+                info_cols: batch.info_columns().as_ptr() as usize,
             },
             None => Place::Copied {
                 obs: batch.obs.to_vec(),
                 rewards: batch.rewards.to_vec(),
                 terminated: batch.terminated.to_vec(),
                 truncated: batch.truncated.to_vec(),
+                info_cols: batch.info_columns().to_vec(),
             },
         };
         let final_obs = if same_step {
-            let all: Vec<Option<Vec<u8>>> = (0..n)
-                .map(|k| batch.final_obs(k).map(<[u8]>::to_vec))
+            let all: Vec<Option<FinalObs>> = (0..n)
+                .map(|k| {
+                    batch.final_obs(k).map(|row| {
+                        if lent {
+                            FinalObs::At(row.as_ptr() as usize)
+                        } else {
+                            FinalObs::Copy(row.to_vec())
+                        }
+                    })
+                })
                 .collect();
             all.iter().any(Option::is_some).then_some(all)
         } else {
@@ -223,6 +249,9 @@ pub(crate) struct Session {
     action_leaves: String,
     obs: ArrayLayout,
     act: ArrayLayout,
+    /// Bytes per env of the slots' typed info columns (0: none).
+    #[pyo3(get)]
+    info_row_bytes: usize,
 }
 
 pub(crate) fn leaves_json(space: &envhub::Space) -> String {
@@ -251,7 +280,7 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 /// usual way. With `adapter`, `id` is that adapter's env id and no registry is involved
 /// (`envhub.AsyncVectorEnv`'s factories, which no daemon's registry could know).
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None, info_row_bytes=0))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
@@ -264,6 +293,7 @@ pub(crate) fn make_session(
     pool_bytes: Option<usize>,
     adapter: Option<String>,
     hubs: Option<String>,
+    info_row_bytes: usize,
 ) -> PyResult<Session> {
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
@@ -308,6 +338,7 @@ pub(crate) fn make_session(
             if let Some(bytes) = pool_bytes {
                 options.pool_bytes = bytes;
             }
+            options.info_row_bytes = info_row_bytes;
             let hub = hub.with_options(options);
             let vec = match adapter {
                 Some(adapter) => {
@@ -352,6 +383,7 @@ pub(crate) fn make_session(
         action_leaves: leaves_json(v.action_space()),
         obs: ArrayLayout::of(v.observation_space()),
         act: ArrayLayout::of(v.action_space()),
+        info_row_bytes,
         pid: st.pid,
         state: Mutex::new(st),
         interrupted,
@@ -453,15 +485,21 @@ impl Session {
         })
     }
 
-    /// `(obs, rewards, terminated, truncated)` arrays of `results`: views of the batch slot
-    /// with its lease as their base, or fresh arrays. `n` `None`: one env, no leading axis.
+    /// `(obs, rewards, terminated, truncated, info columns)` arrays of `results`: views of
+    /// the batch slot with its lease as their base (returned too, for the final
+    /// observations), or fresh arrays. `n` `None`: one env, no leading axis.
     fn arrays<'py>(
         &self,
         py: Python<'py>,
         place: Place,
         n: Option<usize>,
-    ) -> PyResult<[Bound<'py, PyAny>; 4]> {
+    ) -> PyResult<Arrays<'py>> {
         let count = n.unwrap_or(1);
+        let cols = ArrayLayout {
+            dtype: Some(envhub_core::DType::Uint8),
+            shape: vec![self.info_row_bytes],
+            bytes: self.info_row_bytes,
+        };
         match place {
             Place::Lent {
                 lease,
@@ -469,6 +507,7 @@ impl Session {
                 rewards,
                 terminated,
                 truncated,
+                info_cols,
             } => {
                 let owner = Bound::new(
                     py,
@@ -484,22 +523,40 @@ impl Session {
                 // f64, flags 0/1 bytes), and the lease in `owner`, the arrays' base, keeps the
                 // slot mapped and unwritten while any of them lives.
                 unsafe {
-                    Ok([
-                        arrays::view(&self.obs, n, obs as *const u8, owner.clone())?,
-                        arrays::view(
-                            &arrays::REWARDS,
-                            Some(count),
-                            rewards as *const u8,
-                            owner.clone(),
-                        )?,
-                        arrays::view(
-                            &arrays::FLAGS,
-                            Some(count),
-                            terminated as *const u8,
-                            owner.clone(),
-                        )?,
-                        arrays::view(&arrays::FLAGS, Some(count), truncated as *const u8, owner)?,
-                    ])
+                    Ok((
+                        [
+                            arrays::view(&self.obs, n, obs as *const u8, owner.clone())?,
+                            arrays::view(
+                                &arrays::REWARDS,
+                                Some(count),
+                                rewards as *const u8,
+                                owner.clone(),
+                            )?,
+                            arrays::view(
+                                &arrays::FLAGS,
+                                Some(count),
+                                terminated as *const u8,
+                                owner.clone(),
+                            )?,
+                            arrays::view(
+                                &arrays::FLAGS,
+                                Some(count),
+                                truncated as *const u8,
+                                owner.clone(),
+                            )?,
+                            if self.info_row_bytes == 0 {
+                                py.None().into_bound(py)
+                            } else {
+                                arrays::view(
+                                    &cols,
+                                    Some(count),
+                                    info_cols as *const u8,
+                                    owner.clone(),
+                                )?
+                            },
+                        ],
+                        Some(owner),
+                    ))
                 }
             }
             Place::Copied {
@@ -507,16 +564,27 @@ impl Session {
                 rewards,
                 terminated,
                 truncated,
-            } => Ok([
-                arrays::copy(py, &self.obs, n, &obs),
-                PyArray1::from_vec(py, rewards).into_any(),
-                PyArray1::from_vec(py, terminated).into_any(),
-                PyArray1::from_vec(py, truncated).into_any(),
-            ]),
+                info_cols,
+            } => Ok((
+                [
+                    arrays::copy(py, &self.obs, n, &obs),
+                    PyArray1::from_vec(py, rewards).into_any(),
+                    PyArray1::from_vec(py, terminated).into_any(),
+                    PyArray1::from_vec(py, truncated).into_any(),
+                    if self.info_row_bytes == 0 {
+                        py.None().into_bound(py)
+                    } else {
+                        arrays::copy(py, &cols, Some(count), &info_cols)
+                    },
+                ],
+                None,
+            )),
         }
     }
 
-    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids])`.
+    /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids],
+    /// info columns or None)`: the columns as a `[n, info_row_bytes]` uint8 array (a view of
+    /// the slot when the others are), read with the schemas the infos announce.
     fn batch_tuple<'py>(
         &self,
         py: Python<'py>,
@@ -524,7 +592,8 @@ impl Session {
         with_ids: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = r.env_ids.len();
-        let [obs, rewards, terminated, truncated] = self.arrays(py, r.place, Some(n))?;
+        let ([obs, rewards, terminated, truncated, cols], owner) =
+            self.arrays(py, r.place, Some(n))?;
         let infos = match &r.infos {
             None => py.None().into_bound(py),
             Some(infos) => {
@@ -538,11 +607,24 @@ impl Session {
         let final_obs = match &r.final_obs {
             None => py.None().into_bound(py),
             Some(all) => {
+                let row = ArrayLayout {
+                    dtype: Some(envhub_core::DType::Uint8),
+                    shape: vec![self.obs.bytes],
+                    bytes: self.obs.bytes,
+                };
                 let list = PyList::empty(py);
                 for f in all {
-                    match f {
-                        Some(bytes) => list.append(PyBytes::new(py, bytes))?,
-                        None => list.append(py.None())?,
+                    match (f, &owner) {
+                        (None, _) => list.append(py.None())?,
+                        // SAFETY: the row lies in the slot that `owner`'s lease keeps mapped
+                        // and unwritten, `obs.bytes` bytes of it.
+                        (Some(FinalObs::At(at)), Some(owner)) => list.append(unsafe {
+                            arrays::view(&row, None, *at as *const u8, owner.clone())?
+                        })?,
+                        (Some(FinalObs::Copy(bytes)), _) => list.append(PyBytes::new(py, bytes))?,
+                        (Some(FinalObs::At(_)), None) => {
+                            unreachable!("a final observation in place comes with a lent slot")
+                        }
                     }
                 }
                 list.into_any()
@@ -553,6 +635,7 @@ impl Session {
             let ids: Vec<i64> = r.env_ids.iter().map(|&i| i as i64).collect();
             items.push(PyArray1::from_vec(py, ids).into_any());
         }
+        items.push(cols);
         PyTuple::new(py, items)
     }
 
@@ -586,7 +669,7 @@ impl Session {
                 truncated.first().copied().unwrap_or(false),
             ),
         };
-        let [obs, ..] = self.arrays(py, r.place, None)?;
+        let ([obs, ..], _) = self.arrays(py, r.place, None)?;
         let info = match &info {
             Some(i) => info_to_py(py, i)?,
             None => pyo3::types::PyDict::new(py).into_any(),

@@ -1,8 +1,9 @@
 //! The Python worker's Rust half: `python -m envhub.worker serve` creates its envs in Python
 //! and hands them to [`serve_worker`], which runs the same serve loop as the Rust worker
-//! binary ([`envhub_shm::serve_batch`]) with each Python env behind the `Env` trait; or, for a
-//! simulator that holds all of the worker's envs in one vector env, to
-//! [`serve_vector_worker`], which serves that object as the whole batch.
+//! binary ([`envhub_shm::serve_batch`]) with the worker's Python envs as one batch
+//! (`envhub.worker.HostedBatch`, one call into Python per request); or, for a simulator that
+//! holds all of the worker's envs in one vector env, to [`serve_vector_worker`], which serves
+//! that object as the whole batch.
 //!
 //! Why a Python process driving the Rust loop rather than CPython embedded in
 //! `envhub-worker`: the worker then runs in the user's own interpreter (the project's `.venv`
@@ -12,27 +13,17 @@
 //! cost is a second entry point (`python -m envhub.worker`) the hub must know how to start.
 //!
 //! Copies kept to what Python needs: the wrapper gets a read-only view of the request sample
-//! and gives the env its own copy of its action (the sample is reused by later requests, and
-//! an env may keep its action, as "previous action" features do); the observation is copied
-//! once, by numpy, into the response sample.
+//! and copies the batch's actions once, into an array the envs own (the sample is reused by
+//! later requests, and an env may keep its action, as "previous action" features do); each
+//! observation is copied once, by numpy, into its row of the batch slot.
 
-use envhub_core::{AutoresetMode, Env, EnvError, Info, InfoValue, ResetOptions, Space, Transition};
+use envhub_core::{EnvError, ResetOptions, Space};
 use envhub_shm::{
-    EnvBatch, Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerJob, env_flag, frames_section,
+    Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerJob, env_flag, frames_section,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyFloat, PyInt};
 use std::io::Write;
-
-/// One Python env, through the wrapper `envhub.worker.HostedEnv` (methods `reset_into`,
-/// `step_into`, `render_rgb`, `close`).
-struct PyEnv {
-    env: Py<PyAny>,
-    env_id: String,
-    observation_space: Space,
-    action_space: Space,
-}
 
 /// A numpy-ready `memoryview` over `bytes` (writable or not), valid while `bytes` is.
 fn memory_view<'py>(
@@ -86,126 +77,137 @@ fn python_failed(py: Python<'_>, env_id: &str, what: &str, err: PyErr) -> EnvErr
     }
 }
 
-impl PyEnv {
+/// All of a worker's Python envs (one env object each), through the wrapper
+/// `envhub.worker.HostedBatch` (methods `reset_into`, `step_into`, `render_rgb`, `close`):
+/// one call into Python per request for the whole batch, not one per env. The wrapper loops
+/// over the envs, applies the autoreset mode as [`EnvBatch`](envhub_shm::EnvBatch) does for
+/// native envs, writes each result straight into the env's rows of the blocks it is given
+/// (typed info columns included, when the session has them) and answers with the info
+/// section (JSON text of the infos that did not go into columns, or `None`) and the envs
+/// that raised, so one env's exception does not cost the others their step.
+struct PyBatch {
+    batch: Py<PyAny>,
+    env_id: String,
+    num_envs: usize,
+    failures: Vec<(usize, String)>,
+}
+
+/// What `HostedBatch.reset_into` / `step_into` return: the info section, and
+/// `(env index, method, traceback)` for each env that raised.
+type BatchAnswer = (Option<String>, Vec<(usize, String, String)>);
+
+impl PyBatch {
     fn failed(&self, py: Python<'_>, what: &str, err: PyErr) -> EnvError {
         python_failed(py, &self.env_id, what, err)
     }
-}
 
-/// Fills `info` from the JSON object text a wrapper returned (`None`: no info). Values that
-/// are not numbers, flags, text or lists of numbers were already dropped in Python.
-fn fill_info(info: &mut Info, json: Option<String>) {
-    let Some(text) = json else { return };
-    if let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&text) {
-        for (key, value) in map {
-            if let Ok(v) = serde_json::from_value::<InfoValue>(value) {
-                info.insert(key, v);
-            }
-        }
-    }
-}
-
-/// Fills `info` from what a wrapper returned: `None`, JSON object text, or a dict of plain
-/// values (`envhub._pickled.Encoded`: flags, integers, floats and text only), read here
-/// value by value so the numbers skip the round trip through text.
-fn fill_info_py(info: &mut Info, value: &Bound<'_, PyAny>) -> PyResult<()> {
-    if value.is_none() {
-        return Ok(());
-    }
-    if let Ok(dict) = value.cast::<PyDict>() {
-        for (key, v) in dict.iter() {
-            let key: String = key.extract()?;
-            let v = if v.is_instance_of::<PyBool>() {
-                InfoValue::Bool(v.extract()?)
-            } else if v.is_instance_of::<PyInt>() {
-                InfoValue::Int(v.extract()?)
-            } else if v.is_instance_of::<PyFloat>() {
-                InfoValue::Float(v.extract()?)
-            } else {
-                InfoValue::Text(v.extract()?)
+    /// The info section of an answer, keeping its failed envs for `take_failures`.
+    fn answer(&mut self, (info, failed): BatchAnswer) -> Vec<u8> {
+        for (i, what, tb) in failed {
+            let e = EnvError::Simulator {
+                env_id: self.env_id.clone(),
+                reason: format!("the Python env raised in `{what}`:\n{tb}"),
             };
-            info.insert(key, v);
+            self.failures.push((i, e.to_string()));
         }
-        return Ok(());
+        info.map(String::into_bytes).unwrap_or_default()
     }
-    fill_info(info, Some(value.extract()?));
-    Ok(())
 }
 
-impl Env for PyEnv {
-    fn observation_space(&self) -> &Space {
-        &self.observation_space
+/// A writable memoryview of `block`, or `None` when it is empty (a block the slot lacks).
+fn optional_view<'py>(py: Python<'py>, block: &mut [u8]) -> PyResult<Option<Bound<'py, PyAny>>> {
+    if block.is_empty() {
+        return Ok(None);
     }
+    memory_view(py, block.as_mut_ptr(), block.len(), true).map(Some)
+}
 
-    fn action_space(&self) -> &Space {
-        &self.action_space
+impl ServedBatch for PyBatch {
+    fn len(&self) -> usize {
+        self.num_envs
     }
 
     fn reset(
         &mut self,
-        seed: Option<u64>,
+        flags: &[u8],
+        seeds: &[u64],
         options: &ResetOptions,
-        obs: &mut [u8],
-        info: &mut Info,
-    ) -> Result<(), EnvError> {
-        Python::attach(|py| {
-            let mut run = || -> PyResult<()> {
-                let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let seeds: Vec<Option<u64>> = flags
+            .iter()
+            .zip(seeds)
+            .map(|(f, &s)| (f & env_flag::SEEDED != 0).then_some(s))
+            .collect();
+        let got = Python::attach(|py| {
+            let run = || -> PyResult<BatchAnswer> {
                 let options = (!options.is_empty())
                     .then(|| serde_json::to_string(options).unwrap_or_default());
-                let got = self
-                    .env
-                    .call_method1(py, "reset_into", (seed, options, out))?;
-                fill_info_py(info, got.bind(py))
+                let args = (
+                    selected(flags),
+                    seeds,
+                    options,
+                    memory_view(py, out.obs.as_mut_ptr(), out.obs.len(), true)?,
+                    f64_view(py, out.rewards)?,
+                    memory_view(py, out.terminated.as_mut_ptr(), out.terminated.len(), true)?,
+                    memory_view(py, out.truncated.as_mut_ptr(), out.truncated.len(), true)?,
+                    memory_view(py, out.final_mask.as_mut_ptr(), out.final_mask.len(), true)?,
+                    optional_view(py, out.info_cols)?,
+                );
+                self.batch.call_method1(py, "reset_into", args)?.extract(py)
             };
             run().map_err(|e| self.failed(py, "reset", e))
-        })
+        })?;
+        Ok(self.answer(got))
     }
 
     fn step(
         &mut self,
-        action: &[u8],
-        obs: &mut [u8],
-        info: &mut Info,
-    ) -> Result<Transition, EnvError> {
-        Python::attach(|py| {
-            let mut run = || -> PyResult<Transition> {
-                let act = memory_view(py, action.as_ptr(), action.len(), false)?;
-                let out = memory_view(py, obs.as_mut_ptr(), obs.len(), true)?;
-                let got = self.env.call_method1(py, "step_into", (act, out))?;
-                let (reward, terminated, truncated, info_value): (
-                    f64,
-                    bool,
-                    bool,
-                    Bound<'_, PyAny>,
-                ) = got.bind(py).extract()?;
-                fill_info_py(info, &info_value)?;
-                Ok(Transition {
-                    reward,
-                    terminated,
-                    truncated,
-                })
+        flags: &[u8],
+        actions: &[u8],
+        out: &mut ResponseBlocksMut<'_>,
+    ) -> Result<Vec<u8>, EnvError> {
+        let got = Python::attach(|py| {
+            let mut run = || -> PyResult<BatchAnswer> {
+                let args = (
+                    selected(flags),
+                    memory_view(py, actions.as_ptr(), actions.len(), false)?,
+                    memory_view(py, out.obs.as_mut_ptr(), out.obs.len(), true)?,
+                    f64_view(py, out.rewards)?,
+                    memory_view(py, out.terminated.as_mut_ptr(), out.terminated.len(), true)?,
+                    memory_view(py, out.truncated.as_mut_ptr(), out.truncated.len(), true)?,
+                    memory_view(py, out.final_mask.as_mut_ptr(), out.final_mask.len(), true)?,
+                    optional_view(py, out.final_obs)?,
+                    optional_view(py, out.info_cols)?,
+                );
+                self.batch.call_method1(py, "step_into", args)?.extract(py)
             };
             run().map_err(|e| self.failed(py, "step", e))
-        })
+        })?;
+        Ok(self.answer(got))
     }
 
-    fn render(&mut self) -> Result<Option<(usize, usize, Vec<u8>)>, EnvError> {
-        Python::attach(|py| {
-            let frame: PyResult<Option<(usize, usize, Vec<u8>)>> = self
-                .env
-                .call_method0(py, "render_rgb")
+    fn render(&mut self, flags: &[u8]) -> Result<Vec<u8>, EnvError> {
+        let frames = Python::attach(|py| {
+            let frames: PyResult<Vec<Option<Frame>>> = self
+                .batch
+                .call_method1(py, "render_rgb", (selected(flags),))
                 .and_then(|f| f.extract(py));
-            frame.map_err(|e| self.failed(py, "render", e))
-        })
+            frames.map_err(|e| self.failed(py, "render", e))
+        })?;
+        Ok(frames_section(frames))
     }
 
     fn close(&mut self) {
         Python::attach(|py| {
-            if let Err(e) = self.env.call_method0(py, "close") {
+            if let Err(e) = self.batch.call_method0(py, "close") {
                 tracing::warn!(env_id = %self.env_id, "close raised: {}", traceback(py, &e));
             }
         });
+    }
+
+    fn take_failures(&mut self) -> Vec<(usize, String)> {
+        std::mem::take(&mut self.failures)
     }
 }
 
@@ -409,13 +411,13 @@ fn serve(
     .map_err(|e| PyRuntimeError::new_err(format!("worker data plane failed: {e}")))
 }
 
-/// Serves `envs` (wrappers made by `envhub.worker`) for the job `job_json` until the client
+/// Serves `batch` (an `envhub.worker.HostedBatch` over the job's envs) for the job `job_json` until the client
 /// closes the session or exits: prints the ready line on the file descriptor `reply_fd`,
 /// then answers requests. `max_episode_steps` is the limit the envs apply themselves and
 /// `render_fps` their `metadata["render_fps"]` (both reported to the client). Releases the
 /// GIL while waiting for requests.
 #[pyfunction]
-#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, envs, reply_fd, render_fps=None))]
+#[pyo3(signature = (job_json, observation_space, action_space, max_episode_steps, batch, reply_fd, render_fps=None))]
 #[expect(
     clippy::too_many_arguments,
     reason = "the Python function's parameters, one each"
@@ -426,7 +428,7 @@ pub(crate) fn serve_worker(
     observation_space: &str,
     action_space: &str,
     max_episode_steps: Option<u32>,
-    envs: Vec<Py<PyAny>>,
+    batch: Py<PyAny>,
     reply_fd: i32,
     render_fps: Option<f64>,
 ) -> PyResult<()> {
@@ -437,19 +439,14 @@ pub(crate) fn serve_worker(
         max_episode_steps,
         render_fps,
     )?;
-    let batch: Vec<Box<dyn Env>> = envs
-        .into_iter()
-        .map(|env| {
-            Box::new(PyEnv {
-                env,
-                env_id: job.env_id.clone(),
-                observation_space: ready.observation_space.clone(),
-                action_space: ready.action_space.clone(),
-            }) as Box<dyn Env>
-        })
-        .collect();
-    let mode: AutoresetMode = job.config.autoreset_mode;
-    serve(py, &job, EnvBatch::new(batch, mode), ready, reply_fd)
+    let num_envs: usize = batch.getattr(py, "num_envs")?.extract(py)?;
+    let batch = PyBatch {
+        batch,
+        env_id: job.env_id.clone(),
+        num_envs,
+        failures: Vec::new(),
+    };
+    serve(py, &job, batch, ready, reply_fd)
 }
 
 /// As [`serve_worker`], for one `envhub.worker.HostedVectorEnv` holding all of the job's

@@ -21,6 +21,7 @@ pub struct Batch<'a> {
     pub(crate) infos: &'a [serde_json::Value],
     pub(crate) final_mask: &'a [u8],
     pub(crate) final_obs: &'a [u8],
+    pub(crate) info_cols: &'a [u8],
     pub(crate) in_place: bool,
     /// The slot the results lie in, when viewed in place.
     pub(crate) slot: Option<&'a SlotLease>,
@@ -50,6 +51,13 @@ impl<'a> Batch<'a> {
     /// autoreset; empty otherwise), as the slot's blocks.
     pub fn final_blocks(&self) -> (&'a [u8], &'a [u8]) {
         (self.final_mask, self.final_obs)
+    }
+
+    /// The batch's rows of typed info columns (`SessionOptions::info_row_bytes` per env,
+    /// as the Python worker wrote them; empty when the session has none). Their schema
+    /// arrives in the infos: `envhub_protocol::info_columns`.
+    pub fn info_columns(&self) -> &'a [u8] {
+        self.info_cols
     }
 
     /// Whether any env reported info.

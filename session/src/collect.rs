@@ -322,6 +322,7 @@ impl VecEnv {
                 g.truncated.push(trunc[0]);
                 g.final_mask.extend_from_slice(row.final_mask);
                 g.final_obs.extend_from_slice(row.final_obs);
+                g.info_cols.extend_from_slice(row.info_cols);
                 self.obs_bytes_copied += row.obs.len() as u64;
             }
         }
@@ -397,6 +398,7 @@ impl VecEnv {
                     infos: &r.infos,
                     final_mask: rows.final_mask,
                     final_obs: rows.final_obs,
+                    info_cols: rows.info_cols,
                     in_place: true,
                     slot: Some(slot),
                 }
@@ -410,6 +412,7 @@ impl VecEnv {
                 infos: &r.infos,
                 final_mask: &r.gathered.final_mask,
                 final_obs: &r.gathered.final_obs,
+                info_cols: &r.gathered.info_cols,
                 in_place: false,
                 slot: None,
             },

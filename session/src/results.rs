@@ -22,6 +22,7 @@ pub(crate) struct Gathered {
     pub(crate) truncated: Vec<bool>,
     pub(crate) final_mask: Vec<u8>,
     pub(crate) final_obs: Vec<u8>,
+    pub(crate) info_cols: Vec<u8>,
 }
 
 impl Gathered {
@@ -32,6 +33,7 @@ impl Gathered {
         self.truncated.clear();
         self.final_mask.clear();
         self.final_obs.clear();
+        self.info_cols.clear();
     }
 
     pub(crate) fn push_obs(&mut self, bytes: &[u8]) {

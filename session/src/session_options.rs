@@ -37,6 +37,10 @@ pub struct SessionOptions {
     /// Shared memory the session's batch slots may take in all. Results that arrays still
     /// view keep their slot; past this cap new results are copied rather than waiting.
     pub pool_bytes: usize,
+    /// Bytes per env of typed info columns in the batch slots (0: none). Only a client that
+    /// reads them sets it (the Python drop-in); Python workers then write infos that fit
+    /// their learned schema there, and the rest as JSON (see `envhub_protocol::info_columns`).
+    pub info_row_bytes: usize,
 }
 
 impl Default for SessionOptions {
@@ -50,6 +54,7 @@ impl Default for SessionOptions {
             namespace: std::env::var(envhub_core::env_vars::ENVHUB_NAMESPACE)
                 .unwrap_or_else(|_| "envhub_".to_string()),
             pool_bytes: 512 << 20,
+            info_row_bytes: 0,
         }
     }
 }

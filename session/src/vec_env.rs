@@ -178,6 +178,7 @@ impl VecEnv {
                     owner_pid: std::process::id(),
                     spin_us: policy.spin.as_micros() as u64,
                     max_spin_us: options.max_spin.as_micros() as u64,
+                    info_row_bytes: options.info_row_bytes,
                     python: route.python.clone(),
                 })));
                 worker_index += 1;
@@ -259,6 +260,7 @@ impl VecEnv {
                                     owner_pid: std::process::id(),
                                     spin_us: 0,
                                     max_spin_us: 0,
+                                    info_row_bytes: 0,
                                     python: None,
                                 };
                                 Ok((
@@ -334,6 +336,7 @@ impl VecEnv {
             .check()
             .ok()
             .and_then(|obs| BatchLayout::checked(num_envs, obs, with_final))
+            .and_then(|layout| layout.with_info_columns(options.info_row_bytes))
             .ok_or_else(|| {
                 HubError::InvalidState(format!(
                     "`{id}` has an observation space too large for a batch of {num_envs} envs: {observation_space}"

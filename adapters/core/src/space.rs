@@ -116,10 +116,14 @@ pub enum Space {
     },
     /// A vector of discrete values, stored as `int64`.
     MultiDiscrete {
-        /// Number of values of each element.
+        /// Number of values of each element, in row-major order.
         nvec: Vec<i64>,
         /// Smallest value of each element.
         start: Vec<i64>,
+        /// The array shape of `nvec` when it is not 1-D (Gymnasium's `MultiDiscrete([[2, 3],
+        /// [4, 5]])`); `None`: `[nvec.len()]`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        shape: Option<Vec<usize>>,
     },
     /// Binary array, stored as `int8` as Gymnasium does.
     MultiBinary {
@@ -207,6 +211,9 @@ pub const MAX_DEPTH: usize = 32;
 
 const ALIGN: usize = 8;
 
+/// Most dimensions of a multi-discrete space's shape.
+const MAX_DIMS: usize = 32;
+
 fn align_up(n: usize) -> usize {
     n.div_ceil(ALIGN) * ALIGN
 }
@@ -265,7 +272,9 @@ impl Space {
         match self {
             Space::Box { shape, .. } | Space::MultiBinary { shape } => Some(shape.clone()),
             Space::Discrete { .. } => Some(vec![]),
-            Space::MultiDiscrete { nvec, .. } => Some(vec![nvec.len()]),
+            Space::MultiDiscrete { nvec, shape, .. } => {
+                Some(shape.clone().unwrap_or_else(|| vec![nvec.len()]))
+            }
             Space::Dict { .. } | Space::Tuple { .. } => None,
         }
     }
@@ -326,11 +335,20 @@ impl Space {
                 }
                 return Ok(8);
             }
-            Space::MultiDiscrete { nvec, start } => {
+            Space::MultiDiscrete { nvec, start, shape } => {
                 if nvec.len() != start.len() || nvec.iter().any(|&n| n <= 0) {
                     return Err(bad(format!(
                         "a multi-discrete space with nvec {nvec:?} and start {start:?} (one positive count and one start per element)"
                     )));
+                }
+                if let Some(shape) = shape {
+                    let elements = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
+                    if shape.len() > MAX_DIMS || elements != Some(nvec.len()) {
+                        return Err(bad(format!(
+                            "a multi-discrete space of shape {shape:?} with {} counts (the shape's elements, at most {MAX_DIMS} dimensions)",
+                            nvec.len()
+                        )));
+                    }
                 }
                 let bytes = nvec.len().checked_mul(8).ok_or_else(too_big)?;
                 return (bytes <= MAX_VALUE_BYTES)
@@ -552,7 +570,7 @@ impl Space {
         match self {
             Space::Box { low, high, .. } => (low[i], high[i]),
             Space::Discrete { n, start } => (*start as f64, (start + n - 1) as f64),
-            Space::MultiDiscrete { nvec, start } => {
+            Space::MultiDiscrete { nvec, start, .. } => {
                 (start[i] as f64, (start[i] + nvec[i] - 1) as f64)
             }
             Space::MultiBinary { .. } => (0.0, 1.0),
@@ -713,6 +731,21 @@ mod tests {
     }
 
     #[test]
+    fn a_multi_discrete_shape_must_hold_its_counts() {
+        let md = |shape| Space::MultiDiscrete {
+            nvec: vec![2; 6],
+            start: vec![0; 6],
+            shape,
+        };
+        assert_eq!(md(Some(vec![2, 3])).check().unwrap(), 48);
+        assert_eq!(md(Some(vec![2, 3])).shape(), Some(vec![2, 3]));
+        assert_eq!(md(None).shape(), Some(vec![6]));
+        for bad in [vec![4, 2], vec![usize::MAX, 2], vec![1; 40]] {
+            assert!(md(Some(bad.clone())).check().is_err(), "{bad:?}");
+        }
+    }
+
+    #[test]
     fn samples_are_contained() {
         let spaces = [
             Space::box_f32(&[4], -2.0, 2.0),
@@ -721,6 +754,12 @@ mod tests {
             Space::MultiDiscrete {
                 nvec: vec![2, 3, 4],
                 start: vec![0, 0, 1],
+                shape: None,
+            },
+            Space::MultiDiscrete {
+                nvec: vec![2, 3, 4, 5],
+                start: vec![0, 0, 1, 1],
+                shape: Some(vec![2, 2]),
             },
             Space::MultiBinary { shape: vec![6] },
             goal_dict(),
@@ -896,6 +935,7 @@ mod tests {
         let md = Space::MultiDiscrete {
             nvec: vec![2, 3],
             start: vec![0, 0],
+            shape: None,
         };
         let bad: Vec<u8> = [1i64, 3].iter().flat_map(|v| v.to_le_bytes()).collect();
         assert!(md.validate_with(&bad, finite).is_err());

@@ -41,6 +41,10 @@ pub struct WorkerJob {
     /// Spin at most this long before blocking, in microseconds.
     #[serde(default)]
     pub max_spin_us: u64,
+    /// Bytes per env of the slots' typed info columns (0: none; only a client that reads
+    /// them asks for them, and only the Python worker writes them).
+    #[serde(default)]
+    pub info_row_bytes: usize,
     /// The Python environment a Python-hosted adapter runs in (`None`: the hub's interpreter).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub python: Option<WorkerPython>,

@@ -152,6 +152,11 @@ pub struct BatchLayout {
     pub final_mask: usize,
     /// Final observations `[n, obs_bytes]` (only with `with_final_obs`).
     pub final_obs: usize,
+    /// Bytes of one env's row of typed info columns (0: the slot has none).
+    pub info_row_bytes: usize,
+    /// Typed info columns `[n, info_row_bytes]`, the last block, so a slot with them keeps
+    /// every other block where a reader that does not know them looks (native workers).
+    pub info_cols: usize,
     size: usize,
 }
 
@@ -176,8 +181,26 @@ impl BatchLayout {
             truncated,
             final_mask,
             final_obs,
+            info_row_bytes: 0,
+            info_cols: size,
             size,
         }
+    }
+
+    /// This layout with a block of typed info columns of `row_bytes` per env (a multiple of
+    /// [`BLOCK_ALIGN`], so every row starts aligned) after the other blocks; `None` when
+    /// `row_bytes` is not such a multiple or the slot would not fit in an `isize`.
+    pub fn with_info_columns(self, row_bytes: usize) -> Option<BatchLayout> {
+        if !row_bytes.is_multiple_of(BLOCK_ALIGN) {
+            return None;
+        }
+        let base = self.info_cols;
+        let size = self.num_envs.checked_mul(row_bytes)?.checked_add(base)?;
+        (size <= isize::MAX as usize).then_some(BatchLayout {
+            info_row_bytes: row_bytes,
+            size,
+            ..self
+        })
     }
 
     /// [`new`](Self::new) for sizes another process sent: `None` when the slot's size does
@@ -224,6 +247,7 @@ impl BatchLayout {
             } else {
                 &[]
             },
+            info_cols: at(self.info_cols, self.info_row_bytes),
         }
     }
 
@@ -257,6 +281,7 @@ impl BatchLayout {
             } else {
                 &mut []
             },
+            info_cols: at(self.info_cols, self.info_row_bytes),
         }
     }
 }
@@ -275,6 +300,8 @@ pub struct ResponseBlocks<'a> {
     pub final_mask: &'a [u8],
     /// Final observations (same_step autoreset), else empty.
     pub final_obs: &'a [u8],
+    /// Typed info columns, `info_row_bytes` per env (empty when the slot has none).
+    pub info_cols: &'a [u8],
 }
 
 /// The results of one worker's envs being written.
@@ -291,6 +318,8 @@ pub struct ResponseBlocksMut<'a> {
     pub final_mask: &'a mut [u8],
     /// Final observations (same_step autoreset), else empty.
     pub final_obs: &'a mut [u8],
+    /// Typed info columns, `info_row_bytes` per env (empty when the slot has none).
+    pub info_cols: &'a mut [u8],
 }
 
 #[cfg(test)]
@@ -326,8 +355,30 @@ mod tests {
                     assert_eq!(all.rewards.iter().filter(|&&r| r == 2.0).count(), n - half);
                     assert_eq!(all.terminated.iter().filter(|&&t| t == 1).count(), n - half);
                     assert_eq!(all.final_mask.len(), n);
+                    assert!(all.info_cols.is_empty());
                 }
             }
         }
+    }
+
+    #[test]
+    fn info_columns_come_last_and_leave_the_other_blocks_in_place() {
+        let plain = BatchLayout::new(5, 12, true);
+        let cols = plain.with_info_columns(64).unwrap();
+        assert_eq!(
+            (cols.obs, cols.rewards, cols.final_obs),
+            (plain.obs, plain.rewards, plain.final_obs)
+        );
+        assert_eq!(cols.info_cols, plain.size());
+        assert_eq!(cols.size(), plain.size() + 5 * 64);
+        assert!(plain.with_info_columns(12).is_none());
+        assert!(plain.with_info_columns(usize::MAX - 7).is_none());
+        let mut words = vec![0u64; cols.size() / 8];
+        // SAFETY: `words` holds the slot; one borrow.
+        let rows = unsafe { cols.rows_mut(words.as_mut_ptr().cast(), 1, 3) };
+        assert_eq!(rows.info_cols.len(), 3 * 64);
+        rows.info_cols[0] = 7;
+        let bytes: &[u8] = bytemuck::cast_slice(&words);
+        assert_eq!(cols.rows(bytes, 0, 5).info_cols[64], 7);
     }
 }

@@ -108,14 +108,20 @@ pub fn serve_batch(
         .map_err(io);
     }
     let layout = Layout::new(job.num_envs, ready.action_space.byte_len());
-    let slots = SlotMap::new(
-        job.slots.clone(),
-        BatchLayout::new(
-            job.session_envs,
-            ready.observation_space.byte_len(),
-            job.config.autoreset_mode == AutoresetMode::SameStep,
-        ),
+    let plain = BatchLayout::new(
+        job.session_envs,
+        ready.observation_space.byte_len(),
+        job.config.autoreset_mode == AutoresetMode::SameStep,
     );
+    let Some(batch_layout) = plain.with_info_columns(job.info_row_bytes) else {
+        batch.close();
+        return reply(&WorkerReply::Error(format!(
+            "info columns of {} bytes per env do not fit a slot\nhint: a multiple of 8, well under the memory size",
+            job.info_row_bytes
+        )))
+        .map_err(io);
+    };
+    let slots = SlotMap::new(job.slots.clone(), batch_layout);
     let policy = WaitPolicy {
         spin: Duration::from_micros(job.spin_us),
         max_spin: Duration::from_micros(job.max_spin_us),
@@ -306,6 +312,7 @@ mod tests {
             owner_pid: std::process::id(),
             spin_us: 0,
             max_spin_us: 0,
+            info_row_bytes: 0,
             python: None,
         }
     }

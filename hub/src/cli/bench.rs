@@ -87,6 +87,7 @@ fn inproc_throughput(
         owner_pid: std::process::id(),
         spin_us: 0,
         max_spin_us: 0,
+        info_row_bytes: 0,
         python: None,
     };
     // Aim for about the same duration as the hub measurement.

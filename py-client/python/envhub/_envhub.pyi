@@ -20,7 +20,7 @@ def serve_worker(
     observation_space: str,
     action_space: str,
     max_episode_steps: int | None,
-    envs: Sequence[object],
+    batch: object,
     reply_fd: int,
     render_fps: float | None = None,
 ) -> None: ...
@@ -43,7 +43,11 @@ def make_session(
     pool_bytes: int | None = None,
     adapter: str | None = None,
     hubs: str | None = None,
+    info_row_bytes: int = 0,
 ) -> Session: ...
+def info_schema(
+    text: str, row_bytes: int
+) -> tuple[int, list[tuple[str, str, list[int], int, int, str]]]: ...
 
 class Registry:
     @staticmethod
@@ -83,7 +87,8 @@ _Batch = tuple[
     npt.NDArray[np.bool_],
     npt.NDArray[np.bool_],
     list[dict[str, object]] | None,
-    list[bytes | None] | None,
+    list[bytes | npt.NDArray[np.uint8] | None] | None,
+    npt.NDArray[np.uint8] | None,
 ]
 
 class Session:
@@ -107,8 +112,9 @@ class Session:
         npt.NDArray[np.bool_],
         npt.NDArray[np.bool_],
         list[dict[str, object]] | None,
-        list[bytes | None] | None,
+        list[bytes | npt.NDArray[np.uint8] | None] | None,
         npt.NDArray[np.int64],
+        npt.NDArray[np.uint8] | None,
     ]: ...
     def close(self) -> None: ...
     @property
@@ -127,6 +133,8 @@ class Session:
     def num_envs(self) -> int: ...
     @property
     def num_workers(self) -> int: ...
+    @property
+    def info_row_bytes(self) -> int: ...
     @property
     def worker_pids(self) -> list[int]: ...
     @property

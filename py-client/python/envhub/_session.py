@@ -34,9 +34,11 @@ def start(
     pool_bytes: int | None = None,
     adapter: str | None = None,
     hubs: HubsArg = None,
+    info_row_bytes: int = 0,
 ) -> Any:
     """Starts the workers of `config.num_envs` envs of entry `registry_id` (with `adapter`:
-    of that adapter's env id `registry_id`, no registry involved)."""
+    of that adapter's env id `registry_id`, no registry involved). `info_row_bytes`: typed
+    info columns of that many bytes per env in the batch slots (`envhub._info_columns`)."""
     if not isinstance(registry_id, str):
         raise InvalidConfigError(f"the env id must be a string, got {type(registry_id).__name__}")
     if isinstance(config.num_envs, bool) or not isinstance(config.num_envs, int) or config.num_envs < 1:
@@ -52,6 +54,7 @@ def start(
         pool_bytes=pool_bytes,
         adapter=adapter,
         hubs=placement(hubs),
+        info_row_bytes=info_row_bytes,
     )
 
 

@@ -18,6 +18,15 @@ from .errors import InvalidActionError
 
 
 def _bounds(values: list[Any], dtype: np.dtype) -> np.ndarray:
+    if dtype.kind in "iu":
+        # The bounds travel as doubles: an integer dtype's limits (2**63 - 1 rounds up to
+        # 2**63) saturate at the dtype's range instead of wrapping around in the cast.
+        info = np.iinfo(dtype)
+        ints = []
+        for v in values:
+            f = float(v)
+            ints.append(info.max if f >= info.max else info.min if f <= info.min else int(f))
+        return np.array(ints, dtype=dtype)
     out = np.array([float(v) for v in values])  # numbers, or "inf" / "-inf"
     return out.astype(dtype) if dtype.kind == "f" else out
 
@@ -36,8 +45,10 @@ def to_gymnasium(desc: dict[str, Any]) -> spaces.Space[Any]:
     if kind == "discrete":
         return spaces.Discrete(int(desc["n"]), start=int(desc["start"]))
     if kind == "multi_discrete":
+        shape = tuple(desc.get("shape") or (len(desc["nvec"]),))
         return spaces.MultiDiscrete(
-            np.array(desc["nvec"], dtype=np.int64), start=np.array(desc["start"], dtype=np.int64)
+            np.array(desc["nvec"], dtype=np.int64).reshape(shape),
+            start=np.array(desc["start"], dtype=np.int64).reshape(shape),
         )
     if kind == "multi_binary":
         shape = list(desc["shape"])
@@ -125,8 +136,15 @@ class Codec:
 
         return go(self.obs_tree)
 
-    def obs_from_bytes(self, data: bytes) -> Any:
-        """One env's observation from its bytes (a fresh array: `final_obs`)."""
+    def obs_from_bytes(self, data: bytes | np.ndarray) -> Any:
+        """One env's observation from its bytes (`final_obs`): views of them when they are
+        an array (a row of the slot, lent with the step's other results), else a fresh
+        array."""
+        if isinstance(data, np.ndarray):
+            if not self.obs_composite:
+                leaf = self.obs_tree
+                return data[: leaf.nbytes].view(leaf.dtype).reshape(leaf.shape)
+            return self.obs(data)
         if not self.obs_composite:
             leaf = self.obs_tree
             return np.frombuffer(data, dtype=leaf.dtype).reshape(leaf.shape).copy()
@@ -244,11 +262,15 @@ def from_gymnasium(space: spaces.Space[Any]) -> dict[str, Any]:
     if isinstance(space, spaces.Discrete):
         return {"type": "discrete", "n": int(space.n), "start": int(space.start)}
     if isinstance(space, spaces.MultiDiscrete):
-        return {
+        nvec = np.asarray(space.nvec)
+        desc = {
             "type": "multi_discrete",
-            "nvec": [int(v) for v in np.asarray(space.nvec).reshape(-1)],
+            "nvec": [int(v) for v in nvec.reshape(-1)],
             "start": [int(v) for v in np.asarray(space.start).reshape(-1)],
         }
+        if nvec.ndim != 1:  # a 2-D nvec keeps its shape (the Rust space's `shape`)
+            desc["shape"] = list(nvec.shape)
+        return desc
     if isinstance(space, spaces.MultiBinary):
         return {"type": "multi_binary", "shape": list(np.atleast_1d(space.n))}
     if isinstance(space, spaces.Dict):

@@ -11,6 +11,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _info_tree, _spaces
+from ._info_columns import ColumnReader
 from ._infos import flat_infos
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
@@ -99,9 +100,12 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         strict_actions: bool = False,
         hubs: HubsArg = None,
         _adapter: str | None = None,
+        _info_row_bytes: int = 0,
         **extra: Any,
     ) -> None:
         # `_adapter` (private): `registry_id` is that adapter's env id, no registry entry.
+        # `_info_row_bytes` (private): typed info columns in the slots, for a subclass whose
+        # `_info` reads them (the drop-in's).
         mode = _autoreset_mode(autoreset_mode)
         config = EnvConfig(
             render_mode=render_mode,
@@ -115,8 +119,9 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             strict_actions=strict_actions,
         )
         self._session = start(
-            registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs
+            registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs, _info_row_bytes
         )
+        self._columns = ColumnReader(_info_row_bytes) if _info_row_bytes else None
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)
@@ -172,9 +177,11 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
                 )
             if self._last_obs is None and not mask.all():
                 raise InvalidStateError("reset with `reset_mask` needs a full reset first")
-        raw, _, _, _, infos, _ = self._session.reset(
+        raw, _, _, _, infos, _, cols = self._session.reset(
             seeds, None if mask is None else mask.tolist(), to_json(options) if options else None
         )
+        if cols is not None:
+            infos = self._columns.learn(infos)  # type: ignore[union-attr]
         if mask is not None and not mask.all():
             merged = self._latest_obs()
             merged[mask] = raw[mask]
@@ -184,7 +191,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._last_obs = raw
         self._received.clear()
         self._sent[:] = False
-        return self._codec.obs(raw), self._info(infos, None, self.num_envs)
+        return self._codec.obs(raw), self._info(infos, None, self.num_envs, cols)
 
     def _latest_obs(self) -> np.ndarray:
         """A copy of every env's latest raw observation: the last full batch, with the rows
@@ -196,12 +203,14 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Steps every env with its action (an array of shape `action_space.shape`)."""
-        raw, rewards, terminated, truncated, infos, final = self._session.step(self._codec.actions(actions))
+        raw, rewards, terminated, truncated, infos, final, cols = self._session.step(self._codec.actions(actions))
         self._last_obs = raw
         self._received.clear()
-        if infos is None and final is None:
+        if cols is not None:
+            infos = self._columns.learn(infos)  # type: ignore[union-attr]
+        elif infos is None and final is None:
             return self._codec.obs(raw), rewards, terminated, truncated, {}
-        return self._codec.obs(raw), rewards, terminated, truncated, self._info(infos, final, self.num_envs)
+        return self._codec.obs(raw), rewards, terminated, truncated, self._info(infos, final, self.num_envs, cols)
 
     # EnvPool-style asynchronous stepping ---------------------------------------------------
 
@@ -222,7 +231,9 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Waits for the first workers to finish and returns the results of the envs they
         stepped; `info["env_id"]` says which envs they are."""
-        raw, rewards, terminated, truncated, infos, final, ids = self._session.recv()
+        raw, rewards, terminated, truncated, infos, final, ids, cols = self._session.recv()
+        if cols is not None:  # schemas first: an announcing env may be left out below
+            infos = self._columns.learn(infos)  # type: ignore[union-attr]
         keep = self._sent[ids]
         self._sent[ids] = False
         if not keep.all():
@@ -235,17 +246,20 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             )
             infos = None if infos is None else [i for i, k in zip(infos, keep, strict=True) if k]
             final = None if final is None else [f for f, k in zip(final, keep, strict=True) if k]
+            cols = None if cols is None else cols[keep]
         if self._last_obs is not None and len(ids):
             self._received.append((ids, raw))
             if len(self._received) > 64:  # bounded: fold them into one batch
                 self._last_obs, self._received = self._latest_obs(), []
-        info = self._info(infos, final, len(ids))
+        info = self._info(infos, final, len(ids), cols)
         info["env_id"] = ids
         return self._codec.obs(raw), rewards, terminated, truncated, info
 
     # ---------------------------------------------------------------------------------------
 
-    def _info(self, infos: list[dict[str, Any]] | None, final: list[bytes | None] | None, n: int) -> dict[str, Any]:
+    def _info(
+        self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: Any = None
+    ) -> dict[str, Any]:
         if final is None and infos is not None:
             flat = flat_infos(infos, n)
             if flat is not None:

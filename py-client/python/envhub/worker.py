@@ -2,10 +2,13 @@
 
 Started by the hub for Python-hosted adapters (see `envhub.hosted`). `describe` prints the
 adapters this interpreter can host, as JSON; `serve` creates a job's envs here and hands
-them to the Rust serve loop in `envhub._envhub.serve_worker`, which speaks the same
-shared-memory protocol as the Rust `envhub-worker`: each env gets its own copy of its action
-(the request sample is reused by the next request, and an env may keep its action), each
-observation is copied once into the response sample.
+them, as one `HostedBatch`, to the Rust serve loop in `envhub._envhub.serve_worker`, which
+speaks the same shared-memory protocol as the Rust `envhub-worker` and calls into Python
+once per request for the whole batch. The batch's actions are copied once per step into an
+array the envs own (the request sample is reused by the next request, and an env may keep
+its action); each env gets a view of its row. Each observation is copied once, into its row
+of the batch slot; the drop-in's infos go into typed columns of the slot where they fit
+(`envhub._info_columns`).
 
 An adapter whose `make_vec` returns a vector env (one object stepping all of the worker's
 envs, as Isaac Lab and Gymnasium's `vector_entry_point` envs do) is served whole instead,
@@ -28,7 +31,8 @@ import numpy as np
 
 from . import _envhub
 from ._batched import env_value as _env_value
-from ._pickled import Encoded
+from ._info_columns import SCHEMA_KEY, ColumnWriter
+from ._pickled import encode_info
 from ._spaces import _Leaf, _tree, from_gymnasium
 from .config import EnvConfig
 from .hosted import all_adapters
@@ -70,52 +74,244 @@ def _whole(node: Any) -> _Leaf | None:
 
 
 def _rgb(frame: Any) -> tuple[int, int, bytes] | None:
+    """A frame as the data plane carries it: height, width and RGB bytes. A grayscale frame
+    (H×W or H×W×1) has its one channel repeated; an alpha channel is dropped."""
     if frame is None:
         return None
-    a = np.ascontiguousarray(frame, dtype=np.uint8)
-    return int(a.shape[0]), int(a.shape[1]), a[..., :3].tobytes()
+    a = np.asarray(frame, dtype=np.uint8)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[2] not in (1, 3, 4):
+        raise ValueError(
+            f"render() returned a frame of shape {a.shape}; an `rgb_array` frame is H×W×3 (or H×W, H×W×1, H×W×4)"
+        )
+    a = np.repeat(a, 3, axis=2) if a.shape[2] == 1 else a[..., :3]
+    return int(a.shape[0]), int(a.shape[1]), np.ascontiguousarray(a).tobytes()
 
 
 class HostedEnv:
-    """One env, as `serve_worker` drives it: results are written into the slots it gives."""
+    """One env of a worker and the layout of its spaces (what `HostedBatch` steps)."""
 
     def __init__(self, env: Any, obs_desc: dict[str, Any], act_desc: dict[str, Any]) -> None:
         self.env = env
         self.obs_tree = _space_tree(obs_desc)
         self.act_tree = _space_tree(act_desc)
-        # One array leaf (most spaces): its bytes are viewed in one step, not walked.
-        self.obs_leaf = _whole(self.obs_tree)
-        self.act_leaf = _whole(self.act_tree)
 
-    def _write_obs(self, obs: Any, out: memoryview) -> None:
-        leaf = self.obs_leaf
-        if leaf is None:
-            _write(self.obs_tree, obs, np.frombuffer(out, dtype=np.uint8))
-        else:
-            np.frombuffer(out, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape)[...] = obs
 
-    def reset_into(self, seed: int | None, options: str | None, out: memoryview) -> Encoded | str | None:
-        obs, info = self.env.reset(seed=seed, options=json.loads(options) if options else None)
-        self._write_obs(obs, out)
-        return _info_out(info)
+class HostedBatch:
+    """A worker's envs, as `serve_worker` drives them: one call per request for the whole
+    batch, results written into the envs' rows of the blocks it is given, autoreset applied
+    as the Rust `EnvBatch` applies it to native envs (next_step: the step after an episode's
+    end only resets; same_step: the final observation and info kept, then reset; disabled:
+    nothing). An env that raises is reported with its traceback and left neutral rows; the
+    others go on.
 
-    def step_into(self, action: memoryview, out: memoryview) -> tuple[float, bool, bool, Encoded | str | None]:
-        # A copy the env owns: `action` views the request sample, which the next request
-        # overwrites, and envs may keep their action ("previous action" features).
-        leaf = self.act_leaf
-        if leaf is None:
-            act = _read(self.act_tree, np.frombuffer(action, dtype=np.uint8).copy())
-        else:
-            act = np.frombuffer(action, dtype=leaf.dtype, count=leaf.nbytes // leaf.dtype.itemsize).reshape(leaf.shape).copy()
-        obs, reward, terminated, truncated, info = self.env.step(act)
-        self._write_obs(obs, out)
-        return float(reward), bool(terminated), bool(truncated), _info_out(info)
+    Infos: envs that declare `exact_infos` (the drop-in's `DropInEnv`) have theirs delivered
+    exactly as Gymnasium's pipes would: into the slot's typed columns where they fit the
+    learned schema (`info_columns` given), else as `envhub._pickled.encode_info` makes them.
+    Other envs' infos travel as JSON of numbers, flags, text and short numeric vectors."""
 
-    def render_rgb(self) -> tuple[int, int, bytes] | None:
-        return _rgb(self.env.render())
+    def __init__(self, hosted: list[HostedEnv], mode: str, info_row_bytes: int = 0) -> None:
+        self.hosted = hosted
+        self.envs = [h.env for h in hosted]
+        self.num_envs = len(hosted)
+        self.mode = mode
+        self.pending = [False] * self.num_envs
+        self.obs_tree = hosted[0].obs_tree
+        self.act_tree = hosted[0].act_tree
+        self.exact = bool(getattr(self.envs[0], "exact_infos", False))
+        self.columns = ColumnWriter(info_row_bytes) if self.exact and info_row_bytes else None
+
+    # The blocks, viewed for this request ------------------------------------------------------
+
+    def _obs_writer(self, block: memoryview) -> Any:
+        rows = np.frombuffer(block, dtype=np.uint8).reshape(self.num_envs, len(block) // self.num_envs)
+        leaf = _whole(self.obs_tree)
+        if leaf is not None:
+            typed = _read(leaf, rows)
+
+            def write(i: int, obs: Any) -> None:
+                typed[i] = obs
+
+            return write
+        tree = self.obs_tree
+
+        def write_tree(i: int, obs: Any) -> None:
+            _write(tree, obs, rows[i])
+
+        return write_tree
+
+    def _info(self, i: int, info: Any, cols: memoryview | None) -> Any:
+        """Env `i`'s info as it travels in JSON (None: nothing), its row of columns written."""
+        if not self.exact:
+            if cols is not None:
+                self.columns.skip(cols, i)  # type: ignore[union-attr]
+            return _plain_info(info)
+        if cols is None:
+            return encode_info(info)
+        if not info:
+            self.columns.skip(cols, i)  # type: ignore[union-attr]
+            return None
+        written = self.columns.write(cols, i, info)  # type: ignore[union-attr]
+        if written is False:
+            return encode_info(info)
+        return None if written is None else {SCHEMA_KEY: written}
+
+    def _encode(self, info: Any) -> Any:
+        return encode_info(info) if self.exact else _plain_info(info)
+
+    @staticmethod
+    def _section(infos: list[Any]) -> str | None:
+        """The info section: one JSON object per env, or None when no env has one. An env's
+        info that JSON cannot carry (a non-finite number) is left out, as Rust's parser left
+        it out before."""
+        if not any(info is not None for info in infos):
+            return None
+        texts = []
+        for info in infos:
+            try:
+                texts.append(json.dumps(info, allow_nan=False) if info else "{}")
+            except (TypeError, ValueError):
+                texts.append("{}")
+        return "[" + ",".join(texts) + "]"
+
+    # The serve loop's calls ---------------------------------------------------------------
+
+    def reset_into(
+        self,
+        selected: list[bool],
+        seeds: list[int | None],
+        options: str | None,
+        obs: memoryview,
+        rewards: memoryview,
+        terminated: memoryview,
+        truncated: memoryview,
+        final_mask: memoryview,
+        cols: memoryview | None,
+    ) -> tuple[str | None, list[tuple[int, str, str]]]:
+        opts = json.loads(options) if options else None
+        write_obs = self._obs_writer(obs)
+        np.frombuffer(rewards, dtype=np.float64)[:] = 0.0
+        np.frombuffer(terminated, dtype=np.uint8)[:] = 0
+        np.frombuffer(truncated, dtype=np.uint8)[:] = 0
+        np.frombuffer(final_mask, dtype=np.uint8)[:] = 0
+        infos: list[Any] = [None] * self.num_envs
+        failed: list[tuple[int, str, str]] = []
+        for i, env in enumerate(self.envs):
+            if not selected[i]:
+                if cols is not None:
+                    self.columns.skip(cols, i)  # type: ignore[union-attr]
+                continue
+            try:
+                o, info = env.reset(seed=seeds[i], options=opts)
+                write_obs(i, o)
+            except Exception as e:
+                failed.append((i, "reset", _traceback(e)))
+                self.pending[i] = False
+                if cols is not None:
+                    self.columns.skip(cols, i)  # type: ignore[union-attr]
+                continue
+            self.pending[i] = False
+            infos[i] = self._info(i, info, cols)
+        return self._section(infos), failed
+
+    def step_into(
+        self,
+        selected: list[bool],
+        actions: memoryview,
+        obs: memoryview,
+        rewards: memoryview,
+        terminated: memoryview,
+        truncated: memoryview,
+        final_mask: memoryview,
+        final_obs: memoryview | None,
+        cols: memoryview | None,
+    ) -> tuple[str | None, list[tuple[int, str, str]]]:
+        n = self.num_envs
+        # One copy of the batch's actions per step, which the envs own: each gets a view of
+        # its row (kept actions never change, as the next step copies into a new array).
+        acts = _read(self.act_tree, np.frombuffer(actions, dtype=np.uint8).reshape(n, len(actions) // n).copy())
+        single = isinstance(self.act_tree, _Leaf)
+        write_obs = self._obs_writer(obs)
+        rew = np.frombuffer(rewards, dtype=np.float64)
+        term = np.frombuffer(terminated, dtype=np.uint8)
+        trunc = np.frombuffer(truncated, dtype=np.uint8)
+        fmask = np.frombuffer(final_mask, dtype=np.uint8)
+        fmask[:] = 0
+        infos: list[Any] = [None] * n
+        failed: list[tuple[int, str, str]] = []
+        pending, mode = self.pending, self.mode
+        for i, env in enumerate(self.envs):
+            if not selected[i]:
+                rew[i] = 0.0
+                term[i] = trunc[i] = 0
+                if cols is not None:
+                    self.columns.skip(cols, i)  # type: ignore[union-attr]
+                continue
+            what = "step"
+            try:
+                if pending[i]:
+                    # next_step: this step only resets, the action is ignored (Gymnasium 1.x).
+                    what = "reset"
+                    o, info = env.reset(seed=None, options=None)
+                    write_obs(i, o)
+                    pending[i] = False
+                    rew[i] = 0.0
+                    term[i] = trunc[i] = 0
+                    infos[i] = self._info(i, info, cols)
+                    continue
+                o, r, te, tr, info = env.step(acts[i] if single else _env_value(acts, i))
+                write_obs(i, o)
+                rew[i] = r
+                term[i] = bool(te)
+                trunc[i] = bool(tr)
+                if (te or tr) and mode != "disabled":
+                    if mode == "next_step":
+                        pending[i] = True
+                    else:  # same_step: the final observation and info kept, then reset
+                        final = self._final_rows(final_obs)
+                        final[i] = np.frombuffer(obs, dtype=np.uint8).reshape(n, -1)[i]
+                        fmask[i] = 1
+                        what = "reset"
+                        o, reset_info = env.reset(seed=None, options=None)
+                        write_obs(i, o)
+                        encoded = dict(self._encode(reset_info) or {})
+                        final_info = self._encode(info)
+                        if final_info:
+                            encoded["final_info"] = final_info
+                        if cols is not None:
+                            self.columns.skip(cols, i)  # type: ignore[union-attr]
+                        infos[i] = encoded or None
+                        continue
+                infos[i] = self._info(i, info, cols)
+            except Exception as e:
+                failed.append((i, what, _traceback(e)))
+                pending[i] = False
+                rew[i] = 0.0
+                term[i] = trunc[i] = fmask[i] = 0
+                infos[i] = None
+                if cols is not None:
+                    self.columns.skip(cols, i)  # type: ignore[union-attr]
+        return self._section(infos), failed
+
+    def _final_rows(self, final_obs: memoryview | None) -> np.ndarray:
+        if final_obs is None:
+            raise RuntimeError("a same_step session without a final-observation block")
+        return np.frombuffer(final_obs, dtype=np.uint8).reshape(self.num_envs, -1)
+
+    def render_rgb(self, selected: list[bool]) -> list[tuple[int, int, bytes] | None]:
+        return [_rgb(env.render()) for env, s in zip(self.envs, selected, strict=True) if s]
 
     def close(self) -> None:
-        self.env.close()
+        for env in self.envs:
+            try:
+                env.close()
+            except Exception as e:
+                print(f"envhub worker: closing an env raised: {_traceback(e)}", file=sys.stderr)
+
+
+def _traceback(e: BaseException) -> str:
+    return "".join(traceback.format_exception(type(e), e, e.__traceback__)).rstrip()
 
 
 class HostedVectorEnv:
@@ -236,16 +432,8 @@ def _info_value(v: Any) -> Any:
     return None
 
 
-def _info_out(info: dict[str, Any] | None) -> Encoded | str | None:
-    """An env's info as `serve_worker` reads it: the drop-in's already plain dict as it is
-    (read value by value in Rust, no text), else `info_json`."""
-    if type(info) is Encoded:
-        return info or None
-    return info_json(info)
-
-
-def info_json(info: dict[str, Any] | None) -> str | None:
-    """The info values that travel (numbers, flags, text, short numeric vectors) as JSON."""
+def _plain_info(info: dict[str, Any] | None) -> dict[str, Any] | None:
+    """The info values that travel (numbers, flags, text, short numeric vectors), or None."""
     if not info:
         return None
     out = {}
@@ -253,7 +441,7 @@ def info_json(info: dict[str, Any] | None) -> str | None:
         value = _info_value(v)
         if value is not None:
             out[str(k)] = value
-    return json.dumps(out) if out else None
+    return out or None
 
 
 def _env_infos(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
@@ -287,7 +475,7 @@ def _env_infos(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
 
 def vector_info_json(info: dict[str, Any] | None, n: int) -> str | None:
     """A vector env's info as the info section (`[{...}, ...]`, one object per env, with
-    what `info_json` keeps), or None when no env has any."""
+    what `_plain_info` keeps), or None when no env has any."""
     if not info:
         return None
     per_env = _env_infos(info, n)
@@ -442,7 +630,9 @@ def serve(job_json: str) -> int:
         _envhub.serve_vector_worker(job_json, *spaces, limit, batch, reply_fd, render_fps=fps)
     else:
         fps = render_fps(batch[0].env)
-        _envhub.serve_worker(job_json, *spaces, limit, batch, reply_fd, render_fps=fps)
+        mode = (job.get("config") or {}).get("autoreset_mode", "next_step")
+        hosted = HostedBatch(batch, mode, int(job.get("info_row_bytes") or 0))
+        _envhub.serve_worker(job_json, *spaces, limit, hosted, reply_fd, render_fps=fps)
     return 0
 
 

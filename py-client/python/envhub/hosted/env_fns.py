@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from .. import _calls
-from .._pickled import encode_info, unwrap
+from .._pickled import unwrap
 from .base import EnvAdapter
 
 #: Registry framework (and adapter name) of a drop-in session.
@@ -101,7 +101,11 @@ def _describe(fn: Any) -> str:
 
 class DropInEnv:
     """One user env as Gymnasium's `AsyncVectorEnv` worker drives it: a Discrete action
-    arrives as a numpy scalar (not a 0-d array), options and infos travel pickled."""
+    arrives as a numpy scalar (not a 0-d array), options travel pickled. Its infos are
+    `exact_infos`: the worker delivers them exactly (typed columns where they fit, else
+    `envhub._pickled.encode_info`)."""
+
+    exact_infos = True
 
     def __init__(self, env: Any) -> None:
         self.env = env
@@ -112,14 +116,12 @@ class DropInEnv:
         self.render_mode = getattr(env, "render_mode", None)
 
     def reset(self, seed: int | None = None, options: Any = None) -> Any:
-        obs, info = self.env.reset(seed=seed, options=unwrap(options))
-        return obs, encode_info(info)
+        return self.env.reset(seed=seed, options=unwrap(options))
 
     def step(self, action: Any) -> Any:
         if isinstance(action, np.ndarray) and action.ndim == 0:
             action = action[()]
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, terminated, truncated, encode_info(info)
+        return self.env.step(action)
 
     def render(self) -> Any:
         return self.env.render()
