@@ -95,14 +95,8 @@ impl DaemonClient {
     /// raises as `KeyboardInterrupt`, a lost or refusing hub) become text.
     fn checked(&self, error: HubError) -> HubError {
         match error {
-            HubError::Registry(_)
-            | HubError::NoAdapter { .. }
-            | HubError::Unavailable { .. }
-            | HubError::InvalidConfig { .. }
-            | HubError::MakeFailed(_)
-            | HubError::InvalidAction { .. }
-            | HubError::InvalidState(_)
-            | HubError::PythonEnv { .. }
+            e if envhub_protocol::untrusted::describes_the_request(&e) => e,
+            HubError::PythonEnv { .. }
             | HubError::WorkerBinary { .. }
             // A worker the daemon started for us that died starting: ours to report.
             | HubError::WorkerDied { .. }

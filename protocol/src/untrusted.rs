@@ -12,13 +12,7 @@ use envhub_shm::{BatchLayout, Layout};
 /// process, not the hub, and becomes text that names the hub.
 pub fn from_hub(hub: &str, e: HubError) -> HubError {
     match e {
-        HubError::Registry(_)
-        | HubError::NoAdapter { .. }
-        | HubError::Unavailable { .. }
-        | HubError::InvalidConfig { .. }
-        | HubError::MakeFailed(_)
-        | HubError::InvalidAction { .. }
-        | HubError::InvalidState(_) => e,
+        e if describes_the_request(&e) => e,
         HubError::Refused { reason, hint, .. } => HubError::Refused {
             hub: hub.to_string(),
             reason,
@@ -27,6 +21,22 @@ pub fn from_hub(hub: &str, e: HubError) -> HubError {
         HubError::Remote(text) => HubError::Remote(format!("hub `{hub}`: {text}")),
         other => HubError::Remote(format!("hub `{hub}` reported: {other}")),
     }
+}
+
+/// Whether an error another process sent describes the caller's request or that process's
+/// envs (an unknown id, a bad config, an unavailable adapter, ...), and so may be raised here
+/// as it came. The daemon's and a hub's checks both start from these kinds.
+pub fn describes_the_request(e: &HubError) -> bool {
+    matches!(
+        e,
+        HubError::Registry(_)
+            | HubError::NoAdapter { .. }
+            | HubError::Unavailable { .. }
+            | HubError::InvalidConfig { .. }
+            | HubError::MakeFailed(_)
+            | HubError::InvalidAction { .. }
+            | HubError::InvalidState(_)
+    )
 }
 
 /// A reply that breaks the protocol: the hub named, what was wrong.
