@@ -3,8 +3,10 @@
 
 use envhub_core::DType;
 use numpy::ndarray::{ArrayViewD, IxDyn};
-use numpy::npyffi::_PyArray_GET_ITEM_DATA;
-use numpy::{PyArray, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::npyffi::{
+    _PyArray_GET_ITEM_DATA, NPY_ARRAY_WRITEABLE, NpyTypes, PY_ARRAY_API, get_type_object,
+};
+use numpy::{PyArray, PyArrayDescr, PyArrayDescrMethods, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 /// Calls `$body` with `$t` bound to the Rust type of `$dtype` (`u8` for raw bytes).
@@ -179,4 +181,59 @@ pub(crate) fn dtype_of<'py>(
     layout: &ArrayLayout,
 ) -> Bound<'py, numpy::PyArrayDescr> {
     with_dtype!(layout.dtype, T => numpy::dtype::<T>(py))
+}
+
+/// A writeable array of `descr`'s dtype with shape `dims` and byte `strides`, viewing the
+/// memory at `ptr`, with `base` as its base object.
+///
+/// # Safety
+/// Every element the shape and strides reach from `ptr` must be valid memory, aligned for
+/// the dtype and holding valid values of it, that stays valid and is written by no one else
+/// while `base` lives.
+pub(crate) unsafe fn strided_view<'py>(
+    py: Python<'py>,
+    descr: &Bound<'py, PyArrayDescr>,
+    dims: &[isize],
+    strides: &[isize],
+    ptr: *mut u8,
+    base: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    assert_eq!(dims.len(), strides.len(), "a stride per dimension");
+    let mut dims = dims.to_vec();
+    let mut strides = strides.to_vec();
+    // SAFETY: the descr reference is stolen by the call (hence `into_dtype_ptr`, a new
+    // reference); dims and strides outlive it; the caller guarantees the memory.
+    let array = unsafe {
+        PY_ARRAY_API.PyArray_NewFromDescr(
+            py,
+            get_type_object(py, NpyTypes::PyArray_Type),
+            descr.clone().into_dtype_ptr(),
+            dims.len() as std::ffi::c_int,
+            dims.as_mut_ptr(),
+            strides.as_mut_ptr(),
+            ptr.cast(),
+            NPY_ARRAY_WRITEABLE,
+            std::ptr::null_mut(),
+        )
+    };
+    if array.is_null() {
+        return Err(PyErr::fetch(py));
+    }
+    // SAFETY: `array` is a new reference to an array we own.
+    let array = unsafe { Bound::from_owned_ptr(py, array) };
+    // SAFETY: `array` is an ndarray without a base; the call steals the new reference to
+    // `base`.
+    if unsafe {
+        PY_ARRAY_API.PyArray_SetBaseObject(py, array.as_ptr().cast(), base.clone().into_ptr())
+    } != 0
+    {
+        return Err(PyErr::fetch(py));
+    }
+    Ok(array)
+}
+
+/// The address of an array's data.
+pub(crate) fn data_ptr(array: &Bound<'_, numpy::PyUntypedArray>) -> *mut u8 {
+    // SAFETY: reads the data pointer of a live array while holding the GIL.
+    unsafe { (*_PyArray_GET_ITEM_DATA(array.as_array_ptr())).data.cast() }
 }

@@ -12,6 +12,7 @@
 use crate::arrays::{self, ArrayLayout};
 use crate::convert::info_to_py;
 use crate::errors::{forked, hub_error, raise};
+use crate::info_columns::{ColumnTuple, Schemas, uniform_id, vector_info};
 use crate::registry::PyRegistry;
 use envhub::{AutoresetMode, Batch, EnvConfig, Hub, HubError, ResetOptions, SlotLease, VecEnv};
 use numpy::{PyArray1, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
@@ -252,6 +253,8 @@ pub(crate) struct Session {
     /// Bytes per env of the slots' typed info columns (0: none).
     #[pyo3(get)]
     info_row_bytes: usize,
+    /// The info-column schemas the workers announced.
+    schemas: Mutex<Schemas>,
 }
 
 pub(crate) fn leaves_json(space: &envhub::Space) -> String {
@@ -384,6 +387,7 @@ pub(crate) fn make_session(
         obs: ArrayLayout::of(v.observation_space()),
         act: ArrayLayout::of(v.action_space()),
         info_row_bytes,
+        schemas: Mutex::default(),
         pid: st.pid,
         state: Mutex::new(st),
         interrupted,
@@ -406,6 +410,41 @@ fn ctrl_c_check(slot: Arc<Mutex<Option<PyErr>>>) -> Arc<envhub::InterruptCheck> 
 }
 
 impl Session {
+    fn schemas(&self) -> MutexGuard<'_, Schemas> {
+        self.schemas.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Takes the info-column schemas announced in `infos` out of them (checked, remembered);
+    /// `infos` becomes `None` when no env has anything left.
+    fn learn_schemas(
+        &self,
+        py: Python<'_>,
+        infos: &mut Option<Vec<serde_json::Value>>,
+    ) -> PyResult<()> {
+        let Some(list) = infos.as_mut() else {
+            return Ok(());
+        };
+        for info in list.iter_mut() {
+            if let serde_json::Value::Object(map) = info
+                && let Some(text) = map.remove(envhub_protocol::info_columns::SCHEMA_KEY)
+            {
+                let serde_json::Value::String(text) = text else {
+                    return Err(pyo3::exceptions::PyValueError::new_err(
+                        "a worker announced an info-column schema that is not text\nhint: the worker runs another envhub version or misbehaves",
+                    ));
+                };
+                self.schemas().learn(py, &text, self.info_row_bytes)?;
+            }
+        }
+        if list
+            .iter()
+            .all(|i| i.is_null() || i.as_object().is_some_and(|m| m.is_empty()))
+        {
+            *infos = None;
+        }
+        Ok(())
+    }
+
     fn check_pid(&self, py: Python<'_>) -> PyResult<()> {
         if std::process::id() != self.pid {
             return Err(forked(py, &self.id, self.pid));
@@ -434,7 +473,7 @@ impl Session {
         }
         let err = hub_error(py, e);
         if let Some(partial) = partial
-            && let Ok(tuple) = self.batch_tuple(py, partial, false)
+            && let Ok(tuple) = self.batch_tuple(py, partial, false, false)
         {
             let _ = err.value(py).setattr("results", tuple);
         }
@@ -585,15 +624,43 @@ impl Session {
     /// `(obs, rewards, terminated, truncated, infos or None, final_obs or None[, env_ids],
     /// info columns or None)`: the columns as a `[n, info_row_bytes]` uint8 array (a view of
     /// the slot when the others are), read with the schemas the infos announce.
+    ///
+    /// Schemas the infos announce are taken out of them and remembered. With `ready_infos`,
+    /// when every env's info is in its row under one known schema and nothing else came,
+    /// the last item is Gymnasium's vector info itself, a dict of views of the rows
+    /// (see [`vector_info`]), not the rows.
     fn batch_tuple<'py>(
         &self,
         py: Python<'py>,
-        r: Results,
+        mut r: Results,
         with_ids: bool,
+        ready_infos: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let n = r.env_ids.len();
-        let ([obs, rewards, terminated, truncated, cols], owner) =
+        if self.info_row_bytes > 0 {
+            self.learn_schemas(py, &mut r.infos)?;
+        }
+        let ([obs, rewards, terminated, truncated, mut cols], owner) =
             self.arrays(py, r.place, Some(n))?;
+        if ready_infos
+            && n > 0
+            && r.infos.is_none()
+            && r.final_obs.is_none()
+            && let Ok(rows) = cols.cast::<PyUntypedArray>()
+        {
+            let at = arrays::data_ptr(rows);
+            // SAFETY: `rows` is an `[n, info_row_bytes]` uint8 array (`arrays`), C-contiguous,
+            // and `info_row_bytes` is at least 8 (a layout with columns).
+            let id = unsafe { uniform_id(at, n, self.info_row_bytes) };
+            let schema = id.and_then(|id| self.schemas().get(id));
+            if let Some(schema) = schema {
+                // SAFETY: `rows` (the base of the views) owns or leases the memory, which is
+                // aligned (slot blocks and numpy's allocations are 8-byte aligned) and
+                // checked against `schema`.
+                let dict = unsafe { vector_info(py, &schema, at, n, self.info_row_bytes, &cols)? };
+                cols = dict.into_any();
+            }
+        }
         let infos = match &r.infos {
             None => py.None().into_bound(py),
             Some(infos) => {
@@ -703,7 +770,7 @@ impl Session {
     ) -> PyResult<Bound<'py, PyTuple>> {
         let options = parse_options(py, options_json)?;
         let r = self.call(py, move |v| v.reset_with(&seeds, mask.as_deref(), &options))?;
-        self.batch_tuple(py, r, false)
+        self.batch_tuple(py, r, false, true)
     }
 
     /// Steps every env with `actions` (an array of the action space's dtype, C-contiguous).
@@ -714,7 +781,13 @@ impl Session {
     ) -> PyResult<Bound<'py, PyTuple>> {
         let bytes = self.action_bytes(py, actions)?;
         let r = self.call(py, move |v| v.step(&bytes))?;
-        self.batch_tuple(py, r, false)
+        self.batch_tuple(py, r, false, true)
+    }
+
+    /// The info-column schema `id` a worker announced, as `info_schema` describes it; `None`
+    /// if none was.
+    fn info_schema(&self, id: u64) -> Option<(u64, Vec<ColumnTuple>)> {
+        self.schemas().describe(id)
     }
 
     /// One env: `(obs, info)` of a reset with `seed`.
@@ -790,7 +863,7 @@ impl Session {
     /// with their env ids as a 7th item.
     fn recv<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
         let r = self.call(py, |v| v.recv())?;
-        self.batch_tuple(py, r, true)
+        self.batch_tuple(py, r, true, false)
     }
 
     /// Stops the workers. Closing twice is fine; in a forked child it only marks this copy

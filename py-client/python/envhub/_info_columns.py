@@ -25,6 +25,7 @@ from __future__ import annotations
 import hashlib
 import json
 import struct
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -214,9 +215,12 @@ class ColumnWriter:
 class ColumnReader:
     """The client's half: checks announced schemas and reads rows with them."""
 
-    def __init__(self, row_bytes: int) -> None:
+    def __init__(self, row_bytes: int, lookup: Callable[[int], Any] | None = None) -> None:
         self.row_bytes = row_bytes
         self.schemas: dict[int, tuple[np.dtype, list[tuple[str, str, int]], int, int]] = {}
+        # A session takes announced schemas out of the infos itself, checks and keeps them
+        # (`_envhub.Session.info_schema`); the reader asks it for one it has not seen.
+        self.lookup = lookup
 
     def learn(self, infos: list[dict[str, Any]] | None) -> list[dict[str, Any]] | None:
         """Takes the schemas announced in `infos` out of them (checked, remembered); the
@@ -234,7 +238,9 @@ class ColumnReader:
     def _add(self, text: Any) -> None:
         if not isinstance(text, str):
             raise ValueError("a worker announced an info-column schema that is not text")
-        sid, columns = _envhub.info_schema(text, self.row_bytes)
+        self._remember(*_envhub.info_schema(text, self.row_bytes))
+
+    def _remember(self, sid: int, columns: list[tuple[str, str, list[int], int, int, str]]) -> None:
         names, formats, offsets, kinds = [], [], [], []
         for key, dtype, shape, offset, mask, kind in columns:
             names += [key, f"_{key}"]
@@ -251,6 +257,11 @@ class ColumnReader:
 
     def _schema(self, sid: int) -> tuple[np.dtype, list[tuple[str, str, int]], int, int]:
         found = self.schemas.get(sid)
+        if found is None and self.lookup is not None:
+            described = self.lookup(sid)
+            if described is not None:
+                self._remember(*described)
+                found = self.schemas.get(sid)
         if found is None:
             raise ValueError(f"info columns name schema {sid:#x}, which no worker announced")
         return found

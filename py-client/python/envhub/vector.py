@@ -121,7 +121,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._session = start(
             registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs, _info_row_bytes
         )
-        self._columns = ColumnReader(_info_row_bytes) if _info_row_bytes else None
+        self._columns = ColumnReader(_info_row_bytes, self._session.info_schema) if _info_row_bytes else None
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)
@@ -180,8 +180,11 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         raw, _, _, _, infos, _, cols = self._session.reset(
             seeds, None if mask is None else mask.tolist(), to_json(options) if options else None
         )
-        if cols is not None:
-            infos = self._columns.learn(infos)  # type: ignore[union-attr]
+        if type(cols) is dict:  # every env's info in its row, laid out by the session
+            self._last_obs = raw
+            self._received.clear()
+            self._sent[:] = False
+            return self._codec.obs(raw), cols
         if mask is not None and not mask.all():
             merged = self._latest_obs()
             merged[mask] = raw[mask]
@@ -206,9 +209,9 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         raw, rewards, terminated, truncated, infos, final, cols = self._session.step(self._codec.actions(actions))
         self._last_obs = raw
         self._received.clear()
-        if cols is not None:
-            infos = self._columns.learn(infos)  # type: ignore[union-attr]
-        elif infos is None and final is None:
+        if type(cols) is dict:  # every env's info in its row, laid out by the session
+            return self._codec.obs(raw), rewards, terminated, truncated, cols
+        if infos is None and final is None and cols is None:
             return self._codec.obs(raw), rewards, terminated, truncated, {}
         return self._codec.obs(raw), rewards, terminated, truncated, self._info(infos, final, self.num_envs, cols)
 
@@ -231,9 +234,9 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Waits for the first workers to finish and returns the results of the envs they
         stepped; `info["env_id"]` says which envs they are."""
+        # The session has taken announced schemas out of `infos` already, so an announcing
+        # env left out below loses nothing.
         raw, rewards, terminated, truncated, infos, final, ids, cols = self._session.recv()
-        if cols is not None:  # schemas first: an announcing env may be left out below
-            infos = self._columns.learn(infos)  # type: ignore[union-attr]
         keep = self._sent[ids]
         self._sent[ids] = False
         if not keep.all():
