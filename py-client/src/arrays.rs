@@ -237,3 +237,40 @@ pub(crate) fn data_ptr(array: &Bound<'_, numpy::PyUntypedArray>) -> *mut u8 {
     // SAFETY: reads the data pointer of a live array while holding the GIL.
     unsafe { (*_PyArray_GET_ITEM_DATA(array.as_array_ptr())).data.cast() }
 }
+
+/// `bytes` copied into 8-byte words (so views of any dtype over them are aligned), the last
+/// word zero-padded.
+pub(crate) fn words_of(bytes: &[u8]) -> Vec<u64> {
+    let mut words = vec![0u64; bytes.len().div_ceil(8)];
+    // SAFETY: `words` holds at least `bytes.len()` bytes, and a fresh allocation cannot
+    // overlap `bytes`.
+    unsafe {
+        std::ptr::copy_nonoverlapping(bytes.as_ptr(), words.as_mut_ptr().cast(), bytes.len())
+    };
+    words
+}
+
+/// An array of `n` values of `layout` (one value without a leading axis when `n` is `None`)
+/// over `words` (from [`words_of`]), which the array takes over: no copy.
+pub(crate) fn owned<'py>(
+    py: Python<'py>,
+    layout: &ArrayLayout,
+    n: Option<usize>,
+    words: Vec<u64>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let bytes = n.unwrap_or(1) * layout.bytes;
+    assert!(words.len() * 8 >= bytes, "words for the shape");
+    let base = numpy::PyArray1::<u64>::from_vec(py, words).into_any();
+    let ptr = data_ptr(base.cast::<numpy::PyUntypedArray>()?);
+    let descr = dtype_of(py, layout);
+    let dims: Vec<isize> = layout.batch_shape(n).iter().map(|&d| d as isize).collect();
+    let mut strides = vec![0isize; dims.len()];
+    let mut step = descr.itemsize() as isize;
+    for d in (0..dims.len()).rev() {
+        strides[d] = step;
+        step *= dims[d];
+    }
+    // SAFETY: `base` owns the words, which hold the shape's `bytes` bytes, 8-byte aligned;
+    // the values are the bytes a worker wrote for this dtype, as a view of the slot has them.
+    unsafe { strided_view(py, &descr, &dims, &strides, ptr, &base) }
+}

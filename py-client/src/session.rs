@@ -17,8 +17,8 @@ use crate::registry::PyRegistry;
 use envhub::{AutoresetMode, Batch, EnvConfig, Hub, HubError, ResetOptions, SlotLease, VecEnv};
 use numpy::{PyArray1, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyBytes, PyList, PyTuple};
-use std::sync::atomic::{AtomicBool, Ordering};
+use pyo3::types::{PyBool, PyList, PyTuple};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::Duration;
 
@@ -92,7 +92,8 @@ enum Place {
     },
     /// Copied (results in the scratch slot, or gathered).
     Copied {
-        obs: Vec<u8>,
+        /// The observations' bytes, in words so that views of them are aligned.
+        obs: Vec<u64>,
         rewards: Vec<f64>,
         terminated: Vec<bool>,
         truncated: Vec<bool>,
@@ -117,8 +118,8 @@ enum FinalObs {
     /// The address of its row in the slot's final-observation block (the slot is lent with
     /// the other results, so the row stays valid and unchanged while they are viewed).
     At(usize),
-    /// Copied (results in the scratch slot, or gathered).
-    Copy(Vec<u8>),
+    /// Copied (results in the scratch slot, or gathered), in words.
+    Copy(Vec<u64>),
 }
 
 impl Results {
@@ -135,7 +136,7 @@ impl Results {
                 info_cols: batch.info_columns().as_ptr() as usize,
             },
             None => Place::Copied {
-                obs: batch.obs.to_vec(),
+                obs: arrays::words_of(batch.obs),
                 rewards: batch.rewards.to_vec(),
                 terminated: batch.terminated.to_vec(),
                 truncated: batch.truncated.to_vec(),
@@ -149,7 +150,7 @@ impl Results {
                         if lent {
                             FinalObs::At(row.as_ptr() as usize)
                         } else {
-                            FinalObs::Copy(row.to_vec())
+                            FinalObs::Copy(arrays::words_of(row))
                         }
                     })
                 })
@@ -255,6 +256,8 @@ pub(crate) struct Session {
     info_row_bytes: usize,
     /// The info-column schemas the workers announced.
     schemas: Mutex<Schemas>,
+    /// Observation bytes this side copied (results that could not be lent in place).
+    copied: AtomicU64,
 }
 
 pub(crate) fn leaves_json(space: &envhub::Space) -> String {
@@ -388,6 +391,7 @@ pub(crate) fn make_session(
         act: ArrayLayout::of(v.action_space()),
         info_row_bytes,
         schemas: Mutex::default(),
+        copied: AtomicU64::new(0),
         pid: st.pid,
         state: Mutex::new(st),
         interrupted,
@@ -604,20 +608,24 @@ impl Session {
                 terminated,
                 truncated,
                 info_cols,
-            } => Ok((
-                [
-                    arrays::copy(py, &self.obs, n, &obs),
-                    PyArray1::from_vec(py, rewards).into_any(),
-                    PyArray1::from_vec(py, terminated).into_any(),
-                    PyArray1::from_vec(py, truncated).into_any(),
-                    if self.info_row_bytes == 0 {
-                        py.None().into_bound(py)
-                    } else {
-                        arrays::copy(py, &cols, Some(count), &info_cols)
-                    },
-                ],
-                None,
-            )),
+            } => {
+                self.copied
+                    .fetch_add((count * self.obs.bytes) as u64, Ordering::Relaxed);
+                Ok((
+                    [
+                        arrays::owned(py, &self.obs, n, obs)?,
+                        PyArray1::from_vec(py, rewards).into_any(),
+                        PyArray1::from_vec(py, terminated).into_any(),
+                        PyArray1::from_vec(py, truncated).into_any(),
+                        if self.info_row_bytes == 0 {
+                            py.None().into_bound(py)
+                        } else {
+                            arrays::copy(py, &cols, Some(count), &info_cols)
+                        },
+                    ],
+                    None,
+                ))
+            }
         }
     }
 
@@ -671,7 +679,7 @@ impl Session {
                 list.into_any()
             }
         };
-        let final_obs = match &r.final_obs {
+        let final_obs = match r.final_obs {
             None => py.None().into_bound(py),
             Some(all) => {
                 let row = ArrayLayout {
@@ -686,9 +694,13 @@ impl Session {
                         // SAFETY: the row lies in the slot that `owner`'s lease keeps mapped
                         // and unwritten, `obs.bytes` bytes of it.
                         (Some(FinalObs::At(at)), Some(owner)) => list.append(unsafe {
-                            arrays::view(&row, None, *at as *const u8, owner.clone())?
+                            arrays::view(&row, None, at as *const u8, owner.clone())?
                         })?,
-                        (Some(FinalObs::Copy(bytes)), _) => list.append(PyBytes::new(py, bytes))?,
+                        (Some(FinalObs::Copy(words)), _) => {
+                            self.copied
+                                .fetch_add(self.obs.bytes as u64, Ordering::Relaxed);
+                            list.append(arrays::owned(py, &row, None, words)?)?
+                        }
                         (Some(FinalObs::At(_)), None) => {
                             unreachable!("a final observation in place comes with a lent slot")
                         }
@@ -889,9 +901,10 @@ impl Session {
     }
 
     /// Observation bytes copied on the client so far (0 when every result was viewed in
-    /// place).
+    /// place): rows the session gathered out of workers' rows, and results it could not lend
+    /// in place (the scratch slot), each copy counted.
     #[getter]
     fn obs_bytes_copied(&self, py: Python<'_>) -> u64 {
-        py.detach(|| self.lock().vec.obs_bytes_copied())
+        py.detach(|| self.lock().vec.obs_bytes_copied()) + self.copied.load(Ordering::Relaxed)
     }
 }

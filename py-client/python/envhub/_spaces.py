@@ -136,19 +136,13 @@ class Codec:
 
         return go(self.obs_tree)
 
-    def obs_from_bytes(self, data: bytes | np.ndarray) -> Any:
-        """One env's observation from its bytes (`final_obs`): views of them when they are
-        an array (a row of the slot, lent with the step's other results), else a fresh
-        array."""
-        if isinstance(data, np.ndarray):
-            if not self.obs_composite:
-                leaf = self.obs_tree
-                return data[: leaf.nbytes].view(leaf.dtype).reshape(leaf.shape)
-            return self.obs(data)
+    def obs_from_bytes(self, data: np.ndarray) -> Any:
+        """One env's observation from its bytes (`final_obs`, a uint8 array: a row of the
+        slot lent with the step's other results, or the session's own copy): views of them."""
         if not self.obs_composite:
             leaf = self.obs_tree
-            return np.frombuffer(data, dtype=leaf.dtype).reshape(leaf.shape).copy()
-        return self.obs(np.frombuffer(data, dtype=np.uint8).copy())
+            return data[: leaf.nbytes].view(leaf.dtype).reshape(leaf.shape)
+        return self.obs(data)
 
     # Actions ------------------------------------------------------------------------------
 

@@ -141,6 +141,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         }
         self.render_mode = render_mode
         self._last_obs: np.ndarray | None = None
+        self._obs_bytes_copied = 0  # by this class (masked resets, folding `recv`s)
         # Rows `recv` returned since `_last_obs` (env ids, raw rows), merged into a copy only
         # when a masked reset needs the batch's latest observations.
         self._received: list[tuple[np.ndarray, np.ndarray]] = []
@@ -186,9 +187,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             self._sent[:] = False
             return self._codec.obs(raw), cols
         if mask is not None and not mask.all():
-            merged = self._latest_obs()
-            merged[mask] = raw[mask]
-            raw = merged
+            self._keep_latest(raw, ~mask)
             if infos is not None:
                 infos = [info if m else {} for info, m in zip(infos, mask, strict=True)]
         self._last_obs = raw
@@ -196,12 +195,24 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._sent[:] = False
         return self._codec.obs(raw), self._info(infos, None, self.num_envs, cols)
 
+    def _keep_latest(self, raw: np.ndarray, keep: np.ndarray) -> None:
+        """Writes the latest observation of each env in `keep` into its row of `raw` (the
+        results of a masked reset, which hold nothing for them): only those rows are
+        copied, and the reset envs' rows stay where the workers wrote them."""
+        last: np.ndarray = self._last_obs  # type: ignore[assignment]
+        raw[keep] = last[keep]
+        for ids, rows in self._received:
+            sel = keep[ids]
+            raw[ids[sel]] = rows[sel]
+        self._obs_bytes_copied += int(keep.sum()) * (raw.nbytes // max(len(raw), 1))
+
     def _latest_obs(self) -> np.ndarray:
         """A copy of every env's latest raw observation: the last full batch, with the rows
         `recv` returned since then."""
         merged = self._last_obs.copy()  # type: ignore[union-attr]
         for ids, rows in self._received:
             merged[ids] = rows
+        self._obs_bytes_copied += merged.nbytes + sum(rows.nbytes for _, rows in self._received)
         return merged
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -300,6 +311,14 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
                 self.close()
         except Exception:
             pass
+
+    @property
+    def obs_bytes_copied(self) -> int:
+        """Observation bytes copied on this side since the session started, each copy
+        counted: 0 while every result is a view of shared memory. Copies happen when results
+        cannot be lent in place (every slot the memory cap allows is held by arrays you
+        keep), for `recv`'s picked rows, and for a masked reset's envs that were not reset."""
+        return int(self._session.obs_bytes_copied) + self._obs_bytes_copied
 
     @property
     def num_workers(self) -> int:
