@@ -358,6 +358,25 @@ fn python(env: Option<&WorkerPython>, user: &UserAdapters) -> Vec<AdapterInfo> {
         .collect()
 }
 
+/// Whether a session on `route` runs in a Python worker: in a provisioned environment, or
+/// through an adapter the Rust worker does not have. Unknown (the Rust worker cannot say)
+/// counts as not.
+pub(crate) fn hosted_in_python(route: &envhub_protocol::Route) -> bool {
+    if route.python.is_some()
+        || crate::python_host::BUILTIN
+            .iter()
+            .any(|(name, _)| *name == route.adapter)
+    {
+        return true;
+    }
+    NATIVE.get_or_compute(native).is_ok_and(|n| {
+        !n.shown
+            .iter()
+            .chain(n.testing.iter())
+            .any(|a| a.name == route.adapter)
+    })
+}
+
 /// How the adapter `name` is hosted, among this process's adapters and `user`'s (native if
 /// unknown).
 pub(crate) fn host_of(name: &str, user: &UserAdapters) -> Host {

@@ -165,6 +165,7 @@ impl Hub {
         } else {
             None
         };
+        let options = self.options_for(route.as_ref());
         VecEnv::start_placed(
             StartPlan {
                 id,
@@ -173,9 +174,20 @@ impl Hub {
                 slices,
                 opener: Some(envhub_net::ZenohSlices::new(network)),
             },
-            self.options.clone(),
+            options,
             &self.launch(),
         )
+    }
+
+    /// The session options for a session on `route`: typed info columns only where a Python
+    /// worker writes them. A Rust worker never does, and its slots stay the size of its
+    /// results (more of them fit the pool).
+    fn options_for(&self, route: Option<&Route>) -> SessionOptions {
+        let mut options = self.options.clone();
+        if options.info_row_bytes > 0 && !route.is_some_and(catalog::hosted_in_python) {
+            options.info_row_bytes = 0;
+        }
+        options
     }
 
     /// Replaces the session options (timeouts, restart policy, namespace).
@@ -270,7 +282,8 @@ impl Hub {
         let mut config = config.clone();
         config.num_envs = num_envs;
         let route = self.route(id, &config)?;
-        VecEnv::start(id, route, self.options.clone(), &self.launch())
+        let options = self.options_for(Some(&route));
+        VecEnv::start(id, route, options, &self.launch())
     }
 
     /// One env of registry entry `id`, in its own worker.
@@ -280,12 +293,8 @@ impl Hub {
         config.workers = Some(1);
         config.autoreset_mode = AutoresetMode::Disabled;
         let route = self.route(id, &config)?;
-        Ok(Env::new(VecEnv::start(
-            id,
-            route,
-            self.options.clone(),
-            &self.launch(),
-        )?))
+        let options = self.options_for(Some(&route));
+        Ok(Env::new(VecEnv::start(id, route, options, &self.launch())?))
     }
 
     /// A batch of envs of an adapter's env id, bypassing the registry.
@@ -301,7 +310,8 @@ impl Hub {
             config: config.clone(),
             python: None,
         };
-        VecEnv::start(env_id, route, self.options.clone(), &self.launch())
+        let options = self.options_for(Some(&route));
+        VecEnv::start(env_id, route, options, &self.launch())
     }
 }
 

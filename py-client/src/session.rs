@@ -389,7 +389,7 @@ pub(crate) fn make_session(
         action_leaves: leaves_json(v.action_space()),
         obs: ArrayLayout::of(v.observation_space()),
         act: ArrayLayout::of(v.action_space()),
-        info_row_bytes,
+        info_row_bytes: v.info_row_bytes(),
         schemas: Mutex::default(),
         copied: AtomicU64::new(0),
         pid: st.pid,

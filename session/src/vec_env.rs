@@ -514,6 +514,12 @@ impl VecEnv {
         self.route.config.autoreset_mode
     }
 
+    /// Bytes of typed info columns per env in the session's slots (0: none; the hub asks
+    /// for them only where a Python worker writes them).
+    pub fn info_row_bytes(&self) -> usize {
+        self.options.info_row_bytes
+    }
+
     /// Observation bytes this session has copied on the client so far. Results are viewed in
     /// place in shared memory, so this stays 0 except for `recv` of envs that do not lie
     /// contiguously in one slot.

@@ -91,3 +91,44 @@ class KeepsActionsAdapter(envhub.EnvAdapter):
 
     def make(self, env_id: str, config: Any) -> Any:
         return KeepsActionsEnv()
+
+
+class MixedInfoEnv(gym.Env):
+    """Infos of every kind a hosted env reports, seeded: numbers every step, a key only some
+    envs and steps have, and now and then text (which no typed column holds). Episodes end
+    after 5 to 9 steps."""
+
+    def __init__(self) -> None:
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float64)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        self.t = 0
+        self.length = 5
+
+    def _info(self) -> dict[str, Any]:
+        info: dict[str, Any] = {"t": self.t, "x": float(self.t) / 3.0, "ok": self.t % 2 == 0, "e": np.float64(-self.t)}
+        if self.np_random.random() < 0.3:
+            info["bonus"] = float(self.np_random.random())
+        if self.np_random.random() < 0.1:
+            info["note"] = f"step {self.t}"
+        return info
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        super().reset(seed=seed)
+        self.t = 0
+        self.length = int(self.np_random.integers(5, 10))
+        return np.zeros(3), self._info()
+
+    def step(self, action: Any) -> Any:
+        self.t += 1
+        obs = np.array([self.t, float(action[0]), self.np_random.random()])
+        return obs, float(action[0]), self.t >= self.length, False, self._info()
+
+
+class MixedInfoAdapter(envhub.EnvAdapter):
+    name = "mixed_infos"
+    frameworks = ["mixed_infos"]
+    requires = ["numpy"]
+    description = "an env whose infos mix numbers, sometimes-present keys and text"
+
+    def make(self, env_id: str, config: Any) -> Any:
+        return MixedInfoEnv()

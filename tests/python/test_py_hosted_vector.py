@@ -183,9 +183,10 @@ def test_same_step_final_observations_and_info_of_a_dict_vector_env(registry, co
         np.testing.assert_array_equal(terminated, [True, False, False])
         np.testing.assert_array_equal(obs["t"][:, 0], [0, 2, 2])
         np.testing.assert_array_equal(info["_final_obs"], [True, False, False])
-        final = info["final_obs"]  # Dict observations: a dict of per-env arrays
-        np.testing.assert_array_equal(final["t"][0], [2])
-        np.testing.assert_allclose(final["sum"][0], [1.0, 1.0])
+        final = info["final_obs"]  # as Gymnasium's: one observation (a dict) per env, else None
+        assert final.dtype == object and final[1] is None and final[2] is None
+        np.testing.assert_array_equal(final[0]["t"], [2])
+        np.testing.assert_allclose(final[0]["sum"], [1.0, 1.0])
         # Envs that did not finish: the vector env's own info, unchanged.
         np.testing.assert_array_equal(info["t"], [2, 2, 2])
     finally:

@@ -35,6 +35,10 @@ from . import _envhub
 #: The info key that announces a schema (`envhub_protocol::info_columns::SCHEMA_KEY`).
 SCHEMA_KEY = "__envhub_schema__"
 
+#: Bytes per env of typed info columns in the batch slots of a Python-hosted session: room
+#: for about a hundred scalar keys; a larger info takes the JSON path.
+INFO_ROW_BYTES = 1024
+
 # Keys that never go into a column: the data plane's own, and Gymnasium's same_step keys.
 _RESERVED = frozenset({SCHEMA_KEY, "__envhub_pickle__", "__envhub_types__", "final_info", "final_obs"})
 

@@ -33,10 +33,6 @@ from .vector import VectorEnv, _autoreset_mode
 
 __all__ = ["AsyncVectorEnv"]
 
-#: Bytes per env of typed info columns in the batch slots: room for about a hundred scalar
-#: keys; a larger info takes the JSON path.
-INFO_ROW_BYTES = 1024
-
 
 def _pickle_factories(env_fns: Sequence[Callable[[], Any]]) -> bytes:
     import cloudpickle
@@ -170,7 +166,6 @@ class AsyncVectorEnv(VectorEnv):
                 render_mode=render_mode if render_mode == "rgb_array" else None,
                 step_timeout=step_timeout,
                 _adapter=FRAMEWORK,
-                _info_row_bytes=INFO_ROW_BYTES,
             )
         except MakeError as e:  # name the drop-in rather than its temporary file
             shutil.rmtree(self._calls_folder, ignore_errors=True)
@@ -256,25 +251,9 @@ class AsyncVectorEnv(VectorEnv):
         self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: Any = None
     ) -> dict[str, Any]:
         if cols is not None:
-            columns = self._columns
-            ids = columns.ids(cols)  # type: ignore[union-attr]
-            if final is None and infos is None:
-                # Every env's info in its row with one schema: Gymnasium's layout, viewed in place.
-                first = int(ids[0]) if n else 0
-                if first and (ids == first).all():
-                    return columns.columns(cols, first)  # type: ignore[union-attr]
-                if not ids.any():
-                    return {}
-            if ids.any():
-                # Some infos in rows, some as JSON: each env's dict (a row's values first, then
-                # any keys the session added, as a restart's), batched as below.
-                json_infos = infos if infos is not None else [None] * n
-                infos = [
-                    {**columns.env_info(cols, k, int(ids[k])), **(json_infos[k] or {})}  # type: ignore[union-attr]
-                    if ids[k]
-                    else json_infos[k]
-                    for k in range(n)
-                ]
+            ready, infos = self._with_rows(infos, final, n, cols)
+            if ready is not None:
+                return ready
         # Gymnasium's own batching of each env's info, once unwrapped; same_step infos are
         # rebuilt as its worker builds them.
         if final is None and infos is not None:

@@ -11,7 +11,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from . import _info_tree, _spaces
-from ._info_columns import ColumnReader
+from ._info_columns import INFO_ROW_BYTES, ColumnReader
 from ._infos import flat_infos
 from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 from .config import EnvConfig, to_json
@@ -22,10 +22,17 @@ __all__ = ["VectorEnv"]
 
 def _add_info(infos: dict[str, Any], env_info: dict[str, Any], k: int, n: int) -> dict[str, Any]:
     """Gymnasium's vector info layout: every key an array over the `n` envs, with a boolean
-    mask `_key` saying which envs reported it (nested dicts recursively)."""
+    mask `_key` saying which envs reported it (nested dicts recursively; `final_obs` an
+    object array)."""
     for key, value in env_info.items():
-        if isinstance(value, dict):
-            array: Any = _add_info(infos.get(key, {}), value, k, n)
+        if key == "final_obs":
+            # One observation object per env (None where no episode ended), as Gymnasium has it.
+            array: Any = infos.get(key)
+            if array is None:
+                array = np.full(n, fill_value=None, dtype=object)
+            array[k] = value
+        elif isinstance(value, dict):
+            array = _add_info(infos.get(key, {}), value, k, n)
         else:
             if isinstance(value, list):
                 value = np.asarray(value)
@@ -100,12 +107,12 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         strict_actions: bool = False,
         hubs: HubsArg = None,
         _adapter: str | None = None,
-        _info_row_bytes: int = 0,
+        _info_row_bytes: int = INFO_ROW_BYTES,
         **extra: Any,
     ) -> None:
         # `_adapter` (private): `registry_id` is that adapter's env id, no registry entry.
-        # `_info_row_bytes` (private): typed info columns in the slots, for a subclass whose
-        # `_info` reads them (the drop-in's).
+        # `_info_row_bytes` (private): typed info columns per env in the slots, which the hub
+        # keeps only where a Python worker writes them (0: none).
         mode = _autoreset_mode(autoreset_mode)
         config = EnvConfig(
             render_mode=render_mode,
@@ -121,7 +128,8 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._session = start(
             registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs, _info_row_bytes
         )
-        self._columns = ColumnReader(_info_row_bytes, self._session.info_schema) if _info_row_bytes else None
+        row_bytes = int(self._session.info_row_bytes)
+        self._columns = ColumnReader(row_bytes, self._session.info_schema) if row_bytes else None
         s = self._session
         self.registry_id = registry_id
         self.num_envs = int(s.num_envs)
@@ -271,25 +279,53 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
 
     # ---------------------------------------------------------------------------------------
 
+    def _with_rows(
+        self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: np.ndarray
+    ) -> tuple[dict[str, Any] | None, list[dict[str, Any]] | None]:
+        """The info columns `cols` (a `[n, row_bytes]` block) read: Gymnasium's vector info
+        itself when every env's info is in its row under one schema and nothing else came
+        (views of the rows), else None and each env's info as it travelled, with its row's
+        values first where it has one (then any keys the session added, as a restart's)."""
+        columns = self._columns
+        ids = columns.ids(cols)  # type: ignore[union-attr]
+        if final is None and infos is None:
+            first = int(ids[0]) if n else 0
+            if first and (ids == first).all():
+                return columns.columns(cols, first), infos  # type: ignore[union-attr]
+            if not ids.any():
+                return {}, infos
+        if ids.any():
+            json_infos = infos if infos is not None else [None] * n
+            infos = [
+                {**columns.env_info(cols, k, int(ids[k])), **(json_infos[k] or {})}  # type: ignore[union-attr]
+                if ids[k]
+                else json_infos[k]
+                for k in range(n)
+            ]
+        return None, infos
+
     def _info(
         self, infos: list[dict[str, Any]] | None, final: list[Any] | None, n: int, cols: Any = None
     ) -> dict[str, Any]:
+        if cols is not None:
+            ready, infos = self._with_rows(infos, final, n, cols)
+            if ready is not None:
+                return ready
         if final is None and infos is not None:
             flat = flat_infos(infos, n)
             if flat is not None:
                 return flat
+        # Env by env, an ended episode's final observation and info before the new one's
+        # info, as Gymnasium's `SyncVectorEnv` adds them (so the keys come in its order).
         out: dict[str, Any] = {}
-        if final is not None:
-            for k, data in enumerate(final):
-                if data is not None:
-                    final_info = _info_tree.decode(infos[k].pop("final_info", {})) if infos is not None else {}
-                    out = _add_info(
-                        out, {"final_obs": self._codec.obs_from_bytes(data), "final_info": final_info}, k, n
-                    )
-        if infos is not None:
-            for k, info in enumerate(infos):
-                if info:
-                    out = _add_info(out, _info_tree.decode(info), k, n)
+        for k in range(n):
+            info = infos[k] if infos is not None else None
+            data = final[k] if final is not None else None
+            if data is not None:
+                final_info = _info_tree.decode(info.pop("final_info", {})) if info is not None else {}
+                out = _add_info(out, {"final_obs": self._codec.obs_from_bytes(data), "final_info": final_info}, k, n)
+            if info:
+                out = _add_info(out, _info_tree.decode(info), k, n)
         return out
 
     def render(self) -> tuple[np.ndarray | None, ...] | None:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _envhub
+from . import _envhub, _info_tree
 from ._batched import env_value as _env_value
 from ._info_columns import SCHEMA_KEY, ColumnWriter
 from ._pickled import encode_info
@@ -106,10 +106,13 @@ class HostedBatch:
     nothing). An env that raises is reported with its traceback and left neutral rows; the
     others go on.
 
-    Infos: envs that declare `exact_infos` (the drop-in's `DropInEnv`) have theirs delivered
-    exactly as Gymnasium's pipes would: into the slot's typed columns where they fit the
-    learned schema (`info_columns` given), else as `envhub._pickled.encode_info` makes them.
-    Other envs' infos travel as JSON of numbers, flags, text and short numeric vectors."""
+    Infos: with `info_row_bytes` (a session that asked for typed columns), every info that
+    fits the schema learned from the envs' infos goes into the env's row of the slot's
+    columns, exactly (dtypes, shapes, Python or numpy scalars). The others travel as JSON,
+    exactly too: for envs that declare `exact_infos` (the drop-in's `DropInEnv`) as
+    `envhub._pickled.encode_info` makes them (as Gymnasium's pipes would), for the others as
+    an `envhub._info_tree` tree (nested dicts, numpy arrays and scalars with their dtypes and
+    bytes; no pickle, as a remote client may read it)."""
 
     def __init__(self, hosted: list[HostedEnv], mode: str, info_row_bytes: int = 0) -> None:
         self.hosted = hosted
@@ -120,7 +123,7 @@ class HostedBatch:
         self.obs_tree = hosted[0].obs_tree
         self.act_tree = hosted[0].act_tree
         self.exact = bool(getattr(self.envs[0], "exact_infos", False))
-        self.columns = ColumnWriter(info_row_bytes) if self.exact and info_row_bytes else None
+        self.columns = ColumnWriter(info_row_bytes) if info_row_bytes else None
 
     # The blocks, viewed for this request ------------------------------------------------------
 
@@ -143,22 +146,18 @@ class HostedBatch:
 
     def _info(self, i: int, info: Any, cols: memoryview | None) -> Any:
         """Env `i`'s info as it travels in JSON (None: nothing), its row of columns written."""
-        if not self.exact:
-            if cols is not None:
-                self.columns.skip(cols, i)  # type: ignore[union-attr]
-            return _plain_info(info)
         if cols is None:
-            return encode_info(info)
+            return self._encode(info)
         if not info:
             self.columns.skip(cols, i)  # type: ignore[union-attr]
             return None
         written = self.columns.write(cols, i, info)  # type: ignore[union-attr]
         if written is False:
-            return encode_info(info)
+            return self._encode(info)
         return None if written is None else {SCHEMA_KEY: written}
 
     def _encode(self, info: Any) -> Any:
-        return encode_info(info) if self.exact else _plain_info(info)
+        return encode_info(info) if self.exact else _info_tree.encode(info)
 
     @staticmethod
     def _section(infos: list[Any]) -> str | None:
@@ -432,18 +431,6 @@ def _info_value(v: Any) -> Any:
     return None
 
 
-def _plain_info(info: dict[str, Any] | None) -> dict[str, Any] | None:
-    """The info values that travel (numbers, flags, text, short numeric vectors), or None."""
-    if not info:
-        return None
-    out = {}
-    for k, v in info.items():
-        value = _info_value(v)
-        if value is not None:
-            out[str(k)] = value
-    return out or None
-
-
 def _env_infos(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
     """Gymnasium's batched vector info (`key`: a value per env, `_key`: which envs have it;
     nested dicts alike) as one info dict per env. Values without a leading axis of `n`
@@ -475,7 +462,7 @@ def _env_infos(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
 
 def vector_info_json(info: dict[str, Any] | None, n: int) -> str | None:
     """A vector env's info as the info section (`[{...}, ...]`, one object per env, with
-    what `_plain_info` keeps), or None when no env has any."""
+    its numbers, flags, text and short numeric vectors), or None when no env has any."""
     if not info:
         return None
     per_env = _env_infos(info, n)

@@ -12,7 +12,6 @@ from __future__ import annotations
 from importlib import metadata
 from typing import Any, ClassVar
 
-from .. import _info_tree
 from .base import EnvAdapter
 
 
@@ -52,31 +51,13 @@ class SuiteAdapter(EnvAdapter):
         return True, None, None
 
 
-def nested_infos(env: Any) -> Any:
-    """`env` (a `gymnasium.Env`) with infos that arrive whole at the client: nested dicts,
-    numpy arrays and scalars keep their structure, dtypes and bytes (`envhub._info_tree`)."""
-    import gymnasium as gym
-
-    class NestedInfo(gym.Wrapper):
-        def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
-            obs, info = self.env.reset(seed=seed, options=options)
-            return obs, _info_tree.encode(info)
-
-        def step(self, action: Any) -> Any:
-            obs, reward, terminated, truncated, info = self.env.step(action)
-            return obs, reward, terminated, truncated, _info_tree.encode(info)
-
-    return NestedInfo(env)
-
-
 def gym_make(env_id: str, config: Any, kwargs: dict[str, Any]) -> Any:
     """`gymnasium.make` with the session's render mode and step limit (0 or None: the id's
-    own), its infos sent whole."""
+    own)."""
     import gymnasium as gym
 
     limit = config.max_episode_steps or None
-    env = gym.make(env_id, render_mode=config.render_mode, max_episode_steps=limit, **kwargs)
-    return nested_infos(env)
+    return gym.make(env_id, render_mode=config.render_mode, max_episode_steps=limit, **kwargs)
 
 
 def unknown_id(suite: str, env_id: str, ids: list[str], hint: str) -> LookupError:
