@@ -114,6 +114,16 @@ struct Native {
     testing: Arc<[AdapterInfo]>,
 }
 
+impl Native {
+    /// The adapter `name`, shown or for testing.
+    fn find(&self, name: &str) -> Option<&AdapterInfo> {
+        self.shown
+            .iter()
+            .chain(self.testing.iter())
+            .find(|a| a.name == name)
+    }
+}
+
 /// One entry of `envhub-worker describe`, which marks test adapters.
 #[derive(Deserialize)]
 struct Described {
@@ -369,21 +379,21 @@ pub(crate) fn hosted_in_python(route: &envhub_protocol::Route) -> bool {
     {
         return true;
     }
-    NATIVE.get_or_compute(native).is_ok_and(|n| {
-        !n.shown
-            .iter()
-            .chain(n.testing.iter())
-            .any(|a| a.name == route.adapter)
-    })
+    NATIVE
+        .get_or_compute(native)
+        .is_ok_and(|n| n.find(&route.adapter).is_none())
 }
 
 /// How the adapter `name` is hosted, among this process's adapters and `user`'s (native if
 /// unknown).
 pub(crate) fn host_of(name: &str, user: &UserAdapters) -> Host {
-    let find = |list: &[AdapterInfo]| list.iter().find(|a| a.name == name).map(|a| a.host);
     let native = NATIVE.get_or_compute(native).ok();
     native
-        .and_then(|n| find(&n.shown).or_else(|| find(&n.testing)))
-        .or_else(|| adapters_with(user).ok().and_then(|list| find(&list)))
+        .and_then(|n| n.find(name).map(|a| a.host))
+        .or_else(|| {
+            adapters_with(user)
+                .ok()
+                .and_then(|list| list.iter().find(|a| a.name == name).map(|a| a.host))
+        })
         .unwrap_or_default()
 }

@@ -258,19 +258,14 @@ pub(crate) fn owned<'py>(
     n: Option<usize>,
     words: Vec<u64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let bytes = n.unwrap_or(1) * layout.bytes;
-    assert!(words.len() * 8 >= bytes, "words for the shape");
+    assert!(
+        words.len() * 8 >= n.unwrap_or(1) * layout.bytes,
+        "words for the shape"
+    );
     let base = numpy::PyArray1::<u64>::from_vec(py, words).into_any();
     let ptr = data_ptr(base.cast::<numpy::PyUntypedArray>()?);
-    let descr = dtype_of(py, layout);
-    let dims: Vec<isize> = layout.batch_shape(n).iter().map(|&d| d as isize).collect();
-    let mut strides = vec![0isize; dims.len()];
-    let mut step = descr.itemsize() as isize;
-    for d in (0..dims.len()).rev() {
-        strides[d] = step;
-        step *= dims[d];
-    }
-    // SAFETY: `base` owns the words, which hold the shape's `bytes` bytes, 8-byte aligned;
-    // the values are the bytes a worker wrote for this dtype, as a view of the slot has them.
-    unsafe { strided_view(py, &descr, &dims, &strides, ptr, &base) }
+    // SAFETY: `base` owns the words, which hold the shape's bytes, 8-byte aligned, and
+    // nothing else reads or writes them; the values are the bytes a worker wrote for this
+    // dtype, as a view of the slot has them.
+    unsafe { view(layout, n, ptr, base) }
 }
