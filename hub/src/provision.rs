@@ -93,7 +93,7 @@ fn make_store() -> Result<Store, String> {
 fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
     let exe = std::env::current_exe().ok()?;
     if let Some(package) = exe.parent().and_then(|bin| bin.parent())
-        && package.join("worker.py").is_file()
+        && package.join("worker").join("__main__.py").is_file()
         && package.join("__init__.py").is_file()
     {
         return Some(package.to_path_buf());
@@ -106,7 +106,7 @@ fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
         .output()
         .ok()?;
     let path = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
-    (out.status.success() && path.join("worker.py").is_file()).then_some(path)
+    (out.status.success() && path.join("worker").join("__main__.py").is_file()).then_some(path)
 }
 
 /// The environment `entry` runs in, if any: its name and spec.

@@ -406,7 +406,7 @@ def _task_of(env: VectorEnv) -> str:
     registry_id = getattr(env.unwrapped, "registry_id", None)
     if isinstance(registry_id, str):
         try:
-            from ..registry import EnvRegistry
+            from ..client.registry import EnvRegistry
 
             entry = EnvRegistry().get(registry_id)
             return entry.description or entry.name or registry_id
