@@ -146,7 +146,8 @@ def test_vla_eval_server_answers_as_the_function_does(vla_server) -> None:
     with VlaEvalPolicy(vla_server.url, fields=VLA_FIELDS, timeout=30) as policy:
         assert run_episodes(policy, lambda obs, ep, step: direct(obs, ep)) == 3 * 2 * 12
         described = policy.describe()
-    assert described["kind"] == "vla-eval"
+    assert described["kind"] == "server" and described["protocol"] == "vla-eval"
+    assert described["url"] == vla_server.url
     assert described["server"]["model_server"] == "Reference"
     assert described["server"]["protocol_version"] == 1
 
@@ -223,6 +224,7 @@ def test_a_misbehaving_server_fails_that_episode_only(protocol, trouble, request
         assert FAILURES[protocol, trouble] in message, message
         assert message.startswith("slot 0: ") and "slot 1" not in message, message
         assert caught.value.slots.keys() == {0}
+        assert caught.value.answers[0] is None and caught.value.answers[1] is not None
         assert took < STALL_TIMEOUT_S + 3, took
         # The failed episode asks no more of its server; the other slot goes on.
         with pytest.raises(PolicyError, match="slot 0"):

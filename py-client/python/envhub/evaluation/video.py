@@ -41,12 +41,13 @@ class VideoError(EnvHubError, RuntimeError):
 
 
 class EpisodeVideos:
-    """Episode videos under `folder`, one encoder per env slot.
+    """Episode videos in `folder`/`subfolder` (the evaluation's output folder and
+    `videos/`), one encoder per env slot.
 
     `frame(slot, frame)` adds a `HxWx3` uint8 frame to the slot's current episode;
-    `finish(slot, episode, success)` ends it and returns its path relative to
-    `relative_to` (default: `folder`'s parent, where the results file and the report sit),
-    or None when no video is kept (no frames, or a success under `only_failures`);
+    `finish(slot, episode, success)` ends it and returns its path relative to `folder`
+    (`videos/libero-spatial_0_ep0003.mp4`: what the results file records and the report
+    plays), or None when no video is kept (no frames, or a success under `only_failures`);
     `discard(slot)` drops the slot's current episode; `close()` waits for every video to be
     written. The file behind a returned path is complete once `close()` returns."""
 
@@ -54,21 +55,22 @@ class EpisodeVideos:
         self,
         folder: str | os.PathLike[str],
         only_failures: bool = False,
-        fps: int = DEFAULT_FPS,
+        fps: float = DEFAULT_FPS,
         *,
+        subfolder: str = "videos",
         crf: int = 23,
         queue_frames: int = DEFAULT_QUEUE_FRAMES,
-        relative_to: str | os.PathLike[str] | None = None,
     ) -> None:
-        if not (isinstance(fps, int) and fps > 0):
-            raise ValueError(f"fps must be a positive integer, got {fps!r}")
+        if not (isinstance(fps, (int, float)) and 0 < fps <= 1000):
+            raise ValueError(f"fps must be a number of frames per second in (0, 1000], got {fps!r}")
         if queue_frames < 1:
             raise ValueError(f"queue_frames must be at least 1, got {queue_frames}")
-        self.folder = Path(folder)
+        self.root = Path(folder)
+        self.folder = self.root / subfolder
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.relative_to = Path(relative_to) if relative_to is not None else self.folder.resolve().parent
         self.only_failures = only_failures
-        self.fps = fps
+        # 29.97 is 30000/1001: MP4 keeps a rational rate.
+        self.fps = Fraction(fps).limit_denominator(1001)
         self.crf = crf
         self.codec = _codec()
         self._queue: queue.Queue = queue.Queue(maxsize=queue_frames)
@@ -115,7 +117,7 @@ class EpisodeVideos:
             return None
         path = self.folder / video_name(episode)
         self._put(("end", slot, path))
-        return Path(os.path.relpath(path.resolve(), self.relative_to.resolve())).as_posix()
+        return path.relative_to(self.root).as_posix()
 
     def close(self) -> None:
         """Writes what is queued, drops episodes never finished, and stops the writer."""
@@ -189,7 +191,7 @@ class _Video:
     """One episode's encoder, writing a hidden file beside where the video will go."""
 
     def __init__(
-        self, folder: Path, slot: int, shape: tuple[int, ...], fps: int, codec: str, crf: int
+        self, folder: Path, slot: int, shape: tuple[int, ...], fps: Fraction, codec: str, crf: int
     ) -> None:
         import av
 
@@ -207,7 +209,7 @@ class _Video:
             stream = self.container.add_stream(codec, rate=fps, options=options)
             stream.height, stream.width = self.padded
             stream.pix_fmt = "yuv420p"
-            stream.codec_context.time_base = Fraction(1, fps)
+            stream.codec_context.time_base = 1 / fps
             self.stream = stream
         except BaseException:
             self.container.close()

@@ -102,6 +102,8 @@ class ServerPolicy:
             error = PolicyError(lines)
             # Which slots failed and why, for a runner that fails only those episodes.
             error.slots = {slot: str(err) for slot, err in failed.items()}  # type: ignore[attr-defined]
+            # The other slots' answers (None where a slot failed), for that runner to use.
+            error.answers = [None if isinstance(a, SlotError) else a for a in answers]  # type: ignore[attr-defined]
             raise error
         return answers
 
@@ -110,7 +112,9 @@ class ServerPolicy:
 
     def describe(self) -> dict[str, Any]:
         return {
-            "kind": self.kind,
+            "kind": "server",
+            "protocol": self.kind,
+            "name": self.url,
             "url": self.url,
             "timeout_s": self.timeout,
             "server": _plain(self.server_info),
