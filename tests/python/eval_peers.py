@@ -118,7 +118,24 @@ def serve_vla_eval(chunk: int | None, batch: int) -> None:
         def predict_batch(self, obs_batch, ctx_batch):
             return [self._act(obs) for obs in obs_batch]
 
+        async def on_episode_start(self, config, ctx):
+            self.tasks[ctx.session_id] = config["task"]
+            await super().on_episode_start(config, ctx)
+
         async def on_observation(self, obs, ctx):
+            if obs.get("task_description", "").startswith("echo"):
+                # Answers with what EPISODE_START said of the task, and the step it is at.
+                task = self.tasks[ctx.session_id]
+                fields = [
+                    task["task_id"],
+                    task["episode_idx"],
+                    task.get("init_state", -1),
+                    task.get("level", -1),
+                ]
+                await ctx.send_action(
+                    {"actions": np.array([*fields, len(task["name"]), ctx.step, 0], np.float32)}
+                )
+                return
             trouble = _misbehaviour(obs.get("task_description", ""))
             if trouble == "stall":
                 await anyio.sleep(3600)
@@ -136,6 +153,7 @@ def serve_vla_eval(chunk: int | None, batch: int) -> None:
 
     async def main() -> None:
         server = Reference(chunk_size=chunk, max_batch_size=batch, max_wait_time=0.005)
+        server.tasks = {}
         async with anyio.create_task_group() as tg:
             port = await tg.start(serve_async, server, "127.0.0.1", 0)
             print(f"PORT {port}", flush=True)

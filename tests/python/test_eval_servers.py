@@ -152,6 +152,25 @@ def test_vla_eval_server_answers_as_the_function_does(vla_server) -> None:
     assert described["server"]["protocol_version"] == 1
 
 
+def test_vla_eval_episode_start_carries_the_task(vla_server) -> None:
+    """EPISODE_START's `task`: the text as `name`, `task_id`, `episode_idx`, the initial
+    condition, and what `task_info` adds; the server's step count restarts each episode."""
+    info = lambda episode: {"level": 10 + episode.task.index}  # noqa: E731
+    with VlaEvalPolicy(vla_server.url, fields=VLA_FIELDS, timeout=30, task_info=info) as policy:
+        rng = np.random.default_rng(0)
+        for index in (4, 5):
+            episode = Episode(
+                Task("bench", "bench/3", "bench-entry", "echo the task", 3), index, {"init_state": index}
+            )
+            policy.start(1, episode)
+            for step in range(2):
+                (answer,) = policy.act([Request(1, episode, step, observation(rng))])
+                np.testing.assert_array_equal(
+                    answer, np.array([3, index, index, 13, 13, step, 0], np.float32)
+                )
+            policy.end(1, episode, {"success": False, "length": 2})
+
+
 def test_vla_eval_server_side_chunks_replay_as_the_function_does(vla_chunk_server) -> None:
     """`PredictModelServer(chunk_size=3)` computes a chunk every 3rd observation of an
     episode and answers from its buffer in between; the buffer starts anew each episode."""

@@ -24,7 +24,7 @@ from __future__ import annotations
 import itertools
 import logging
 import time
-from typing import Any
+from typing import Any, Callable
 
 import msgpack
 import numpy as np
@@ -46,8 +46,10 @@ class VlaEvalPolicy(ServerPolicy):
     "agentview_image", "states": "state"}`, nested dicts joined by `.`); without it every
     camera image `X_image` goes to `images.X` and every other entry keeps its name (an array
     observation goes to `states`, or `images.image` when it is an image). The task's text
-    goes to `task_description`, as vla-eval's benchmarks send it. `timeout` bounds every
-    wait for the server, in seconds."""
+    goes to `task_description`, as vla-eval's benchmarks send it. EPISODE_START's `task` says
+    `name` (the task's text), `suite`, `task_id`, `episode_idx` and the episode's initial
+    condition; `task_info(episode)` adds or replaces fields (a server that picks a model per
+    task reads its own, e.g. `level`). `timeout` bounds every wait for the server, in seconds."""
 
     kind = "vla-eval"
 
@@ -58,8 +60,10 @@ class VlaEvalPolicy(ServerPolicy):
         fields: dict[str, str] | None = None,
         timeout: float = 60.0,
         text_key: str = "task_description",
+        task_info: Callable[[Episode], dict[str, Any]] | None = None,
     ) -> None:
         super().__init__(url, timeout=timeout)
+        self.task_info = task_info
         self.fields = dict(fields) if fields is not None else None
         self.text_key = text_key
         self._seq = itertools.count(1)
@@ -106,6 +110,8 @@ class VlaEvalPolicy(ServerPolicy):
             "envhub_entry": task.entry,
         }
         info.update({k: v for k, v in episode.init.items() if isinstance(v, (str, int, float, bool, list))})
+        if self.task_info is not None:
+            info.update(self.task_info(episode))
         await self._send(ws, "episode_start", {"task": info})
 
     def observation(self, request: Request) -> dict[str, Any]:
