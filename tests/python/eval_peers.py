@@ -5,7 +5,7 @@ into the cache folder and returns its interpreter.
 
 Run as a script inside that environment it is a policy server:
     python eval_peers.py vla-eval|openpi [--chunk K] [--batch B]
-serving `reference_action` on 127.0.0.1 (a free port, printed as `PORT n`). A task text
+serving `reference_action` (`linear_action` for an observation without images) on 127.0.0.1 (a free port, printed as `PORT n`). A task text
 that names a misbehaviour makes the server do it: `stall` (never answers), `disconnect`
 (closes the connection), `malformed` (answers something that is not an action), `error`
 (its policy raises), `exit` (the process exits).
@@ -40,6 +40,26 @@ def reference_action(image: np.ndarray, state: np.ndarray, text: str) -> np.ndar
 def reference_chunk(image: np.ndarray, state: np.ndarray, text: str, horizon: int = HORIZON) -> np.ndarray:
     base = reference_action(image, state, text)
     return np.stack([base + np.float32(0.01 * i) for i in range(horizon)]).astype(np.float32)
+
+
+def linear_action(state: np.ndarray, action_dim: int) -> np.ndarray:
+    """A deterministic policy of a state vector: tanh of fixed weights times the state,
+    summed with math.fsum (exactly rounded: the same bits in every process)."""
+    import math
+
+    state = [float(x) for x in np.asarray(state, dtype=np.float64).ravel()]
+    out = []
+    for i in range(action_dim):
+        weights = [((i * 7 + j * 13) % 11 - 5) / 20.0 for j in range(len(state))]
+        out.append(math.tanh(math.fsum(w * x for w, x in zip(weights, state))))
+    return np.asarray(out, dtype=np.float32)
+
+
+def linear_chunk(state: np.ndarray, action_dim: int, horizon: int = HORIZON) -> np.ndarray:
+    base = linear_action(state, action_dim)
+    return np.stack([np.clip(base * np.float32(1 - 0.2 * i), -1, 1) for i in range(horizon)]).astype(
+        np.float32
+    )
 
 
 # -- the environment ----------------------------------------------------------------------
@@ -98,7 +118,7 @@ def _misbehaviour(text: str) -> str | None:
     return None
 
 
-def serve_vla_eval(chunk: int | None, batch: int) -> None:
+def serve_vla_eval(chunk: int | None, batch: int, action_dim: int) -> None:
     """A vla-eval model server written with vla-eval's own base class, served by vla-eval."""
     import anyio
     import websockets
@@ -107,6 +127,8 @@ def serve_vla_eval(chunk: int | None, batch: int) -> None:
 
     class Reference(PredictModelServer):
         def _act(self, obs):
+            if "images" not in obs:  # a state-vector benchmark: the linear policy
+                return {"actions": linear_action(obs["states"], self.action_dim)}
             image, state, text = obs["images"]["agentview"], obs["states"], obs["task_description"]
             if chunk:
                 return {"actions": reference_chunk(image, state, text, chunk)}
@@ -154,6 +176,7 @@ def serve_vla_eval(chunk: int | None, batch: int) -> None:
     async def main() -> None:
         server = Reference(chunk_size=chunk, max_batch_size=batch, max_wait_time=0.005)
         server.tasks = {}
+        server.action_dim = action_dim
         async with anyio.create_task_group() as tg:
             port = await tg.start(serve_async, server, "127.0.0.1", 0)
             print(f"PORT {port}", flush=True)
@@ -161,7 +184,7 @@ def serve_vla_eval(chunk: int | None, batch: int) -> None:
     anyio.run(main)
 
 
-def serve_openpi() -> None:
+def serve_openpi(action_dim: int) -> None:
     """An OpenPI-protocol server as OpenPI's `serve_policy.py` runs one: openpi-client's
     msgpack_numpy over websockets, metadata first, a traceback as text on failure."""
     import asyncio
@@ -176,6 +199,8 @@ def serve_openpi() -> None:
             text = obs["prompt"]
             if _misbehaviour(text) == "error":
                 raise ValueError("the reference policy refuses this task")
+            if "observation/image" not in obs:  # a state-vector benchmark: the linear policy
+                return {"actions": linear_chunk(obs["observation/state"], action_dim)}
             return {"actions": reference_chunk(obs["observation/image"], obs["observation/state"], text)}
 
     policy = Reference()
@@ -227,8 +252,9 @@ if __name__ == "__main__":
     parser.add_argument("protocol", choices=["vla-eval", "openpi"])
     parser.add_argument("--chunk", type=int, default=None)
     parser.add_argument("--batch", type=int, default=1)
+    parser.add_argument("--action-dim", type=int, default=ACTION_DIM)
     args = parser.parse_args()
     if args.protocol == "vla-eval":
-        serve_vla_eval(args.chunk, args.batch)
+        serve_vla_eval(args.chunk, args.batch, args.action_dim)
     else:
-        serve_openpi()
+        serve_openpi(args.action_dim)

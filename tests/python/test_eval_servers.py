@@ -324,3 +324,66 @@ def test_the_default_layouts() -> None:
 class _Bare:
     def __init__(self, fields, text_key) -> None:
         self.fields, self.text_key = fields, text_key
+
+
+# -- through `envhub.evaluation.evaluate` --------------------------------------------------
+
+# HalfCheetah, short: the same per-episode results whoever computes the actions.
+CHEETAH = {
+    "name": "cheetah-short",
+    "entries": ["mujoco-half-cheetah"],
+    "episodes_per_task": 3,
+    "init": {"seed_start": 0},
+    "horizon": 40,
+    "success": {"rule": "none"},
+}
+
+
+def _evaluate():
+    try:
+        from envhub.evaluation import evaluate
+    except ImportError as exc:
+        pytest.skip(f"envhub.evaluation.evaluate is not here yet ({exc})")
+    import envhub
+    from conftest import mujoco_or_skip
+
+    mujoco_or_skip(envhub)
+    return evaluate
+
+
+def _episodes(results: dict) -> list[tuple]:
+    return [
+        (e["task"], e["index"], e["init"], e["return"], e["length"], e["error"]) for e in results["episodes"]
+    ]
+
+
+@pytest.mark.parametrize("protocol", ["vla-eval", "openpi"])
+def test_eval_through_a_server_equals_the_callable(protocol, peers, tmp_path) -> None:
+    """`envhub.evaluation.evaluate` with the policy behind a vla-eval model server (one
+    action per observation) or an OpenPI server (4-action chunks) gives, episode for
+    episode, the results of the same function passed as a Python callable, on a different
+    number of envs."""
+    evaluate = _evaluate()
+    if protocol == "vla-eval":
+
+        def function(observations, tasks):
+            return [eval_peers.linear_action(o, 6) for o in observations]
+    else:
+
+        def function(observations, tasks):
+            return [eval_peers.linear_chunk(o, 6) for o in observations]
+
+    reference = evaluate(CHEETAH, function, num_envs=2, progress=False, out=tmp_path / "callable")
+    server = Server(peers, protocol, "--batch", "4", "--action-dim", "6")
+    try:
+        policy = connect(protocol, server.url, timeout=30)
+        served = evaluate(CHEETAH, policy, num_envs=3, progress=False, out=tmp_path / "served")
+    finally:
+        server.stop()
+    assert _episodes(served) == _episodes(reference)
+    assert all(e["error"] is None and e["length"] == 40 for e in served["episodes"])
+    assert served["policy"]["protocol"] == protocol and served["policy"]["url"] == server.url
+    if protocol == "vla-eval":
+        assert served["policy"]["server"]["model_server"] == "Reference"
+    else:
+        assert served["policy"]["server"]["action_horizon"] == HORIZON

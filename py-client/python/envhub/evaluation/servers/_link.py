@@ -111,6 +111,15 @@ class ServerPolicy:
         self._submit(self._end(slot, episode, result))
 
     def describe(self) -> dict[str, Any]:
+        """What the results record: the protocol, the URL and what the server said of itself
+        (asked now, on slot 0's connection, if no connection has been made yet)."""
+        if not self.server_info and not self._closed:
+            try:
+                self._submit(self._probe()).result(timeout=4 * self.timeout + _LOOP_GRACE_S)
+            except SlotError as exc:
+                log.warning("%s", exc)
+            except concurrent.futures.TimeoutError:
+                pass
         return {
             "kind": "server",
             "protocol": self.kind,
@@ -217,6 +226,11 @@ class ServerPolicy:
                 ) from None
             raise _slot_error(exc, self, "its handshake") from None
         link.ws = ws
+
+    async def _probe(self) -> None:
+        link = self._link(0)
+        async with link.lock:
+            await self._connect(link)
 
     async def _drop(self, link: _Link) -> None:
         ws, link.ws = link.ws, None
