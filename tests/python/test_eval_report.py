@@ -217,6 +217,20 @@ def test_the_report_is_one_self_contained_file(tmp_path) -> None:
     assert other.count('src="../videos/bench_') == 5
 
 
+def test_a_benchmark_scored_by_return_leads_with_it(tmp_path) -> None:
+    results = make_results(tmp_path)
+    results["protocol"]["success"] = {"rule": "none"}
+    results["summary"].update(success_rate=None, stderr=None, successes=0)
+    for row in results["per_task"]:
+        row.update(success_rate=None, stderr=None, successes=0)
+    for episode in results["episodes"]:
+        episode["success"] = None
+    page = Path(write_report(results, tmp_path / "report.html")).read_text()
+    assert '<div class="stat big"><div class="label">Mean return</div><div class="value">5.70</div>' in page
+    assert "Success rate</div>" not in page and 'class="bar"' not in page
+    assert page.count('data-outcome="done"') == 5 and page.count('data-outcome="error"') == 1
+
+
 BROWSER_SCRIPT = r"""
 import json, shutil, sys
 from playwright.sync_api import sync_playwright
