@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from envhub.errors import EnvHubError
 
+from ..wire.errors import EnvHubError
 from .policy import Episode
 
 DEFAULT_FPS = 20

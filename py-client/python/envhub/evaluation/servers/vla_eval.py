@@ -78,10 +78,10 @@ class VlaEvalPolicy(ServerPolicy):
         return unpack(await ws.recv(), self.url)
 
     async def _hello(self, ws: Any) -> dict[str, Any]:
-        from envhub import __version__
+        from ... import _envhub
 
         await self._send(
-            ws, "hello", {"harness_version": f"envhub {__version__}", "protocol_version": PROTOCOL_VERSION}
+            ws, "hello", {"harness_version": f"envhub {_envhub.__version__}", "protocol_version": PROTOCOL_VERSION}
         )
         reply = await self._recv(ws)
         if reply["type"] != "hello":
