@@ -9,6 +9,7 @@
 //! May depend on: `envhub-core`, `envhub-catalog` (its errors travel in [`HubError`]),
 //! `envhub-shm` (layouts only). Must not depend on: Zenoh, iceoryx2 services, processes.
 
+pub mod daemon;
 mod error;
 mod frame;
 mod ids;
