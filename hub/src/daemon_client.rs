@@ -183,7 +183,7 @@ impl DaemonClient {
         start_timeout: Duration,
     ) -> Result<ReadySpec, HubError> {
         let ok = self.call(Request::Launch {
-            job: job.clone(),
+            job: Box::new(job.clone()),
             start_timeout,
             user: user_adapters_of_this_process(),
         })?;

@@ -85,8 +85,8 @@ pub enum Request {
     },
     /// Start a worker.
     Launch {
-        /// Its job.
-        job: WorkerJob,
+        /// Its job (boxed: the largest request by far).
+        job: Box<WorkerJob>,
         /// How long it may take to report ready.
         start_timeout: Duration,
         /// The client's user adapters.

@@ -323,7 +323,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
             user: user.clone(),
         },
         Request::Launch {
-            job: job(),
+            job: Box::new(job()),
             start_timeout: Duration::from_secs(60),
             user,
         },
