@@ -10,6 +10,7 @@ import sys
 from typing import Any
 
 from .benchmarks import BenchmarkError
+from .results import ResumeError
 
 
 def parser() -> argparse.ArgumentParser:
@@ -118,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             step_timeout=args.step_timeout,
             progress=not args.quiet,
         )
-    except (BenchmarkError, FileExistsError) as e:
+    except (BenchmarkError, FileExistsError, ResumeError) as e:
         print(f"envhub eval: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -14,11 +14,15 @@ import sys
 import time
 from typing import Any
 
-__all__ = ["EpisodeLog", "Progress", "summarize", "markdown", "write_outputs"]
+__all__ = ["EpisodeLog", "ResumeError", "Progress", "summarize", "markdown", "write_outputs"]
 
 SCHEMA = "envhub.eval/1"
 LOG = "episodes.jsonl"
 RUN = "run.json"
+
+
+class ResumeError(ValueError):
+    """`--resume` on a folder that holds another evaluation."""
 
 
 class EpisodeLog:
@@ -35,11 +39,12 @@ class EpisodeLog:
                 before = json.load(f)
             if before != header:
                 changed = sorted(k for k in set(before) | set(header) if before.get(k) != header.get(k))
-                raise ValueError(
+                raise ResumeError(
                     f"--resume: {folder} holds an evaluation of another protocol (differs in {', '.join(changed)})\n"
                     "hint: resume with the same benchmark, tasks, episodes and policy, or use another --out"
                 )
             self.records = read_log(self.path)
+            _drop_torn_tail(self.path)
         elif not resume and os.path.exists(self.path) and os.path.getsize(self.path):
             raise FileExistsError(f"{folder} already holds an evaluation\nhint: --resume to go on with it, or another --out")
         _write_json(run, header)
@@ -74,6 +79,16 @@ def read_log(path: str) -> dict[str, dict[str, Any]]:
                 continue
             out[f"{r['task']}#{r['index']}"] = r
     return out
+
+
+def _drop_torn_tail(path: str) -> None:
+    """Cuts a last line a kill left half-written, so the next record starts a line."""
+    if not os.path.exists(path):
+        return
+    with open(path, "rb+") as f:
+        data = f.read()
+        if data and not data.endswith(b"\n"):
+            f.truncate(data.rfind(b"\n") + 1)
 
 
 def _write_json(path: str, data: Any) -> None:

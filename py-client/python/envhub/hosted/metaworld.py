@@ -96,12 +96,34 @@ class MetaWorldAdapter(SuiteAdapter):
 
 
 @functools.lru_cache(maxsize=4)
-def _goal_set(benchmark: str, seed: int) -> Any:
-    """Meta-World's benchmark object (its train goals of every task), built once per worker:
-    MT50's draws 2,500 goals."""
-    import metaworld
+def _goal_set(benchmark: str, seed: int) -> tuple[Any, list[Any]]:
+    """(task classes, train goals) of Meta-World's benchmark of that seed. Drawing them makes
+    every task's env and resets it 50 times (MT10: about 13 s here), so every worker of
+    every session would pay it: they are kept in a file per user, benchmark, seed and
+    Meta-World version (written whole, then renamed into place)."""
+    import os
+    import pickle
+    import tempfile
+    from importlib import metadata
 
-    return getattr(metaworld, benchmark)(seed=seed)
+    import metaworld
+    from metaworld import env_dict
+
+    classes = getattr(env_dict, f"{benchmark}_V3")
+    folder = os.path.join(tempfile.gettempdir(), f"envhub-{os.getuid()}-metaworld")
+    path = os.path.join(folder, f"{benchmark}-seed{seed}-{metadata.version('metaworld')}.pkl")
+    try:
+        with open(path, "rb") as f:
+            return classes, pickle.load(f)
+    except (OSError, pickle.UnpicklingError, EOFError):
+        pass
+    tasks = getattr(metaworld, benchmark)(seed=seed).train_tasks
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=folder)
+    with os.fdopen(fd, "wb") as f:
+        pickle.dump(tasks, f)
+    os.replace(tmp, path)
+    return classes, tasks
 
 
 def _benchmark_env(benchmark: str, seed: int, config: Any, kwargs: dict[str, Any]) -> Any:
@@ -112,17 +134,16 @@ def _benchmark_env(benchmark: str, seed: int, config: Any, kwargs: dict[str, Any
     kwargs = dict(kwargs)
     name = kwargs.pop("env_name")
     kwargs.pop("seed")
-    bench = _goal_set(benchmark, seed)
-    if name not in bench.train_classes:
-        raise unknown_id(f"Meta-World {benchmark}", name, sorted(bench.train_classes), f"{benchmark}'s tasks")
-    tasks = [t for t in bench.train_tasks if t.env_name == name]
-    env_id = list(bench.train_classes).index(name)
+    classes, goals = _goal_set(benchmark, seed)
+    if name not in classes:
+        raise unknown_id(f"Meta-World {benchmark}", name, sorted(classes), f"{benchmark}'s tasks")
+    tasks = [t for t in goals if t.env_name == name]
     return metaworld._init_each_env(
-        env_cls=bench.train_classes[name],
+        env_cls=classes[name],
         tasks=tasks,
         seed=seed,
-        env_id=env_id,
-        num_tasks=len(bench.train_classes),
+        env_id=list(classes).index(name),
+        num_tasks=len(classes),
         max_episode_steps=config.max_episode_steps or None,
         render_mode=config.render_mode,
         **kwargs,
