@@ -90,7 +90,7 @@ def test_builtin_benchmarks_parse_with_the_reference_protocols():
     for n in ("spatial", "object", "goal", "10", "90"):
         b = benches[f"libero-{n}"]
         assert (b.settle_steps, b.settle_action, b.episodes_per_task) == (10, [0, 0, 0, 0, 0, 0, -1], 50)
-        assert b.rule == "any_step" and b.episode_init(7) == {"init_state": 7}
+        assert b.rule == "any_step" and b.episode_init(3) == {"init_state": 3, "seed": 7}
     assert len(benches["libero-90"].tasks) == 90
     mt10, mt50 = benches["metaworld-mt10"], benches["metaworld-mt50"]
     assert (len(mt10.tasks), len(mt50.tasks), mt10.horizon, mt10.rule) == (10, 50, 500, "any_step")

@@ -8,6 +8,14 @@ cameras, `env.seed(7)`, `reset()` then `set_init_state(init_states[k])`, 10 step
 its sign) gives the same success flags step for step. The horizon is cut to a few steps to
 keep it short; the rest is the catalog's `libero-spatial` protocol.
 
+LIBERO's reset draws the scene's placement from its seeded generator, and `set_init_state`
+restores the physical state but not everything drawn (the rendered images differ, the
+states do not): in vla-eval, which seeds an env once when it makes it, episode k's images
+depend on the k resets before it, so on how episodes were sharded. envhub reseeds every
+episode's reset (`init: {init_states: true, seed: 7}`), so an episode is the same wherever
+and after whatever it runs: the reference here seeds before each episode too, which is
+vla-eval's own sequence for each env's first episode.
+
 Skipped with the reason where LIBERO's catalog environment cannot be built or has no
 LIBERO (`envhub env sync libero`); failed instead under ENVHUB_LIBERO_REQUIRED=1, as
 test_py_libero.py does.
@@ -48,11 +56,10 @@ def fixed(t):
 
 tasks = benchmark.get_benchmark("libero_spatial")()
 env = OffScreenRenderEnv(bddl_file_name=tasks.get_task_bddl_file_path(0), camera_heights=256, camera_widths=256)
-env.seed(7)
-env.reset()  # as a new envhub env is reset once for its spaces
 init = tasks.get_task_init_states(0)
 out = {}
 for k in range(INIT_STATES):
+    env.seed(7)  # vla-eval seeds once, when it makes the env: the same for episode 0
     env.reset()
     obs = env.set_init_state(init[k])
     for _ in range(10):

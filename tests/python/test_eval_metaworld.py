@@ -20,6 +20,7 @@ import os
 import re
 import subprocess
 
+import numpy as np
 import pytest
 from conftest import import_envhub
 
@@ -108,3 +109,22 @@ def test_mt10_scripted_equals_metaworld_evaluation(tmp_path):
     assert [e["init"] for e in results["episodes"][:EPISODES]] == [
         {"goal": g} for g in envhub.evaluation.benchmarks.goal_draws(SEED, EPISODES)
     ]
+
+
+def test_every_env_of_a_session_has_the_one_goal_set():
+    """The adapter: every env of a session holds the goal set of the one seed (a train goal
+    picked by index gives every env the same start); without one, env i draws its goals from
+    its own generator, so the envs differ; a reset seed (ignored by Meta-World) changes nothing."""
+    metaworld_python()
+    envs = envhub.make_vec("metaworld-reach", 3, seed=3)
+    try:
+        picked, _ = envs.reset(options={"goal": 7})
+        assert np.array_equal(picked[0], picked[1]) and np.array_equal(picked[0], picked[2])
+        drawn, _ = envs.reset()
+        assert not np.array_equal(drawn[0][36:39], drawn[1][36:39])  # goal positions differ
+        again, _ = envs.reset(seed=[11, 12, 13], options={"goal": 7})
+        assert np.array_equal(again, picked)
+        with pytest.raises(envhub.EnvHubError, match="goal"):
+            envs.reset(options={"goal": 50})
+    finally:
+        envs.close()

@@ -25,7 +25,7 @@ FIELDS = {
     "tasks": "with `entry`: a task count (tasks 0..n-1), or a list of task indexes or names",
     "task_option": "the entry option that names the task (default `task`)",
     "episodes_per_task": "episodes of each task (a positive integer)",
-    "init": "how episode k starts: {init_states: true} | {train_goals: {seed: S, benchmark: MT10}} | "
+    "init": "how episode k starts: {init_states: true, seed: S (optional)} | {train_goals: {seed: S, benchmark: MT10}} | "
     "{seeds: [..]} | {seed_start: N}",
     "horizon": "policy steps per episode at most (after settling)",
     "settle": "{steps: N, action: [..]}: steps with a fixed action before the policy's first",
@@ -128,7 +128,10 @@ class Benchmark:
     def episode_init(self, k: int) -> dict[str, Any]:
         """The initial condition of episode `k` of a task: a reset option or seed."""
         if "init_states" in self.init:
-            return {"init_state": k}
+            # With `seed`, every episode's reset reseeds the env (LIBERO's visual placement
+            # draws from it): the episode does not depend on the ones run before it.
+            seed = self.init.get("seed")
+            return {"init_state": k} if seed is None else {"init_state": k, "seed": seed}
         if "train_goals" in self.init:
             return {"goal": goal_draws(self.init["train_goals"]["seed"], k + 1)[k]}
         if "seeds" in self.init:
@@ -204,16 +207,24 @@ def _str_list(name: str, value: Any, where: str) -> list[str]:
 
 def _init(value: Any, where: str) -> dict[str, Any]:
     value = _mapping("init", value, where)
+    value = dict(value)
+    seed = value.pop("seed", None) if "init_states" in value else None
     if len(value) != 1 or next(iter(value)) not in INIT_KINDS:
         key = next((k for k in value if k not in INIT_KINDS), None)
         if key is not None:
             raise closest(str(key), list(INIT_KINDS), f"`init` kind of {where}")
-        raise BenchmarkError(f"{where}: `init` names exactly one of {', '.join(INIT_KINDS)}, not {sorted(value)}")
+        raise BenchmarkError(
+            f"{where}: `init` names exactly one of {', '.join(INIT_KINDS)}, not {sorted(value)}"
+        )
     kind, arg = next(iter(value.items()))
     if kind == "init_states":
         if arg is not True:
-            raise BenchmarkError(f"{where}: `init: {{init_states: true}}` (episode k from the task's init state k)")
-        return {"init_states": True}
+            raise BenchmarkError(
+                f"{where}: `init: {{init_states: true}}` (episode k from the task's init state k)"
+            )
+        if seed is None:
+            return {"init_states": True}
+        return {"init_states": True, "seed": _int("init.seed", seed, where, low=0)}
     if kind == "train_goals":
         arg = _mapping("init.train_goals", arg, where)
         _keys(arg, ["seed", "benchmark"], f"{where} `init.train_goals`")

@@ -74,10 +74,11 @@ def _registry_files(paths: Any) -> list[str]:
 def _read_yaml(files: list[str]) -> dict[str, dict[str, Any]]:
     import yaml
 
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's: the catalog is long
     out: dict[str, dict[str, Any]] = {}
     for f in files:
         with open(f, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh) or {}
+            data = yaml.load(fh, Loader=loader) or {}
         declared = data.get("benchmarks") or {}
         if not isinstance(declared, dict):
             raise BenchmarkError(f"{f}: `benchmarks:` must be a mapping of names to benchmarks")

@@ -219,14 +219,24 @@ class Runner:
             if len(answers) != len(requests):
                 raise PolicyError(f"the policy answered {len(answers)} times for {len(requests)} requests")
         except Exception as e:
-            message = str(e) if isinstance(e, PolicyError) else f"the policy raised {type(e).__name__}: {e}"
-            if not isinstance(e, PolicyError):
-                message += "\n" + "".join(traceback.format_exception(e)[-3:]).rstrip()
-            for i in need:
-                self._finish(self._slots[i], i, error=message)
-            return
+            per_slot = getattr(e, "slots", None)
+            if isinstance(e, PolicyError) and isinstance(per_slot, dict) and getattr(e, "answers", None) is not None:
+                # A server that failed some slots only (`slots`: slot -> message) answered the others.
+                answers = list(e.answers)  # type: ignore[attr-defined]
+                for i in need:
+                    if i in per_slot:
+                        self._finish(self._slots[i], i, error=str(per_slot[i]))
+            else:
+                message = str(e) if isinstance(e, PolicyError) else f"the policy raised {type(e).__name__}: {e}"
+                if not isinstance(e, PolicyError):
+                    message += "\n" + "".join(traceback.format_exception(e)[-3:]).rstrip()
+                for i in need:
+                    self._finish(self._slots[i], i, error=message)
+                return
         for i, answer in zip(need, answers, strict=True):
             slot = self._slots[i]
+            if slot.ended:
+                continue
             try:
                 chunk = check_actions(answer, self._space, self.bench.action.get("sign"))
             except ActionError as e:
