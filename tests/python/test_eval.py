@@ -310,3 +310,29 @@ def test_cli_writes_the_table_and_results(tmp_path, policies):
     bad = run_cli("mujoco", "--tasks", "mujoco-hopper", "--episodes", "1", "--policy", f"{policies}:act",
                   "--out", str(tmp_path / "b"))
     assert bad.returncode == 1 and "| mujoco-hopper | 1 | 1 |" in bad.stdout
+
+
+def test_tasks_run_side_by_side_with_one_policy_batch(tmp_path):
+    """Two tasks with fewer episodes than envs run in sessions at once; one policy call
+    serves both tasks' envs; the table is the 1-env table."""
+    bench = {
+        "name": "two",
+        "entries": ["gym-pendulum", "gym-mountain-car-continuous"],
+        "episodes_per_task": 3,
+        "init": {"seed_start": 0},
+        "horizon": 25,
+        "success": "none",
+    }
+    mixed = []
+
+    def policy(observations, tasks):
+        mixed.append(len({t.id for t in tasks}))
+        return [np.array([np.tanh(o[0] + o[1])], np.float32) for o in observations]
+
+    wide = evaluate(bench, policy, num_envs=6, out=tmp_path / "wide", progress=False)
+    assert max(mixed) == 2
+    mixed.clear()
+    narrow = evaluate(bench, policy, num_envs=1, out=tmp_path / "narrow", progress=False)
+    assert max(mixed) == 1
+    assert table(wide) == table(narrow)
+    assert [t["task"] for t in wide["per_task"]] == ["gym-pendulum", "gym-mountain-car-continuous"]

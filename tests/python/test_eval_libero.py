@@ -160,6 +160,6 @@ def test_first_observation_and_success_flags_match_libero_in_process(tmp_path):
             np.testing.assert_array_equal(policy.first[k][key], ref[f"{k}/{key}"], err_msg=f"init state {k}, {key}")
         flags = ref[f"{k}/flags"]
         episode = results["episodes"][k]
-        assert episode["init"] == {"init_state": k}
+        assert episode["init"] == {"init_state": k, "seed": 7}
         assert episode["success"] == bool(flags.any())
         assert episode["length"] == len(flags)

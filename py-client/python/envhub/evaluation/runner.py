@@ -1,12 +1,16 @@
-"""The episode loop: a task's episodes over the envs of one session, batched policy calls.
+"""The episode loop: a benchmark's episodes over sessions of envs, batched policy calls.
 
-Each env (slot) runs one episode at a time: a reset with the episode's initial condition,
-the settling steps with the protocol's fixed action, then policy steps (an action chunk is
-executed one action per step before the slot asks again) until success (when the rule stops
-there), the env's own end, or the horizon. Only envs with an episode are stepped (`send` to
-those ids, `recv` until all are back), so an env never runs past its episode. An episode's
-result depends on its initial condition and the policy's answers alone: the same with 1 env
-or 16, local or remote.
+A task runs in a session of its entry (the task is a make option, so one session holds one
+task); sessions of several tasks run at once while the env budget (`num_envs`) allows: a
+task with fewer episodes left than free envs leaves the rest to the next tasks. Every env
+(slot, numbered across sessions) runs one episode at a time: a reset with the episode's
+initial condition, the settling steps with the protocol's fixed action, then policy steps
+(an action chunk is executed one action per step before the slot asks again) until success
+(when the rule stops there), the env's own end, or the horizon. One policy call per step
+gathers every slot whose turn it is, whatever its task. Only envs with an episode are stepped
+(`send` to those ids, `recv` until all are back), so an env never runs past its episode. An
+episode's result depends on its initial condition and the policy's answers alone: the same
+with 1 env or 16, local or remote.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 import json
 import time
 import traceback
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -24,6 +29,9 @@ from .policy import Episode, Policy, PolicyError, Request, Task
 from .protocol import ActionError, Observer, check_actions
 
 __all__ = ["Runner", "EvaluationStopped"]
+
+# Sessions of a task that break without finishing an episode before its episodes are failed.
+MAX_BROKEN = 2
 
 
 class EvaluationStopped(RuntimeError):
@@ -41,9 +49,26 @@ class _Slot:
     pos: int = 0
     t0: float = 0.0
     obs: Any = None
-    error: str | None = None
     ended: bool = False
     frames: bool = False
+
+    @property
+    def running(self) -> bool:
+        return self.episode is not None and not self.ended
+
+
+class _Session:
+    """One task's session: its envs, their slots (global ids `ids[i]` for env `i`), and the
+    task's episodes not started yet."""
+
+    def __init__(self, spec: TaskSpec, envs: Any, ids: list[int], queue: deque[int], bench: Benchmark) -> None:
+        self.spec, self.envs, self.ids, self.queue = spec, envs, ids, queue
+        self.space = envs.single_action_space
+        self.observer = Observer(bench.observation, envs.single_observation_space)
+        self.slots = [_Slot() for _ in ids]
+        self.started: set[int] = set()
+        self.finished = 0  # episodes that ended without an error
+        self.first = True
 
 
 def _row(obs: Any, j: int) -> Any:
@@ -86,88 +111,108 @@ class Runner:
         self.step_timeout, self.fail_fast, self.replan, self.videos = step_timeout, fail_fast, replan, videos
         self.env_steps = 0
         self.tasks: dict[str, Task] = {}
-        self._slots: list[_Slot] = []
-        self._started: set[int] = set()
+        self.sessions: list[_Session] = []
 
-    # Tasks --------------------------------------------------------------------------------
+    # Sessions -----------------------------------------------------------------------------
 
     def run(self, skip: set[str]) -> None:
         """Every episode of every task, but those in `skip` (`<task id>#<index>`)."""
-        for spec in self.bench.tasks:
-            todo = [k for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip]
-            if todo:
-                self._run_task(spec, todo)
+        from .. import EnvHubError
 
-    def _run_task(self, spec: TaskSpec, todo: list[int]) -> None:
+        pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
+        for spec in self.bench.tasks:
+            todo = deque(k for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip)
+            if todo:
+                pending.append((spec, todo, 0))
+        free = list(range(self.num_envs))
+        try:
+            while pending or self.sessions:
+                while pending and free:
+                    spec, todo, broken = pending.popleft()
+                    n = min(len(free), len(todo))
+                    ids, free = free[:n], free[n:]
+                    if not self._open(spec, todo, ids, broken):
+                        free = sorted(free + ids)
+                for s in list(self.sessions):
+                    try:
+                        self._tick(s)
+                    except EnvHubError as e:
+                        requeue = self._broken(s, e)
+                        if requeue is not None:
+                            pending.appendleft(requeue)
+                    if s not in self.sessions or not any(x.episode is not None for x in s.slots):
+                        if s in self.sessions:
+                            self._close(s)
+                        free = sorted(free + s.ids)
+                self._ask_policy()
+                self._send_all()
+        finally:
+            for s in list(self.sessions):
+                self._close(s)
+
+    def _open(self, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int) -> bool:
+        """Starts a session for `spec` on slots `ids` and its first episodes; False (its
+        episodes failed with the reason) where the task cannot run."""
         from .. import EnvHubError, make_vec
 
-        failures = 0
-        while todo:
-            n = min(self.num_envs, len(todo))
-            try:
-                envs = make_vec(
-                    spec.entry,
-                    n,
-                    self.workers,
-                    "disabled",
-                    max_episode_steps=self.bench.settle_steps + self.bench.horizon,
-                    registry=self.registry,
-                    step_timeout=self.step_timeout,
-                    hubs=self.hubs,
-                    **self.bench.env_options(spec),
-                )
-            except EnvHubError as e:
-                # The task cannot run here: each of its episodes fails with the reason.
-                task = self.tasks.get(spec.id) or self.bench.task(spec)
-                for k in todo:
-                    self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
-                return
-            try:
-                done_before = len(todo)
-                todo = self._run_session(envs, spec, todo)
-            except EnvHubError as e:
-                # The session broke (a worker died, a step timed out): its running episodes
-                # failed, and the rest of the task goes on in a new session.
-                for i, slot in enumerate(self._slots):
-                    if slot.episode is not None and not slot.ended:
-                        self._finish(slot, i, error=f"{type(e).__name__}: {e}")
-                todo = [k for k in todo if k not in self._started]
-                failures = failures + 1 if len(todo) == done_before else 0
-                if failures >= 2:
-                    task = self.tasks.get(spec.id) or self.bench.task(spec)
-                    for k in todo:
-                        self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
-                    return
-            finally:
-                envs.close()
+        try:
+            envs = make_vec(
+                spec.entry,
+                len(ids),
+                self.workers,
+                "disabled",
+                max_episode_steps=self.bench.settle_steps + self.bench.horizon,
+                registry=self.registry,
+                step_timeout=self.step_timeout,
+                hubs=self.hubs,
+                **self.bench.env_options(spec),
+            )
+        except EnvHubError as e:
+            task = self.tasks.get(spec.id) or self.bench.task(spec)
+            for k in todo:
+                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            return False
+        s = _Session(spec, envs, ids, todo, self.bench)
+        s.broken = broken  # type: ignore[attr-defined]
+        self.sessions.append(s)
+        try:
+            self._reset(s, {i: s.queue.popleft() for i in range(len(ids))})
+        except EnvHubError as e:
+            requeue = self._broken(s, e)
+            return self._open(requeue[0], requeue[1], ids, requeue[2]) if requeue is not None else False
+        return True
 
-    # One session --------------------------------------------------------------------------
+    def _close(self, s: _Session) -> None:
+        self.sessions.remove(s)
+        try:
+            s.envs.close()
+        except Exception:
+            pass
 
-    def _run_session(self, envs: Any, spec: TaskSpec, todo: list[int]) -> list[int]:
-        n = envs.num_envs
-        self._space = envs.single_action_space
-        self.observer = Observer(self.bench.observation, envs.single_observation_space)
-        self._slots = [_Slot() for _ in range(n)]
-        self._started: set[int] = set()
-        queue = list(todo)
-        self._spec = spec
-        assign = {i: queue.pop(0) for i in range(n)}
-        self._reset(envs, assign, full=True)
-        while any(s.episode is not None for s in self._slots):
-            self._ask_policy()
-            self._step(envs)
-            ended = [i for i, s in enumerate(self._slots) if s.episode is not None and s.ended]
-            for i in ended:
-                self._slots[i] = _Slot()
-            assign = {i: queue.pop(0) for i in ended if queue}
-            if assign:
-                self._reset(envs, assign, full=False)
-        return []
+    def _broken(self, s: _Session, e: Exception) -> tuple[TaskSpec, deque[int], int] | None:
+        """A session that broke (a worker died, a step timed out): its running episodes fail;
+        the task's other episodes go on in a new session, unless sessions of it keep breaking
+        with no episode finished."""
+        for i, slot in enumerate(s.slots):
+            if slot.running:
+                self._finish(s, i, error=f"{type(e).__name__}: {e}")
+        self._close(s)
+        broken = 0 if s.finished else getattr(s, "broken", 0) + 1
+        if not s.queue:
+            return None
+        if broken >= MAX_BROKEN:
+            task = self.tasks.get(s.spec.id) or self.bench.task(s.spec)
+            for k in s.queue:
+                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            return None
+        return s.spec, s.queue, broken
 
-    def _reset(self, envs: Any, assign: dict[int, int], full: bool) -> None:
-        """Resets the slots in `assign` for their episodes (grouped by reset options: the
-        session's reset takes one set of options for the envs it resets)."""
-        n = envs.num_envs
+    # Resets -------------------------------------------------------------------------------
+
+    def _reset(self, s: _Session, assign: dict[int, int]) -> None:
+        """Resets the envs in `assign` for their episodes (grouped by reset options: one
+        reset takes one set of options for the envs it resets)."""
+        n = len(s.slots)
         inits = {i: self.bench.episode_init(k) for i, k in assign.items()}
         seeds: list[int | None] = [None] * n
         groups: dict[str, list[int]] = {}
@@ -175,45 +220,63 @@ class Runner:
             seeds[i] = init.get("seed")
             options = {k: v for k, v in init.items() if k != "seed"}
             groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
-        batches = list(groups.items())
         t0 = time.perf_counter()
-        for g, (key, ids) in enumerate(batches):
+        for key, group in groups.items():
             options = json.loads(key)
-            if full and g == 0:
-                obs, info = envs.reset(seed=seeds, options=options or None)
+            if s.first:  # a session's first reset is a full one
+                obs, info = s.envs.reset(seed=seeds, options=options or None)
+                s.first = False
             else:
                 mask = np.zeros(n, dtype=np.bool_)
-                mask[ids] = True
-                obs, info = envs.reset(seed=seeds, options={**options, "reset_mask": mask})
+                mask[group] = True
+                obs, info = s.envs.reset(seed=seeds, options={**options, "reset_mask": mask})
             texts, has = info.get("language"), info.get("_language")
-            for i in ids:
+            for i in group:
                 # A language-conditioned suite says the task's instruction in its reset info.
                 if texts is not None and (has is None or has[i]) and isinstance(texts[i], str):
-                    if self._spec.id not in self.tasks:
-                        self.tasks[self._spec.id] = self.bench.task(self._spec, texts[i])
-                slot = self._slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
-        task = self.tasks.setdefault(self._spec.id, self.bench.task(self._spec))
+                    if s.spec.id not in self.tasks:
+                        self.tasks[s.spec.id] = self.bench.task(s.spec, texts[i])
+                s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
+        task = self.tasks.setdefault(s.spec.id, self.bench.task(s.spec))
         for i, k in assign.items():
-            slot = self._slots[i]
+            slot = s.slots[i]
             slot.episode = Episode(task, k, inits[i])
-            self._started.add(k)
+            s.started.add(k)
             try:
-                self.policy.start(i, slot.episode)
+                self.policy.start(s.ids[i], slot.episode)
             except Exception as e:
-                self._finish(slot, i, error=f"policy start failed: {type(e).__name__}: {e}")
+                self._finish(s, i, error=f"policy start failed: {type(e).__name__}: {e}")
                 continue
             if slot.settle_left == 0:
-                self._frame(i, slot)
+                self._frame(s, i)
+
+    def _tick(self, s: _Session) -> None:
+        """Receives the session's step (if sent), then starts the next episodes on the envs
+        whose episode ended."""
+        if getattr(s, "sent", None):
+            self._recv(s)
+        ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
+        for i in ended:
+            s.slots[i] = _Slot()
+        assign = {i: s.queue.popleft() for i in ended if s.queue}
+        if assign:
+            self._reset(s, assign)
+
+    # Policy and steps ---------------------------------------------------------------------
 
     def _ask_policy(self) -> None:
         need = [
-            i
-            for i, s in enumerate(self._slots)
-            if s.episode is not None and not s.ended and s.settle_left == 0 and (s.chunk is None or s.pos >= len(s.chunk))
+            (s, i)
+            for s in self.sessions
+            for i, slot in enumerate(s.slots)
+            if slot.running and slot.settle_left == 0 and (slot.chunk is None or slot.pos >= len(slot.chunk))
         ]
         if not need:
             return
-        requests = [Request(i, self._slots[i].episode, self._slots[i].t, self.observer(self._slots[i].obs)) for i in need]  # type: ignore[arg-type]
+        requests = [
+            Request(s.ids[i], s.slots[i].episode, s.slots[i].t, s.observer(s.slots[i].obs))  # type: ignore[arg-type]
+            for s, i in need
+        ]
         try:
             answers = self.policy.act(requests)
             if len(answers) != len(requests):
@@ -223,87 +286,101 @@ class Runner:
             if isinstance(e, PolicyError) and isinstance(per_slot, dict) and getattr(e, "answers", None) is not None:
                 # A server that failed some slots only (`slots`: slot -> message) answered the others.
                 answers = list(e.answers)  # type: ignore[attr-defined]
-                for i in need:
-                    if i in per_slot:
-                        self._finish(self._slots[i], i, error=str(per_slot[i]))
+                for s, i in need:
+                    if s.ids[i] in per_slot:
+                        self._finish(s, i, error=str(per_slot[s.ids[i]]))
             else:
                 message = str(e) if isinstance(e, PolicyError) else f"the policy raised {type(e).__name__}: {e}"
                 if not isinstance(e, PolicyError):
                     message += "\n" + "".join(traceback.format_exception(e)[-3:]).rstrip()
-                for i in need:
-                    self._finish(self._slots[i], i, error=message)
+                for s, i in need:
+                    self._finish(s, i, error=message)
                 return
-        for i, answer in zip(need, answers, strict=True):
-            slot = self._slots[i]
+        sign = self.bench.action.get("sign")
+        for (s, i), answer in zip(need, answers, strict=True):
+            slot = s.slots[i]
             if slot.ended:
                 continue
             try:
-                chunk = check_actions(answer, self._space, self.bench.action.get("sign"))
+                chunk = check_actions(answer, s.space, sign)
             except ActionError as e:
-                self._finish(slot, i, error=str(e))
+                self._finish(s, i, error=str(e))
                 continue
             slot.chunk = chunk[: self.replan] if self.replan else chunk
             slot.pos = 0
 
-    def _step(self, envs: Any) -> None:
-        ids = [i for i, s in enumerate(self._slots) if s.episode is not None and not s.ended]
-        if not ids:
-            return
-        actions = np.empty((len(ids), *self._space.shape), dtype=self._space.dtype)
-        for j, i in enumerate(ids):
-            slot = self._slots[i]
-            if slot.settle_left:
-                actions[j] = self.bench.settle_action  # type: ignore[assignment]
-            else:
-                actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
-                slot.pos += 1
-        envs.send(actions, ids)
-        waiting = set(ids)
-        while waiting:
-            obs, rewards, terminated, truncated, info = envs.recv()
-            got = [int(i) for i in info["env_id"]]
-            for j, i in enumerate(got):
-                waiting.discard(i)
-                self._after_step(i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
-        self.env_steps += len(ids)
+    def _send_all(self) -> None:
+        from .. import EnvHubError
 
-    def _after_step(self, i: int, obs: Any, reward: float, terminated: bool, truncated: bool, info: Any, j: int) -> None:
-        slot = self._slots[i]
+        for s in list(self.sessions):
+            ids = [i for i, slot in enumerate(s.slots) if slot.running]
+            s.sent = ids  # type: ignore[attr-defined]
+            if not ids:
+                continue
+            actions = np.empty((len(ids), *s.space.shape), dtype=s.space.dtype)
+            for j, i in enumerate(ids):
+                slot = s.slots[i]
+                if slot.settle_left:
+                    actions[j] = self.bench.settle_action  # type: ignore[assignment]
+                else:
+                    actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
+                    slot.pos += 1
+            try:
+                s.envs.send(actions, ids)
+            except EnvHubError:
+                s.sent = []  # type: ignore[attr-defined]
+                raise
+
+    def _recv(self, s: _Session) -> None:
+        waiting = set(s.sent)  # type: ignore[attr-defined]
+        s.sent = []  # type: ignore[attr-defined]
+        self.env_steps += len(waiting)
+        while waiting:
+            obs, rewards, terminated, truncated, info = s.envs.recv()
+            for j, i in enumerate(info["env_id"].tolist()):
+                waiting.discard(i)
+                self._after_step(s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
+
+    def _after_step(
+        self, s: _Session, i: int, obs: Any, reward: float, terminated: bool, truncated: bool, info: Any, j: int
+    ) -> None:
+        slot = s.slots[i]
         slot.obs = obs
         if slot.settle_left:
             slot.settle_left -= 1
             if terminated or truncated:
-                self._finish(slot, i, error=None, success=False)
+                self._finish(s, i, success=False)
             elif slot.settle_left == 0:
-                self._frame(i, slot)
+                self._frame(s, i)
             return
         slot.t += 1
         slot.ret += reward
-        self._frame(i, slot)
+        self._frame(s, i)
         rule = self.bench.rule
-        flag = _flag(info, self.bench.success_key, j) if rule != "none" else None
-        if rule == "any_step" and flag:
-            slot.success = True
+        if rule == "any_step":
+            if _flag(info, self.bench.success_key, j):
+                slot.success = True
+            elif slot.success is None:
+                slot.success = False
         elif rule == "last_step":
-            slot.success = bool(flag)
-        elif rule == "any_step" and slot.success is None:
-            slot.success = False
+            slot.success = bool(_flag(info, self.bench.success_key, j))
         if (slot.success and rule == "any_step" and self.bench.stop_on_success) or terminated or truncated:
-            self._finish(slot, i)
+            self._finish(s, i)
         elif slot.t >= self.bench.horizon:
-            self._finish(slot, i)
+            self._finish(s, i)
 
     # Episode ends -------------------------------------------------------------------------
 
-    def _frame(self, i: int, slot: _Slot) -> None:
+    def _frame(self, s: _Session, i: int) -> None:
         if self.videos is None:
             return
-        frame = self.observer.frame(slot.obs)
+        frame = s.observer.frame(s.slots[i].obs)
         if frame is not None:
-            self.videos.frame(i, frame)
-            slot.frames = True
+            self.videos.frame(s.ids[i], frame)
+            s.slots[i].frames = True
 
-    def _finish(self, slot: _Slot, i: int, error: str | None = None, success: bool | None = None) -> None:
+    def _finish(self, s: _Session | None, i: int, error: str | None = None, success: bool | None = None) -> None:
+        slot = s.slots[i] if s is not None else self._unstarted
         if slot.ended or slot.episode is None:
             return
         slot.ended = True
@@ -322,14 +399,16 @@ class Runner:
             "error": error,
             "video": None,
         }
-        if self.videos is not None and i >= 0:
-            if error is None and slot.frames:
-                result["video"] = self.videos.finish(i, ep, bool(slot.success))
-            else:
-                self.videos.discard(i)
-        if i >= 0:
+        if s is not None:
+            s.finished += error is None
+            slot_id = s.ids[i]
+            if self.videos is not None:
+                if error is None and slot.frames:
+                    result["video"] = self.videos.finish(slot_id, ep, bool(slot.success))
+                else:
+                    self.videos.discard(slot_id)
             try:
-                self.policy.end(i, ep, result)
+                self.policy.end(slot_id, ep, result)
             except Exception as e:  # the episode's result stands; the policy's trouble is said
                 result["error"] = result["error"] or f"policy end failed: {type(e).__name__}: {e}"
         self.record(result)
@@ -337,5 +416,5 @@ class Runner:
             raise EvaluationStopped(f"episode {ep.key} failed: {error}")
 
     def _fail_unstarted(self, episode: Episode, error: str) -> None:
-        slot = _Slot(episode=episode, t0=time.perf_counter())
-        self._finish(slot, -1, error=error)
+        self._unstarted = _Slot(episode=episode, t0=time.perf_counter())
+        self._finish(None, -1, error=error)
