@@ -18,6 +18,7 @@ import json
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -324,14 +325,18 @@ def test_tasks_run_side_by_side_with_one_policy_batch(tmp_path):
         "success": "none",
     }
     mixed = []
+    wait_until = [time.monotonic() + 30]
 
     def policy(observations, tasks):
         mixed.append(len({t.id for t in tasks}))
+        if max(mixed) < 2 and time.monotonic() < wait_until[0]:
+            time.sleep(0.05)  # the first task's episodes wait (bounded) for the second's session to start
         return [np.array([np.tanh(o[0] + o[1])], np.float32) for o in observations]
 
     wide = evaluate(bench, policy, num_envs=6, out=tmp_path / "wide", progress=False)
     assert max(mixed) == 2
     mixed.clear()
+    wait_until[0] = 0
     narrow = evaluate(bench, policy, num_envs=1, out=tmp_path / "narrow", progress=False)
     assert max(mixed) == 1
     assert table(wide) == table(narrow)

@@ -117,6 +117,8 @@ class Runner:
 
     def run(self, skip: set[str]) -> None:
         """Every episode of every task, but those in `skip` (`<task id>#<index>`)."""
+        from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
         from .. import EnvHubError
 
         pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
@@ -125,14 +127,27 @@ class Runner:
             if todo:
                 pending.append((spec, todo, 0))
         free = list(range(self.num_envs))
+        # Sessions start (workers spawn, suites import) and stop in threads while the others
+        # step: a start takes seconds. Two at a time, so a small machine is not swamped.
+        pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-start")
+        self._stops = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-stop")
+        starting: dict[Any, tuple[TaskSpec, deque[int], list[int], int]] = {}
         try:
-            while pending or self.sessions:
+            while pending or self.sessions or starting:
                 while pending and free:
                     spec, todo, broken = pending.popleft()
                     n = min(len(free), len(todo))
                     ids, free = free[:n], free[n:]
-                    if not self._open(spec, todo, ids, broken):
+                    starting[pool.submit(self._make, spec, n)] = (spec, todo, ids, broken)
+                if not self.sessions:  # nothing to step: wait for a start
+                    wait(list(starting), return_when=FIRST_COMPLETED)
+                for future in [f for f in starting if f.done()]:
+                    spec, todo, ids, broken = starting.pop(future)
+                    started = self._started_session(future, spec, todo, ids, broken)
+                    if started is not True:
                         free = sorted(free + ids)
+                        if started is not False:
+                            pending.appendleft(started)
                 for s in list(self.sessions):
                     try:
                         self._tick(s)
@@ -149,24 +164,36 @@ class Runner:
         finally:
             for s in list(self.sessions):
                 self._close(s)
+            for future in starting:  # sessions that start after all: stopped unused
+                future.add_done_callback(lambda f: f.cancelled() or f.exception() is not None or f.result().close())
+            pool.shutdown(wait=True, cancel_futures=True)
+            self._stops.shutdown(wait=True)
 
-    def _open(self, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int) -> bool:
-        """Starts a session for `spec` on slots `ids` and its first episodes; False (its
-        episodes failed with the reason) where the task cannot run."""
-        from .. import EnvHubError, make_vec
+    def _make(self, spec: TaskSpec, n: int) -> Any:
+        from .. import make_vec
+
+        return make_vec(
+            spec.entry,
+            n,
+            self.workers,
+            "disabled",
+            max_episode_steps=self.bench.settle_steps + self.bench.horizon,
+            registry=self.registry,
+            step_timeout=self.step_timeout,
+            hubs=self.hubs,
+            **self.bench.env_options(spec),
+        )
+
+    def _started_session(
+        self, future: Any, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int
+    ) -> bool | tuple[TaskSpec, deque[int], int]:
+        """The session a start gave, with its first episodes reset: True; False where the
+        task cannot run (its episodes failed with the reason); or the task to start again
+        when its first reset broke the session."""
+        from .. import EnvHubError
 
         try:
-            envs = make_vec(
-                spec.entry,
-                len(ids),
-                self.workers,
-                "disabled",
-                max_episode_steps=self.bench.settle_steps + self.bench.horizon,
-                registry=self.registry,
-                step_timeout=self.step_timeout,
-                hubs=self.hubs,
-                **self.bench.env_options(spec),
-            )
+            envs = future.result()
         except EnvHubError as e:
             task = self.tasks.get(spec.id) or self.bench.task(spec)
             for k in todo:
@@ -179,15 +206,20 @@ class Runner:
             self._reset(s, {i: s.queue.popleft() for i in range(len(ids))})
         except EnvHubError as e:
             requeue = self._broken(s, e)
-            return self._open(requeue[0], requeue[1], ids, requeue[2]) if requeue is not None else False
+            return False if requeue is None else requeue
         return True
 
     def _close(self, s: _Session) -> None:
+        """Stops a session's workers in the background (its results are all in)."""
         self.sessions.remove(s)
-        try:
-            s.envs.close()
-        except Exception:
-            pass
+
+        def close() -> None:
+            try:
+                s.envs.close()
+            except Exception:
+                pass
+
+        self._stops.submit(close)
 
     def _broken(self, s: _Session, e: Exception) -> tuple[TaskSpec, deque[int], int] | None:
         """A session that broke (a worker died, a step timed out): its running episodes fail;
