@@ -33,7 +33,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output folder (episodes.jsonl, results.json, results.csv)")
     p.add_argument("--resume", action="store_true", help="go on with the evaluation in --out")
     p.add_argument("--num-envs", type=int, default=1, help="envs (episodes in parallel)")
-    p.add_argument("--workers", type=int, help="worker processes (default: one per core, at most one per env)")
+    p.add_argument("--workers", type=int, help="worker processes per session (default: its share of the cores)")
     p.add_argument("--hubs", help="place envs on other hubs: all, or names separated by commas")
     p.add_argument("--step-timeout", type=float, help="seconds a step may take before its episode fails")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed episode")

@@ -170,12 +170,17 @@ class Runner:
             self._stops.shutdown(wait=True)
 
     def _make(self, spec: TaskSpec, n: int) -> Any:
+        import os
+
         from .. import make_vec
 
+        # By default a session gets the share of the cores its envs are of `num_envs` (at least
+        # one worker): sessions run side by side, and every worker is an interpreter to start.
+        workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
         return make_vec(
             spec.entry,
             n,
-            self.workers,
+            workers,
             "disabled",
             max_episode_steps=self.bench.settle_steps + self.bench.horizon,
             registry=self.registry,
