@@ -19,7 +19,7 @@ class Catalog:
     """The benchmarks and entries of a registry (`registry`: as `EnvRegistry` takes it)."""
 
     def __init__(self, registry: Any = None) -> None:
-        from .. import EnvRegistry  # the public name (imported late: envhub's root may import this package)
+        from ..client.registry import EnvRegistry
 
         self.registry = registry if isinstance(registry, EnvRegistry) else EnvRegistry(registry)
         self.declared = declared_benchmarks(self.registry, None if isinstance(registry, EnvRegistry) else registry)

@@ -117,7 +117,7 @@ class Runner:
 
     def run(self, skip: set[str]) -> None:
         """Every episode of every task, but those in `skip` (`<task id>#<index>`)."""
-        from .. import EnvHubError
+        from ..wire.errors import EnvHubError
 
         pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
         for spec in self.bench.tasks:
@@ -153,7 +153,8 @@ class Runner:
     def _open(self, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int) -> bool:
         """Starts a session for `spec` on slots `ids` and its first episodes; False (its
         episodes failed with the reason) where the task cannot run."""
-        from .. import EnvHubError, make_vec
+        from ..client.factory import make_vec
+        from ..wire.errors import EnvHubError
 
         try:
             envs = make_vec(
@@ -310,7 +311,7 @@ class Runner:
             slot.pos = 0
 
     def _send_all(self) -> None:
-        from .. import EnvHubError
+        from ..wire.errors import EnvHubError
 
         for s in list(self.sessions):
             ids = [i for i, slot in enumerate(s.slots) if slot.running]
