@@ -145,6 +145,7 @@ class RecordEpisodes(VectorWrapper):
         self._dataset: Dataset | None = None
         self._prev: tuple[dict[str, np.ndarray], list[np.ndarray] | None] | None = None
         self._fresh = np.ones(self.num_envs, dtype=bool)  # envs whose next step is not recorded
+        self._failed = np.zeros(self.num_envs, dtype=bool)  # envs that failed, until reset
         self._gap = False
         self._warned = False
         self._closed = False
@@ -248,9 +249,11 @@ class RecordEpisodes(VectorWrapper):
 
     def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self._check()
-        obs, info = self.env.reset(seed=seed, options=options)
+        # Read before the env is called: Gymnasium's vector envs pop `reset_mask` from the
+        # caller's options.
         mask = (options or {}).get("reset_mask")
-        mask = None if mask is None else np.array(mask, dtype=bool, copy=True)
+        mask = None if mask is None else np.array(mask, dtype=bool, copy=True).reshape(self.num_envs)
+        obs, info = self.env.reset(seed=seed, options=options)
         frames = self._frames()
         if self._writer is None:
             self._open(frames)
@@ -258,24 +261,40 @@ class RecordEpisodes(VectorWrapper):
         self._prev = (self._observe(obs), frames)
         if mask is None:
             self._fresh[:] = False
+            self._failed[:] = False
         else:
             self._fresh[mask] = False
+            self._failed[mask] = False
         return obs, info
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
         self._check()
         if self._prev is None:
             raise RecordingError("`step` before `reset`\nhint: call `reset()` first, as Gymnasium requires")
-        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        failed = None
+        try:
+            obs, rewards, terminated, truncated, info = self.env.step(actions)
+        except Exception as e:
+            partial = self._failed_envs(e)
+            if partial is None:
+                # Which envs stepped is unknown (Gymnasium's vector envs raise with no
+                # results): every episode in flight is dropped.
+                self._gap = True
+                raise
+            error = e
+            failed, (obs, rewards, terminated, truncated, info) = partial
         terminated_ = np.array(terminated, dtype=bool, copy=True)
         truncated_ = np.array(truncated, dtype=bool, copy=True)
+        if failed is not None:  # the failed envs' rows are not meaningful
+            terminated_[failed] = truncated_[failed] = False
+            self._failed |= failed
         done = terminated_ | truncated_
-        valid = ~self._fresh
+        valid = ~self._fresh & ~self._failed
         success = None
         if done.any():
             same_step = self._mode == AutoresetMode.SAME_STEP
             success = [_success(info, i, same_step) if done[i] else None for i in range(self.num_envs)]
-            if self.keep == "success":
+            if self.keep == "success" and failed is None:  # (a failed step's info is lost)
                 unknown = [i for i in np.flatnonzero(done & valid) if success[i] is None]
                 if unknown:
                     raise RecordingError(
@@ -295,14 +314,39 @@ class RecordEpisodes(VectorWrapper):
                 valid=valid,
                 success=success,
                 task=self.task,
+                failed=failed,
             )
         )
-        self._prev = (self._observe(obs), self._frames())
         if self._mode == AutoresetMode.NEXT_STEP:
             self._fresh = done
         elif self._mode == AutoresetMode.DISABLED:
             self._fresh = self._fresh | done
+        if failed is not None:
+            # The failed envs must be reset; the others go on from these results.
+            try:
+                frames = self._frames()
+            except Exception:  # no frames to go on with: the episodes in flight are dropped
+                frames, self._gap = None, True
+            self._prev = (self._observe(obs), frames)
+            raise error
+        self._prev = (self._observe(obs), self._frames())
         return obs, rewards, terminated, truncated, info
+
+    def _failed_envs(self, e: Exception) -> tuple[np.ndarray, tuple] | None:
+        """The envs that failed in a step that raised and the others' results, where the env
+        says which (envhub's `EnvFailedError`: `env_ids`, and `results`: Gymnasium's five, or
+        the session's raw ones, decoded here); else `None`."""
+        ids, results = getattr(e, "env_ids", None), getattr(e, "results", None)
+        if ids is None or not isinstance(results, tuple):
+            return None
+        if len(results) != 5:
+            codec = getattr(self.env.unwrapped, "_codec", None)  # envhub's VectorEnv
+            if codec is None or len(results) < 4:
+                return None
+            results = (codec.obs(results[0]), results[1], results[2], results[3], {})
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[np.asarray(list(ids), dtype=np.int64)] = True
+        return mask, results
 
     def _put(self, item: Step | Reset) -> None:
         assert self._writer is not None

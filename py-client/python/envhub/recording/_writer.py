@@ -37,6 +37,7 @@ class Step:
     valid: np.ndarray
     success: list[bool | None] | None
     task: str
+    failed: np.ndarray | None = None  # envs that failed in this step: their episodes are dropped
     gap: bool = False  # steps before this one were dropped (queue full)
 
 
@@ -209,9 +210,15 @@ class Writer:
             self._end(i, t, s.success[i] if s.success is not None else None)
         # After an autoreset step, or the end of an episode (recorded or not, after a drop),
         # the env's next episode starts with the next row.
+        if s.failed is not None:  # their episodes are dropped; recorded again from their reset
+            for i in np.flatnonzero(s.failed & self._live):
+                self._abandon(i)
+                self.stats["episodes_dropped"] += 1
         restart = ~s.valid | done
         self._live[restart] = True
         self._start[restart] = t + 1
+        if s.failed is not None:
+            self._live[s.failed] = False
 
     def _encode(self, envs: np.ndarray, s: Step) -> None:
         jobs: list[list[tuple[EpisodeVideo, np.ndarray]]] = [[] for _ in range(self._threads)]
