@@ -182,3 +182,73 @@ def test_a_step_where_one_env_failed_keeps_the_others_steps(tmp_path, null_regis
     assert [len(ep["action"]) for ep in seen.ended] == [4] * 5
     summary, arrays = load(root)
     check_against(summary, arrays, seen.ended, "nothing")
+
+
+# What is not the recorder's ---------------------------------------------------------------------
+
+
+def _snapshot(root) -> dict[str, str]:
+    """Every folder and file under `root`: folders by name, files by their bytes' hash."""
+    import hashlib
+
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for d in dirnames:
+            out[os.path.relpath(os.path.join(dirpath, d), root) + "/"] = "dir"
+        for f in filenames:
+            path = os.path.join(dirpath, f)
+            with open(path, "rb") as fh:
+                out[os.path.relpath(path, root)] = hashlib.sha256(fh.read()).hexdigest()
+    return out
+
+
+def _users_files(root) -> None:
+    (root / "data").mkdir(parents=True, exist_ok=True)
+    (root / "data" / "mine.parquet").write_bytes(b"PAR1 not the recorder's PAR1")
+    (root / "videos" / "cam" / "take1").mkdir(parents=True, exist_ok=True)
+    (root / "videos" / "cam" / "take1" / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42 a user's clip")
+    (root / "notes").mkdir(exist_ok=True)
+
+
+def test_a_refused_folder_is_left_byte_for_byte_as_it_was(tmp_path):
+    """A non-empty folder that holds no dataset is refused, and refused again: nothing in it
+    changes (every file's hash, every folder), and no `.envhub/` is left."""
+    root = tmp_path / "foreign"
+    _users_files(root)
+    (root / "notes" / "todo.txt").write_text("mine")
+    before = _snapshot(root)
+    for _ in range(2):
+        with pytest.raises(envhub.recording.DatasetLayoutError, match="holds no LeRobot dataset"):
+            envhub.record("gym-pendulum", 1, root, video=False, max_episode_steps=5)
+        assert _snapshot(root) == before
+    assert not (root / ".envhub").exists()
+    # A dataset of another layout is refused untouched too.
+    ds = tmp_path / "pendulum"
+    envhub.record("gym-pendulum", 1, ds, video=False, max_episode_steps=5)
+    before = _snapshot(ds)
+    with pytest.raises(envhub.recording.DatasetLayoutError, match="another layout"):
+        envhub.record("gym-cartpole", 1, ds, video=False)
+    assert _snapshot(ds) == before
+
+
+def test_an_accepted_recording_never_deletes_the_users_files(tmp_path):
+    """Files in a dataset's folders that the recorder does not write (a clip under `videos/`,
+    a Parquet file under `data/` of another name) survive appending, and the crash clean-up of
+    a first commit that never finished."""
+    root = tmp_path / "pendulum"
+    envhub.record("gym-pendulum", 2, root, num_envs=2, video=False, max_episode_steps=5)
+    _users_files(root)
+    theirs = {k: v for k, v in _snapshot(root).items() if "mine" in k or "take1" in k or k.startswith("notes")}
+    envhub.record("gym-pendulum", 2, root, num_envs=2, video=False, max_episode_steps=5)
+    after = _snapshot(root)
+    assert {k: after.get(k) for k in theirs} == theirs
+    summary, _ = load(root)
+    assert summary["num_episodes"] == 4
+    # A recording that crashed before its first commit left `.envhub/`; the user's files next to
+    # what it left are theirs still.
+    crashed = tmp_path / "crashed"
+    (crashed / ".envhub" / "staging").mkdir(parents=True)
+    (crashed / "videos" / "cam" / "take1").mkdir(parents=True)
+    (crashed / "videos" / "cam" / "take1" / "clip.mp4").write_bytes(b"a user's clip")
+    envhub.record("gym-pendulum", 1, crashed, video=False, max_episode_steps=5)
+    assert (crashed / "videos" / "cam" / "take1" / "clip.mp4").read_bytes() == b"a user's clip"

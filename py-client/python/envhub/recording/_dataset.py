@@ -25,8 +25,10 @@ would mean rewriting files, which this writer never does).
 from __future__ import annotations
 
 import fcntl
+import glob
 import json
 import os
+import re
 import shutil
 import warnings
 from dataclasses import dataclass, field
@@ -63,6 +65,14 @@ class Episode:
 
 def _next(chunk: int, file: int) -> tuple[int, int]:
     return (chunk + 1, 0) if file == CHUNKS_SIZE - 1 else (chunk, file + 1)
+
+
+def _ours(rel: str, template: str) -> bool:
+    """Whether `rel` is a name `template` makes (`chunk-000/file-000`, ...)."""
+    pattern = re.escape(template)
+    for field_ in ("chunk_index", "file_index"):
+        pattern = pattern.replace(re.escape("{" + field_ + ":03d}"), r"\d{3,}")
+    return re.fullmatch(pattern, rel) is not None
 
 
 def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
@@ -177,11 +187,13 @@ class Dataset:
         import pyarrow  # noqa: F401  (fails early, before any file is touched)
 
         self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
         private = self.root / PRIVATE
-        self._ours = private.exists()  # an envhub recording was here (maybe cut short)
+        self._ours = private.is_dir()  # an envhub recording was here (maybe cut short)
+        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
+        self._check_folder(wanted)  # before anything is created: a refusal touches nothing
+        self.root.mkdir(parents=True, exist_ok=True)
         private.mkdir(exist_ok=True)
-        self._lock = open(private / "lock", "w")  # held until close
+        self._lock = open(private / "lock", "a")  # held until close
         try:
             fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -196,12 +208,13 @@ class Dataset:
             self._lock.close()
             raise
 
-    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
-        self.staging = self.root / PRIVATE / "staging"
-        shutil.rmtree(self.staging, ignore_errors=True)
-        self.staging.mkdir()
+    def _check_folder(self, wanted: dict[str, Any], locked: bool = False) -> dict[str, Any] | None:
+        """The dataset's `info.json` if it holds one of this layout, `None` for a new or empty
+        folder (or one where an envhub recording crashed before its first commit); else
+        `DatasetLayoutError`. Reads only."""
+        if self.root.exists() and not self.root.is_dir():
+            raise DatasetLayoutError(f"`{self.root}` is a file\nhint: record into a new or empty folder")
         info_path = self.root / "meta" / "info.json"
-        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
         if info_path.exists():
             try:
                 info = json.loads(info_path.read_text())
@@ -217,18 +230,30 @@ class Dataset:
                     + "\nhint: record into a new folder, or record the same env with the same "
                     "observation, action, frames and fps to append to this one"
                 )
+            return info
+        if not self.root.exists():
+            return None
+        # Without `info.json`, `data/`, `meta/` and `videos/` are what a crash in the first
+        # commit left, if envhub was recording here; anything else is not ours.
+        ours = (PRIVATE, "data", "meta", "videos") if self._ours else (PRIVATE,) if locked else ()
+        others = [p.name for p in self.root.iterdir() if p.name not in ours]
+        if others:
+            raise DatasetLayoutError(
+                f"`{self.root}` is not empty and holds no LeRobot dataset (no `meta/info.json`; "
+                f"it has {', '.join(f'`{n}`' for n in sorted(others)[:5])})\n"
+                "hint: record into a new or empty folder"
+            )
+        return None
+
+    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
+        info = self._check_folder(wanted, locked=True)  # again, under the lock
+        self.staging = self.root / PRIVATE / "staging"
+        shutil.rmtree(self.staging, ignore_errors=True)
+        self.staging.mkdir()
+        if info is not None:
             self.info = info
         else:
-            # Without `info.json`, `data/`, `meta/` and `videos/` are what a crash in the first
-            # commit left, if envhub was recording here; anything else is not ours to remove.
-            ours = (PRIVATE, "data", "meta", "videos") if self._ours else (PRIVATE,)
-            others = [p.name for p in self.root.iterdir() if p.name not in ours]
-            if others:
-                raise DatasetLayoutError(
-                    f"`{self.root}` is not empty and holds no LeRobot dataset (no `meta/info.json`; "
-                    f"it has {', '.join(f'`{n}`' for n in sorted(others)[:5])})\n"
-                    "hint: record into a new or empty folder"
-                )
             self.info = {
                 "codebase_version": CODEBASE_VERSION,
                 "robot_type": robot_type,
@@ -291,10 +316,14 @@ class Dataset:
             used |= {Path(_fmt(VIDEO_PATH, (r[f"videos/{k}/chunk_index"], r[f"videos/{k}/file_index"]),
                                video_key=k)) for r in rows}
         removed = []
-        for pattern in ("data/*/*.parquet", "meta/episodes/*/*.parquet", "videos/*/*/*.mp4"):
+        # Only names this recorder writes: other files are the user's, left alone.
+        patterns = [("data/*/*.parquet", DATA_PATH), ("meta/episodes/*/*.parquet", EPISODES_PATH)]
+        patterns += [(f"videos/{glob.escape(k)}/*/*.mp4", VIDEO_PATH.replace("{video_key}", k))
+                     for k in self.video_keys]
+        for pattern, template in patterns:
             for path in self.root.glob(pattern):
                 rel = path.relative_to(self.root)
-                if rel not in used:
+                if rel not in used and _ours(str(rel), template):
                     path.unlink()
                     removed.append(str(rel))
         if removed:
