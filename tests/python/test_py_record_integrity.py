@@ -7,10 +7,12 @@ Judged, as in `test_py_record.py`, by LeRobot's own loader in its own interprete
 from __future__ import annotations
 
 import os
+import textwrap
+import warnings
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from conftest import import_envhub, mujoco_or_skip
 from test_py_record import REQUIRED, check_against, load
 
 envhub = import_envhub()
@@ -252,3 +254,80 @@ def test_an_accepted_recording_never_deletes_the_users_files(tmp_path):
     (crashed / "videos" / "cam" / "take1" / "clip.mp4").write_bytes(b"a user's clip")
     envhub.record("gym-pendulum", 1, crashed, video=False, max_episode_steps=5)
     assert (crashed / "videos" / "cam" / "take1" / "clip.mp4").read_bytes() == b"a user's clip"
+
+
+# Durability ------------------------------------------------------------------------------------
+
+CRASH_BETWEEN_RENAMES = textwrap.dedent(
+    """\
+    import os, sys
+    import envhub
+    from envhub.recording import _durable
+
+    root, crash_at = sys.argv[1], int(sys.argv[2])
+    renames = []
+
+    def hook(rel):
+        renames.append(rel)
+        print(rel, flush=True)
+        if len(renames) == crash_at:
+            os._exit(9)  # a crash: nothing after this runs, nothing is cleaned up
+
+    _durable.rename_hook = hook
+    envhub.record("mujoco-inverted-pendulum", 3, root, num_envs=3, max_episode_steps=6, width=32, height=32,
+                  seed=5, recorder={"commit_every": 3600})
+    """
+)
+
+
+def _record_pendulums(root, episodes: int, seed: int) -> None:
+    envhub.record("mujoco-inverted-pendulum", episodes, root, num_envs=3, max_episode_steps=6, width=32,
+                  height=32, seed=seed)
+
+
+def test_a_crash_between_any_two_renames_leaves_the_last_commit(tmp_path):
+    """A commit's renames, each one the last thing a process does (`os._exit` from the rename
+    hook): the dataset loads, and equals the last commit (meta files, stats included, change
+    together); the next recording appends after it."""
+    import shutil
+    import subprocess
+    import sys
+
+    mujoco_or_skip(envhub)
+    base = tmp_path / "base"
+    _record_pendulums(base, 3, seed=0)
+    ref_summary, ref = load(base)
+    ref_meta = _snapshot(base / "meta")
+    script = tmp_path / "crash.py"
+    script.write_text(CRASH_BETWEEN_RENAMES)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    crash_at, renames = 1, None
+    while True:
+        root = tmp_path / f"crash{crash_at}"
+        shutil.copytree(base, root)
+        proc = subprocess.run([sys.executable, str(script), str(root), str(crash_at)], capture_output=True,
+                              text=True, timeout=300, env=env)
+        if proc.returncode == 0:  # past the last rename: the whole commit is there
+            renames = crash_at - 1
+            break
+        assert proc.returncode == 9, proc.stderr[-3000:]
+        assert _snapshot(root / "meta") == ref_meta, f"crash at rename {crash_at}: meta/ changed"
+        summary, arrays = load(root)
+        n = ref_summary["num_frames"]
+        assert {k: summary[k] for k in ("num_episodes", "num_frames", "episode_lengths", "stats_keys")} == {
+            k: ref_summary[k] for k in ("num_episodes", "num_frames", "episode_lengths", "stats_keys")}
+        for key, values in ref.items():
+            got = arrays[key][: len(values)] if key.startswith("raw/") else arrays[key]
+            assert got.shape[0] >= n and np.array_equal(got[: len(values)], values), (crash_at, key)
+        # Recording again removes what the crash left and appends after the last commit.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _record_pendulums(root, 3, seed=9)
+        summary, arrays = load(root)
+        assert summary["num_episodes"] == 6 and summary["episode_lengths"][:3] == ref_summary["episode_lengths"]
+        np.testing.assert_array_equal(arrays["raw/index"], np.arange(summary["num_frames"]))
+        for key in ("raw/observation.state", "raw/action"):
+            np.testing.assert_array_equal(arrays[key][:n], ref[key])
+        crash_at += 1
+    # A data file, a video file per episode and `meta/` (exchanged whole).
+    assert renames == 5, renames

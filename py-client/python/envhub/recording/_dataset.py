@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ._durable import Commit
 from .errors import DatasetLayoutError, RecordingError
 
 CODEBASE_VERSION = "v3.0"
@@ -377,27 +378,28 @@ class Dataset:
         """A path in the private folder, for a file not committed yet."""
         return self.staging / name
 
-    def _place(self, tmp: Path, rel: str) -> None:
-        final = self.root / rel
-        final.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(tmp, final)
-
-    def _write_table(self, table: Any, rel: str) -> None:
+    @staticmethod
+    def _write_table(table: Any, path: Path) -> None:
         import pyarrow.parquet as pq
 
-        tmp = self.staged(Path(rel).name + ".tmp")
-        pq.write_table(table, tmp, compression="snappy")
-        self._place(tmp, rel)
+        pq.write_table(table, path, compression="snappy")
 
-    def _write_json(self, data: dict[str, Any], rel: str) -> None:
-        tmp = self.staged(Path(rel).name + ".tmp")
-        with open(tmp, "w") as f:
+    @staticmethod
+    def _write_json(data: dict[str, Any], path: Path) -> None:
+        with open(path, "w") as f:
             json.dump(data, f, indent=4, ensure_ascii=False)
-            f.flush()
-            os.fsync(f.fileno())
-        self._place(tmp, rel)
 
     def commit(self, episodes: list[Episode]) -> list[int]:
+        """Writes `episodes` into the dataset in one commit; returns their episode indices.
+        On an error nothing is committed and the dataset's state here is as before."""
+        tasks, stats = dict(self.tasks), dict(self.stats)
+        try:
+            return self._commit(episodes)
+        except BaseException:
+            self.tasks, self.stats = tasks, stats
+            raise
+
+    def _commit(self, episodes: list[Episode]) -> list[int]:
         """Writes `episodes` into the dataset (see the module's doc for the order); returns
         their episode indices. Statistics are computed over all of them at once (one
         `reduceat` per column and statistic), since commits of many episodes are common."""
@@ -409,6 +411,7 @@ class Dataset:
             self.tasks[task] = len(self.tasks)
         data_at, meta_at = self._next_data, self._next_meta
         fps = self.info["fps"]
+        commit = Commit(self.root, self.staging)
         count = len(episodes)
         lengths = np.array([ep.length for ep in episodes], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
@@ -439,7 +442,7 @@ class Dataset:
             for ep in episodes:
                 at.append(self._next_video[key])
                 self._next_video[key] = _next(*at[-1])
-                self._place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
+                commit.place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
             meta[f"videos/{key}/chunk_index"] = np.array([a[0] for a in at], dtype=np.int64)
             meta[f"videos/{key}/file_index"] = np.array([a[1] for a in at], dtype=np.int64)
             meta[f"videos/{key}/from_timestamp"] = np.zeros(count)
@@ -458,18 +461,23 @@ class Dataset:
                 meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
         meta["success"] = [ep.success for ep in episodes]
 
-        self._write_table(self._data_table(columns), _fmt(DATA_PATH, data_at))
-        self._write_table(self._episodes_table(meta), _fmt(EPISODES_PATH, meta_at))
-        self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
+        data = commit.staged("data.parquet")
+        self._write_table(self._data_table(columns), data)
+        commit.place(data, _fmt(DATA_PATH, data_at))
+        self._write_table(self._episodes_table(meta), commit.meta_file(_fmt(EPISODES_PATH, meta_at)[5:]))
         if new_tasks:
-            self._write_tasks()
+            self._write_tasks(commit.meta_file("tasks.parquet"))
         self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
-                         "meta/stats.json")
-        self.info["total_episodes"] = first_ep + count
-        self.info["total_frames"] = first_frame + total
-        self.info["total_tasks"] = len(self.tasks)
-        self.info["splits"] = {"train": f"0:{self.info['total_episodes']}"}
-        self._write_json(self.info, "meta/info.json")  # the commit point
+                         commit.meta_file("stats.json"))
+        info = dict(self.info)
+        info["total_episodes"] = first_ep + count
+        info["total_frames"] = first_frame + total
+        info["total_tasks"] = len(self.tasks)
+        info["splits"] = {"train": f"0:{info['total_episodes']}"}
+        self._write_json(info, commit.meta_file("info.json"))
+        commit.apply()  # the commit point: `meta/` swapped in whole
+        self.info = info
+        self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
         return list(range(first_ep, first_ep + count))
 
     def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
@@ -527,14 +535,14 @@ class Dataset:
                 columns.append(pa.nulls(len(table), type=f.type))
         return pa.Table.from_arrays(columns, schema=schema)
 
-    def _write_tasks(self) -> None:
+    def _write_tasks(self, path: Path) -> None:
         import pyarrow as pa
 
         order = sorted(self.tasks, key=self.tasks.__getitem__)
         table = pa.table({"task_index": pa.array([self.tasks[t] for t in order], pa.int64()),
                           "task": pa.array(order, pa.string())})
         table = table.replace_schema_metadata({b"pandas": _pandas_tasks_metadata("task")})
-        self._write_table(table, "meta/tasks.parquet")
+        self._write_table(table, path)
 
     def close(self) -> None:
         """Releases the folder (removing the private folder's files not committed)."""
