@@ -331,3 +331,48 @@ def test_a_crash_between_any_two_renames_leaves_the_last_commit(tmp_path):
         crash_at += 1
     # A data file, a video file per episode and `meta/` (exchanged whole).
     assert renames == 5, renames
+
+
+# Bounded in bytes and threads --------------------------------------------------------------------
+
+
+def _threads() -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("Threads:"))
+
+
+def test_the_queue_is_bounded_in_bytes_and_encoding_in_threads(tmp_path, null_registry):
+    """Eight envs of 128x128 frames (48 KiB each, 384 KiB a step) that step far faster than
+    the writer encodes them: the queue never holds more than its byte budget (the step being
+    written included), and encoding takes no more threads than `encode_threads` (one per
+    encoder, FFmpeg's default being one per core for each of the eight)."""
+    os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
+    env = envhub.make_vec("null-env", 8, num_workers=1, registry=null_registry, frame=[128, 128, 3],
+                          max_episode_steps=10)
+    budget = 1_000_000  # two steps and a half
+    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), fps=30, task="nothing", queue_bytes=budget,
+                                encode_threads=2)
+    before = _threads()
+    most = before
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec.reset(seed=0)
+            for _ in range(40):
+                rec.step(np.zeros(8, np.int64))
+                most = max(most, _threads())
+    finally:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec.close()
+    step = 8 * 128 * 128 * 3
+    assert rec.stats["steps_waited"] > 0, "the writer kept up: the budget was never reached"
+    assert step < rec.stats["queue_bytes_peak"] <= budget
+    assert most - before <= 1 + 2, f"{most - before} threads more while recording (writer + 2 encoders)"
+    assert rec.stats["episodes_written"] == 24
+    other = envhub.make_vec("gym-pendulum", 1)
+    try:
+        with pytest.raises(ValueError, match="queue_bytes"):
+            envhub.RecordEpisodes(other, str(tmp_path / "e"), queue_bytes=0)
+    finally:
+        other.close()

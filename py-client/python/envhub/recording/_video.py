@@ -67,6 +67,9 @@ class EpisodeVideo:
             stream.width, stream.height = width, height
             stream.pix_fmt = pix_fmt(width, height)
             stream.codec_context.time_base = Fraction(1, fps)
+            # One thread per encoder (FFmpeg's default is one per core each): the recorder
+            # bounds the threads that encode by calling encoders from `encode_threads` threads.
+            stream.codec_context.thread_count = 1
             self._stream = stream
         except BaseException:
             self._container.close()

@@ -9,7 +9,6 @@ envhub's are views of shared memory) and puts it on a bounded queue; the writer 
 from __future__ import annotations
 
 import os
-import queue
 import time
 import warnings
 import weakref
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
+from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
 from ._features import INDEX_FEATURES, RENDER_KEY, STEP_COLUMNS, action_column, observation_columns
 from ._video import DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, check_codec, pix_fmt
@@ -75,14 +75,15 @@ class RecordEpisodes(VectorWrapper):
     Ended episodes reach the disk within `commit_every` seconds, so a crash loses at most the
     episodes in flight and those, and never leaves a dataset that does not load.
 
-    Stepping is not blocked by the disk or the encoder: steps go through a queue of
-    `queue_size` to a writer thread. If it is full, `when_full="wait"` makes the step wait and
+    Stepping is not blocked by the disk or the encoder: steps go through a queue of at most
+    `queue_bytes` (512 MiB by default; counting the step being written) to a writer thread. If it is full, `when_full="wait"` makes the step wait and
     `"drop"` drops the step, and with it the episodes in flight (each env records again from
     its next episode); either way a `QueueFullWarning` says so, and `stats` counts it.
 
     `max_episodes` stops keeping episodes once that many are kept (later ones are counted in
     `stats["episodes_beyond"]`). Frames are encoded on `encode_threads` threads (default: up to
-    4, one per core), the envs shared among them.
+    4, one per core), the envs shared among them; each encoder runs on its caller's thread, so
+    these are all the threads encoding takes.
 
     The dataset folder is opened (checked and locked) at the first `reset()`; a folder that
     holds a dataset of another layout raises `DatasetLayoutError` naming the differences.
@@ -100,7 +101,7 @@ class RecordEpisodes(VectorWrapper):
         codec: str | None = None,
         crf: int = DEFAULT_CRF,
         gop: int = DEFAULT_GOP,
-        queue_size: int = 64,
+        queue_bytes: int = DEFAULT_QUEUE_BYTES,
         when_full: str = "wait",
         commit_every: float = 1.0,
         max_episodes: int | None = None,
@@ -113,8 +114,10 @@ class RecordEpisodes(VectorWrapper):
             raise ValueError(f"unknown `keep={keep!r}`\nhint: use `keep=\"all\"` or `keep=\"success\"`")
         if when_full not in ("wait", "drop"):
             raise ValueError(f"unknown `when_full={when_full!r}`\nhint: use `when_full=\"wait\"` or `\"drop\"`")
-        if queue_size < 1:
-            raise ValueError(f"`queue_size={queue_size}` must be at least 1")
+        if queue_bytes < 1:
+            raise ValueError(f"`queue_bytes={queue_bytes}` must be at least 1 (a byte budget; default 512 MiB)")
+        if encode_threads is not None and encode_threads < 1:
+            raise ValueError(f"`encode_threads={encode_threads}` must be at least 1")
         if codec is not None:
             check_codec(codec)
         self.root = str(root)
@@ -126,7 +129,7 @@ class RecordEpisodes(VectorWrapper):
         self._action = action_column(env.single_action_space)
         self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
         self._codec, self._crf, self._gop = codec, int(crf), int(gop)
-        self._queue_size, self._commit_every, self._robot_type = queue_size, float(commit_every), robot_type
+        self._queue_bytes, self._commit_every, self._robot_type = int(queue_bytes), float(commit_every), robot_type
         self._max_episodes = max_episodes
         self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
         self.stats: dict[str, Any] = {
@@ -140,6 +143,7 @@ class RecordEpisodes(VectorWrapper):
             "steps_dropped": 0,
             "steps_waited": 0,
             "seconds_waited": 0.0,
+            "queue_bytes_peak": 0,  # the most bytes the queue held (with the step being written)
         }
         self._writer: Writer | None = None
         self._dataset: Dataset | None = None
@@ -214,7 +218,7 @@ class RecordEpisodes(VectorWrapper):
         videos = [c.name for c in self._obs_columns if c.video]
         self._writer = Writer(
             dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
-            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_size, self.stats,
+            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_bytes, self.stats,
             self._max_episodes, self._encode_threads,
         )
         self._finalizer = weakref.finalize(self, _stop_writer, self._writer, dataset)
@@ -352,30 +356,23 @@ class RecordEpisodes(VectorWrapper):
         assert self._writer is not None
         q = self._writer.queue
         item.gap = self._gap
-        try:
-            q.put_nowait(item)
+        nbytes = _nbytes(item)
+        if q.put(item, nbytes, timeout=0):
             self._gap = False
             return
-        except queue.Full:
-            pass
         if self.when_full == "drop" and isinstance(item, Step):
             self.stats["steps_dropped"] += 1
             self._gap = True
             self._warn(
-                f"the recorder's queue ({self._queue_size} steps) is full: a step is dropped, and "
+                f"the recorder's queue ({_mib(self._queue_bytes)}) is full: a step is dropped, and "
                 "with it the episodes in flight (each env records again from its next episode)"
             )
             return
         self.stats["steps_waited"] += 1
-        self._warn(f"the recorder's queue ({self._queue_size} steps) is full: steps wait for the writer")
+        self._warn(f"the recorder's queue ({_mib(self._queue_bytes)}) is full: steps wait for the writer")
         start = time.monotonic()
-        while True:
+        while not q.put(item, nbytes, timeout=0.5):
             self._check()
-            try:
-                q.put(item, timeout=0.5)
-                break
-            except queue.Full:
-                continue
         self.stats["seconds_waited"] += time.monotonic() - start
         self._gap = False
 
@@ -383,7 +380,7 @@ class RecordEpisodes(VectorWrapper):
         if not self._warned:
             self._warned = True
             warnings.warn(
-                f"{message}\nhint: a larger `queue_size`, fewer envs or cameras, or `video=False`; "
+                f"{message}\nhint: a larger `queue_bytes`, fewer envs or cameras, or `video=False`; "
                 "`stats` counts every wait and drop",
                 QueueFullWarning,
                 stacklevel=4,
@@ -412,6 +409,8 @@ class RecordEpisodes(VectorWrapper):
                 if self._finalizer is not None:
                     self._finalizer()
             finally:
+                if self._writer is not None:
+                    self.stats["queue_bytes_peak"] = self._writer.queue.peak
                 if self.stats["steps_dropped"] or self.stats["steps_waited"]:
                     s = self.stats
                     warnings.warn(
@@ -433,15 +432,25 @@ def _stop_writer(writer: Writer, dataset: Dataset) -> None:
     """Lets the writer commit what ended and stop, then releases the dataset."""
     try:
         if writer.thread.is_alive():
-            while writer.thread.is_alive():
-                try:
-                    writer.queue.put(STOP, timeout=0.5)
-                    break
-                except queue.Full:
-                    continue
+            while writer.thread.is_alive() and not writer.queue.put(STOP, 0, timeout=0.5):
+                pass
             writer.thread.join()
     finally:
         dataset.close()
+
+
+def _nbytes(item: Step | Reset) -> int:
+    """The bytes a queued item holds (its arrays)."""
+    if isinstance(item, Reset):
+        return 0 if item.mask is None else item.mask.nbytes
+    total = sum(a.nbytes for a in item.obs.values()) + item.action.nbytes + 3 * item.reward.nbytes
+    if item.frames is not None:
+        total += sum(np.asarray(f).nbytes for f in item.frames if f is not None)
+    return int(total)
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.4g} MiB"
 
 
 def _task_of(env: VectorEnv) -> str:

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ._budget import ByteQueue
 from ._dataset import Dataset, Episode
 from ._video import EpisodeVideo
 
@@ -101,7 +102,7 @@ class Writer:
         gop: int,
         keep: str,
         commit_every: float,
-        queue_size: int,
+        queue_bytes: int,
         stats: dict[str, Any],
         max_episodes: int | None = None,
         encode_threads: int = 1,
@@ -117,7 +118,7 @@ class Writer:
         self.max_episodes = max_episodes
         self.commit_every = commit_every
         self.stats = stats
-        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.queue = ByteQueue(queue_bytes)
         self.error: BaseException | None = None
         self._rows = _Rows()
         self._t = 0  # global index of the next row
@@ -143,18 +144,22 @@ class Writer:
             while True:
                 wait = max(0.0, self.commit_every - (time.monotonic() - self._last_commit))
                 try:
-                    item = self.queue.get(timeout=wait if self._pending else None)
+                    item, nbytes = self.queue.get(timeout=wait if self._pending else None)
                 except queue.Empty:
                     self._commit()
                     continue
                 if item is STOP:
                     break
-                if item.gap:
-                    self._gap()
-                if isinstance(item, Reset):
-                    self._reset(item.mask)
-                else:
-                    self._step(item)
+                try:
+                    if item.gap:
+                        self._gap()
+                    if isinstance(item, Reset):
+                        self._reset(item.mask)
+                    else:
+                        self._step(item)
+                finally:
+                    del item  # its arrays, before the budget says they are gone
+                    self.queue.done(nbytes)
                 if self._pending and time.monotonic() - self._last_commit >= self.commit_every:
                     self._commit()
             self._commit()
@@ -162,10 +167,12 @@ class Writer:
             self.error = e
             while True:  # let the recorder's blocked `put`s through until it sees the error
                 try:
-                    if self.queue.get(timeout=1.0) is STOP:
-                        break
+                    item, nbytes = self.queue.get(timeout=1.0)
                 except queue.Empty:
                     continue
+                self.queue.done(nbytes)
+                if item is STOP:
+                    break
         finally:
             for i in range(self.n):
                 self._abandon(i)
