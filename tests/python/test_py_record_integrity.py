@@ -6,6 +6,7 @@ Judged, as in `test_py_record.py`, by LeRobot's own loader in its own interprete
 
 from __future__ import annotations
 
+import json
 import os
 import textwrap
 import warnings
@@ -58,8 +59,10 @@ class Episodes:
         self.current: list[dict[str, list]] = [{} for _ in range(n)]
         self.ended: list[dict[str, list]] = []
 
-    def add(self, i: int, obs, action, reward, term, trunc) -> None:
+    def add(self, i: int, obs, action, reward, term, trunc, frame=None) -> None:
         ep = self.current[i]
+        if frame is not None:
+            ep.setdefault("frame", []).append(np.array(frame, copy=True))
         ep.setdefault("observation.state", []).append(np.array(obs, copy=True))
         ep.setdefault("action", []).append(np.array(action, copy=True))
         ep.setdefault("next.reward", []).append(float(reward))
@@ -329,8 +332,9 @@ def test_a_crash_between_any_two_renames_leaves_the_last_commit(tmp_path):
         for key in ("raw/observation.state", "raw/action"):
             np.testing.assert_array_equal(arrays[key][:n], ref[key])
         crash_at += 1
-    # A data file, a video file per episode and `meta/` (exchanged whole).
-    assert renames == 5, renames
+    # The data file and the video file, each the last one with rows and frames appended, and
+    # `meta/` (exchanged whole).
+    assert renames == 3, renames
 
 
 # Bounded in bytes and threads --------------------------------------------------------------------
@@ -376,3 +380,108 @@ def test_the_queue_is_bounded_in_bytes_and_encoding_in_threads(tmp_path, null_re
             envhub.RecordEpisodes(other, str(tmp_path / "e"), queue_bytes=0)
     finally:
         other.close()
+
+
+# LeRobot v3's layout: many episodes per file --------------------------------------------------
+
+
+def _files(root) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file())
+
+
+def _drive_pendulums(rec, steps: int, seed: int) -> list[dict[str, list]]:
+    """Steps native MuJoCo pendulums (`next_step` autoreset) with random actions; returns the
+    episodes that ended as the session returned them, `render()` frames included."""
+    rng = np.random.default_rng(seed)
+    n = rec.num_envs
+    seen = Episodes(n)
+    obs, _ = rec.reset(seed=seed)
+    shown = rec.render()
+    fresh = np.zeros(n, dtype=bool)
+    for _ in range(steps):
+        actions = rng.uniform(-3, 3, (n, 1)).astype(np.float32)
+        nobs, rewards, term, trunc, _ = rec.step(actions)
+        for i in np.flatnonzero(~fresh):
+            seen.add(i, obs[i], actions[i], rewards[i], term[i], trunc[i], frame=shown[i])
+        obs, fresh, shown = nobs, term | trunc, rec.render()
+    return seen.ended
+
+
+def _record_many(root, steps: int, seed: int, **sizes) -> list[dict[str, list]]:
+    env = envhub.make_vec("mujoco-inverted-pendulum", 8, num_workers=1, render_mode="rgb_array",
+                          max_episode_steps=4, width=16, height=16)
+    rec = envhub.RecordEpisodes(env, str(root), task="balance", commit_every=0.05, **sizes)
+    try:
+        expected = _drive_pendulums(rec, steps, seed)
+    finally:
+        rec.close()
+    assert rec.stats["episodes_written"] == len(expected)
+    return expected
+
+
+def _check_addresses(root, fps: int) -> dict[str, list]:
+    """Episodes are addressed by contiguous index ranges, and by time ranges that follow one
+    another in each video file from 0."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    eps = pa.concat_tables(
+        [pq.read_table(p) for p in sorted((root / "meta/episodes").glob("*/*.parquet"))]).to_pydict()
+    lengths = np.array(eps["length"])
+    ends = np.cumsum(lengths)
+    np.testing.assert_array_equal(eps["dataset_to_index"], ends)
+    np.testing.assert_array_equal(eps["dataset_from_index"], ends - lengths)
+    key = "videos/observation.images.render"
+    at = list(zip(eps[f"{key}/chunk_index"], eps[f"{key}/file_index"], strict=True))
+    start = 0.0
+    for e in range(len(lengths)):
+        if e and at[e] != at[e - 1]:
+            start = 0.0
+        assert eps[f"{key}/from_timestamp"][e] == pytest.approx(start)
+        assert eps[f"{key}/to_timestamp"][e] == pytest.approx(start + lengths[e] / fps)
+        start = eps[f"{key}/to_timestamp"][e]
+    return eps
+
+
+def test_many_short_episodes_share_a_handful_of_files(tmp_path):
+    """Hundreds of short episodes with a small camera: one data file, one episodes file, one
+    MP4 (as LeRobot's writer makes them), episodes addressed by index and time ranges;
+    LeRobot's loader reads states and actions bit for bit and every frame. Appending goes on
+    in the same files."""
+    mujoco_or_skip(envhub)
+    root = tmp_path / "many"
+    expected = _record_many(root, 120, seed=0)
+    expected += _record_many(root, 30, seed=1)
+    assert len(expected) >= 200
+    assert _files(root) == [
+        "data/chunk-000/file-000.parquet",
+        "meta/episodes/chunk-000/file-000.parquet",
+        "meta/info.json",
+        "meta/stats.json",
+        "meta/tasks.parquet",
+        "videos/observation.images.render/chunk-000/file-000.mp4",
+    ], _files(root)
+    summary, arrays = load(root)
+    _check_addresses(root, summary["fps"])
+    check_against(summary, arrays, expected, "balance", video_key="observation.images.render")
+
+
+def test_files_roll_at_the_declared_sizes(tmp_path):
+    """With small `data_files_size_in_mb` / `video_files_size_in_mb` the files roll: each
+    stays near the size (one commit past it at most), the dataset loads whole, and an append
+    continues the last file."""
+    mujoco_or_skip(envhub)
+    root = tmp_path / "rolled"
+    sizes = {"data_files_size_in_mb": 0.02, "video_files_size_in_mb": 0.05}
+    expected = _record_many(root, 100, seed=0, **sizes)
+    data = sorted((root / "data").glob("*/*.parquet"))
+    videos = sorted((root / "videos").glob("*/*/*.mp4"))
+    assert len(data) >= 2 and len(videos) >= 2, (data, videos)
+    last_video = videos[-1].stat().st_size
+    expected += _record_many(root, 4, seed=1, **sizes)  # a few frames: they fit the last file
+    assert sorted((root / "videos").glob("*/*/*.mp4")) == videos and videos[-1].stat().st_size > last_video
+    info = json.loads((root / "meta/info.json").read_text())
+    assert info["data_files_size_in_mb"] == 0.02 and info["video_files_size_in_mb"] == 0.05
+    summary, arrays = load(root)
+    _check_addresses(root, summary["fps"])
+    check_against(summary, arrays, expected, "balance", video_key="observation.images.render")

@@ -37,11 +37,15 @@ from typing import Any
 
 import numpy as np
 
-from ._durable import Commit
+from ._durable import Commit, fsync_dir, fsync_file
+from ._video import concatenate, count_frames
 from .errors import DatasetLayoutError, RecordingError
 
 CODEBASE_VERSION = "v3.0"
 CHUNKS_SIZE = 1000
+#: LeRobot's defaults: a data (and episodes) file, a video file is rolled past this size.
+DATA_FILES_SIZE_IN_MB = 100
+VIDEO_FILES_SIZE_IN_MB = 200
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
@@ -62,6 +66,14 @@ class Episode:
     video_stats: dict[str, dict[str, Any]] = field(default_factory=dict)
     task: str = ""
     success: bool | None = None
+
+
+@dataclass
+class _Open:
+    """The last file of a kind: where it is, and its committed rows (or frames)."""
+
+    at: tuple[int, int]
+    count: int
 
 
 def _next(chunk: int, file: int) -> tuple[int, int]:
@@ -184,7 +196,8 @@ class Dataset:
     `info.json`. An existing dataset must have the same version, fps and features (dtype and
     shape), else `DatasetLayoutError` names each difference."""
 
-    def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+    def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None,
+                 data_files_size_in_mb: float | None = None, video_files_size_in_mb: float | None = None) -> None:
         import pyarrow  # noqa: F401  (fails early, before any file is touched)
 
         self.root = Path(root)
@@ -204,7 +217,9 @@ class Dataset:
                 "hint: record into another folder, or wait for that recording to end"
             ) from None
         try:
-            self._open(fps, features, robot_type)
+            self._open(fps, features, robot_type,
+                       {"data_files_size_in_mb": data_files_size_in_mb,
+                        "video_files_size_in_mb": video_files_size_in_mb})
         except BaseException:
             self._lock.close()
             raise
@@ -246,7 +261,8 @@ class Dataset:
             )
         return None
 
-    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None,
+              sizes: dict[str, float | None]) -> None:
         wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
         info = self._check_folder(wanted, locked=True)  # again, under the lock
         self.staging = self.root / PRIVATE / "staging"
@@ -262,8 +278,8 @@ class Dataset:
                 "total_frames": 0,
                 "total_tasks": 0,
                 "chunks_size": CHUNKS_SIZE,
-                "data_files_size_in_mb": 100,
-                "video_files_size_in_mb": 200,
+                "data_files_size_in_mb": DATA_FILES_SIZE_IN_MB,
+                "video_files_size_in_mb": VIDEO_FILES_SIZE_IN_MB,
                 "fps": fps,
                 "splits": {},
                 "data_path": DATA_PATH,
@@ -272,11 +288,15 @@ class Dataset:
             }
         self.features = self.info["features"]
         self.video_keys = [k for k, f in self.features.items() if f["dtype"] == "video"]
+        for key, value in sizes.items():
+            if value is not None:
+                self.info[key] = value
         rows = self._committed_episode_rows()
         self._remove_uncommitted(rows)
-        self._next_data = self._after(rows, "data")
-        self._next_meta = self._after(rows, "meta/episodes")
-        self._next_video = {k: self._after(rows, f"videos/{k}") for k in self.video_keys}
+        self._data = self._last_file(rows, "data")
+        self._meta = self._last_file(rows, "meta/episodes")
+        self._videos = {k: self._last_file(rows, f"videos/{k}") for k in self.video_keys}
+        self._trim(rows)
         self.tasks = self._read_tasks()
         self.stats = self._read_stats()
         self._schemas = self._existing_schemas()
@@ -291,15 +311,16 @@ class Dataset:
         import pyarrow.parquet as pq
 
         total = self.info["total_episodes"]
-        keep = ["episode_index", "data/chunk_index", "data/file_index", "meta/episodes/chunk_index",
-                "meta/episodes/file_index"]
+        keep = ["episode_index", "length", "dataset_from_index", "dataset_to_index", "data/chunk_index",
+                "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index"]
         for k in self.video_keys:
-            keep += [f"videos/{k}/chunk_index", f"videos/{k}/file_index"]
+            keep += [f"videos/{k}/chunk_index", f"videos/{k}/file_index", f"videos/{k}/to_timestamp"]
         rows: list[dict[str, Any]] = []
         for path in self._episode_files():
             names = pq.read_schema(path).names
             table = pq.read_table(path, columns=[c for c in keep if c in names])
             rows += [r for r in table.to_pylist() if r["episode_index"] < total]
+        rows.sort(key=lambda r: r["episode_index"])
         if len(rows) != total:
             raise DatasetLayoutError(
                 f"the dataset at `{self.root}` counts {total} episodes in `meta/info.json` but "
@@ -334,11 +355,52 @@ class Dataset:
                 stacklevel=4,
             )
 
-    @staticmethod
-    def _after(rows: list[dict[str, Any]], prefix: str) -> tuple[int, int]:
-        used = [(r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) for r in rows
-                if r.get(f"{prefix}/chunk_index") is not None]
-        return _next(*max(used)) if used else (0, 0)
+    def _last_file(self, rows: list[dict[str, Any]], prefix: str) -> _Open | None:
+        """The file of `prefix` (`data`, `meta/episodes`, `videos/<key>`) that the last
+        committed episode is in, and how much of it is committed: rows for Parquet files
+        (episodes may span several commits), frames for videos."""
+        if not rows or rows[-1].get(f"{prefix}/chunk_index") is None:
+            return None
+        last = rows[-1]
+        at = (int(last[f"{prefix}/chunk_index"]), int(last[f"{prefix}/file_index"]))
+        same = [r for r in rows if (r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) == at]
+        if prefix == "data":
+            count = int(last["dataset_to_index"]) - min(int(r["dataset_from_index"]) for r in same)
+        elif prefix == "meta/episodes":
+            count = len(same)
+        else:
+            count = round(float(last[f"{prefix}/to_timestamp"]) * self.info["fps"])
+        return _Open(at, count)
+
+    def _trim(self, rows: list[dict[str, Any]]) -> None:
+        """Cuts what a crash left appended to the last data and video files (rows and frames
+        past the last commit), so the files hold exactly what `meta/` describes."""
+        import pyarrow.parquet as pq
+
+        cut = []
+        if self._data is not None:
+            path = self.root / _fmt(DATA_PATH, self._data.at)
+            if pq.read_metadata(path).num_rows > self._data.count:
+                tmp = self.staging / "trim.parquet"
+                self._write_table(pq.read_table(path).slice(0, self._data.count), tmp)
+                cut.append((tmp, path))
+        for key, last in self._videos.items():
+            if last is None:
+                continue
+            path = self.root / _fmt(VIDEO_PATH, last.at, video_key=key)
+            if count_frames(path) > last.count:
+                tmp = self.staging / f"trim-{len(cut)}.mp4"
+                concatenate([(path, last.count)], tmp, self.info["fps"])
+                cut.append((tmp, path))
+        for tmp, path in cut:
+            fsync_file(tmp)
+            os.replace(tmp, path)
+            fsync_dir(path.parent)
+        if cut:
+            warnings.warn(
+                f"cut what a crash left past the last commit from {len(cut)} file(s) of `{self.root}`",
+                stacklevel=4,
+            )
 
     def _read_tasks(self) -> dict[str, int]:
         import pyarrow.parquet as pq
@@ -409,7 +471,6 @@ class Dataset:
         new_tasks = [e.task for e in episodes if e.task not in self.tasks]
         for task in dict.fromkeys(new_tasks):
             self.tasks[task] = len(self.tasks)
-        data_at, meta_at = self._next_data, self._next_meta
         fps = self.info["fps"]
         commit = Commit(self.root, self.staging)
         count = len(episodes)
@@ -428,27 +489,43 @@ class Dataset:
         columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
         columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
 
+        # Data: appended to the last file, or a new one if that would reach the size.
+        data_table = self._data_table(columns)
+        data_last = self._grow(self._data, DATA_PATH, self.info["data_files_size_in_mb"], new=total)
+        if data_last.count:
+            data_table = self._prepend(data_table, _fmt(DATA_PATH, data_last.at), data_last.count)
+        data = commit.staged("data.parquet")
+        self._write_table(data_table, data)
+        commit.place(data, _fmt(DATA_PATH, data_last.at))
         meta: dict[str, Any] = {
             "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
             "tasks": [[ep.task] for ep in episodes],
             "length": lengths,
-            "data/chunk_index": np.full(count, data_at[0]),
-            "data/file_index": np.full(count, data_at[1]),
+            "data/chunk_index": np.full(count, data_last.at[0]),
+            "data/file_index": np.full(count, data_last.at[1]),
             "dataset_from_index": first_frame + starts,
             "dataset_to_index": first_frame + starts + lengths,
         }
+        # Videos: every episode's MP4 appended (packets copied, not encoded again) to the last
+        # file of its camera, or to a new one; an episode is a time range of its file.
+        videos: dict[str, _Open] = {}
         for key in self.video_keys:
-            at = []
-            for ep in episodes:
-                at.append(self._next_video[key])
-                self._next_video[key] = _next(*at[-1])
-                commit.place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
-            meta[f"videos/{key}/chunk_index"] = np.array([a[0] for a in at], dtype=np.int64)
-            meta[f"videos/{key}/file_index"] = np.array([a[1] for a in at], dtype=np.int64)
-            meta[f"videos/{key}/from_timestamp"] = np.zeros(count)
-            meta[f"videos/{key}/to_timestamp"] = lengths / fps
-        meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
-        meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
+            size = sum(os.path.getsize(ep.videos[key]) for ep in episodes)
+            last = self._grow(self._videos[key], VIDEO_PATH, self.info["video_files_size_in_mb"], adding=size, key=key)
+            rel = _fmt(VIDEO_PATH, last.at, video_key=key)
+            parts = [(self.root / rel, last.count)] if last.count else []
+            parts += [(ep.videos[key], ep.length) for ep in episodes]
+            video = commit.staged("video.mp4")
+            concatenate(parts, video, fps)
+            commit.place(video, rel)
+            meta[f"videos/{key}/chunk_index"] = np.full(count, last.at[0])
+            meta[f"videos/{key}/file_index"] = np.full(count, last.at[1])
+            meta[f"videos/{key}/from_timestamp"] = (last.count + starts) / fps
+            meta[f"videos/{key}/to_timestamp"] = (last.count + starts + lengths) / fps
+            videos[key] = _Open(last.at, last.count + total)
+        meta_last = self._grow(self._meta, EPISODES_PATH, self.info["data_files_size_in_mb"], new=count)
+        meta["meta/episodes/chunk_index"] = np.full(count, meta_last.at[0])
+        meta["meta/episodes/file_index"] = np.full(count, meta_last.at[1])
         for key, values in columns.items():
             per_episode, whole = _stats(values, starts, lengths)
             self.stats[key] = aggregate(self.stats.get(key), whole)
@@ -461,10 +538,10 @@ class Dataset:
                 meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
         meta["success"] = [ep.success for ep in episodes]
 
-        data = commit.staged("data.parquet")
-        self._write_table(self._data_table(columns), data)
-        commit.place(data, _fmt(DATA_PATH, data_at))
-        self._write_table(self._episodes_table(meta), commit.meta_file(_fmt(EPISODES_PATH, meta_at)[5:]))
+        meta_table = self._episodes_table(meta)
+        if meta_last.count:
+            meta_table = self._prepend(meta_table, _fmt(EPISODES_PATH, meta_last.at), meta_last.count)
+        self._write_table(meta_table, commit.meta_file(_fmt(EPISODES_PATH, meta_last.at)[len("meta/"):]))
         if new_tasks:
             self._write_tasks(commit.meta_file("tasks.parquet"))
         self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
@@ -477,8 +554,35 @@ class Dataset:
         self._write_json(info, commit.meta_file("info.json"))
         commit.apply()  # the commit point: `meta/` swapped in whole
         self.info = info
-        self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
+        self._data = _Open(data_last.at, data_last.count + total)
+        self._meta = _Open(meta_last.at, meta_last.count + count)
+        self._videos.update(videos)
+        for ep in episodes:  # now copied into the dataset's files
+            for path in ep.videos.values():
+                path.unlink(missing_ok=True)
         return list(range(first_ep, first_ep + count))
+
+    def _grow(self, last: _Open | None, template: str, limit_mb: float, *, new: int = 0,
+              adding: int | None = None, key: str = "") -> _Open:
+        """Where this commit's part goes: the last file (`count` of it committed) unless its
+        size plus `adding` bytes (by default `new` rows at the file's bytes per row) would
+        reach `limit_mb` (LeRobot's rule), else the next file (nothing of it committed)."""
+        if last is None:
+            return _Open((0, 0), 0)
+        size = os.path.getsize(self.root / _fmt(template, last.at, video_key=key))
+        if adding is None:
+            adding = size * new // max(last.count, 1)
+        if last.count == 0 or (size + adding) / 2**20 < limit_mb:
+            return last
+        return _Open(_next(*last.at), 0)
+
+    def _prepend(self, table: Any, rel: str, count: int) -> Any:
+        """`table` after the first `count` rows of the committed file `rel`."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        old = pq.read_table(self.root / rel).slice(0, count)
+        return pa.concat_tables([old, table.cast(old.schema)])
 
     def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
         import pyarrow as pa

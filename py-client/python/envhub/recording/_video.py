@@ -109,6 +109,48 @@ class EpisodeVideo:
             pass
 
 
+def count_frames(path: Path) -> int:
+    """The video packets (frames) of an MP4, read without decoding."""
+    import av
+
+    with av.open(str(path)) as src:
+        return sum(1 for p in src.demux(src.streams.video[0]) if p.size)
+
+
+def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
+    """Writes the first `frames` frames of each `(mp4, frames)` of `parts`, one after another,
+    into the MP4 `out`: packets are copied (no encoding again) with their times moved on by
+    the frames before them, so part `k` starts at the sum of the earlier parts' frames over
+    `fps`. Parts come from `EpisodeVideo`s (or earlier concatenations) of one camera: the same
+    encoder and settings, no reordered frames, a keyframe first."""
+    import av
+
+    with av.open(str(out), mode="w", format="mp4") as dst:
+        stream = None
+        offset = 0  # frames before this part
+        for path, frames in parts:
+            with av.open(str(path)) as src:
+                s = src.streams.video[0]
+                if stream is None:
+                    stream = dst.add_stream_from_template(s)
+                tb = s.time_base
+                taken = 0
+                for packet in src.demux(s):
+                    if not packet.size or packet.pts is None:
+                        continue
+                    if round(packet.pts * tb * fps) >= frames:
+                        continue
+                    shift = int(round(Fraction(offset, fps) / tb))
+                    packet.pts += shift
+                    packet.dts = packet.pts if packet.dts is None else packet.dts + shift
+                    packet.stream = stream
+                    dst.mux(packet)
+                    taken += 1
+                if taken != frames:
+                    raise ValueError(f"`{path}` holds {taken} frames, {frames} expected")
+            offset += frames
+
+
 class _ChannelStats:
     """Per-channel min, max, mean and std of an episode's frames in [0, 1], as LeRobot keeps
     for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels a side."""

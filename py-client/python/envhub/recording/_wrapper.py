@@ -70,6 +70,11 @@ class RecordEpisodes(VectorWrapper):
     `render()` frames become the video `observation.images.render`. The task text is `task`,
     else the catalog entry's description (envhub envs), else the env's id.
 
+    The files are LeRobot v3's: episodes appended into data, episodes-metadata and video
+    files, each rolled to the next file when it would reach `data_files_size_in_mb` (100,
+    LeRobot's default; the episodes files too) or `video_files_size_in_mb` (200); a value given
+    is written into the dataset's `info.json`.
+
     Episodes are written when they end, `keep="success"` keeping only those whose last
     `success` / `is_success` info is true; an episode a `reset()` cuts short is not written.
     Ended episodes reach the disk within `commit_every` seconds, so a crash loses at most the
@@ -107,6 +112,8 @@ class RecordEpisodes(VectorWrapper):
         max_episodes: int | None = None,
         encode_threads: int | None = None,
         robot_type: str | None = None,
+        data_files_size_in_mb: float | None = None,
+        video_files_size_in_mb: float | None = None,
     ) -> None:
         super().__init__(env)
         require()
@@ -118,6 +125,11 @@ class RecordEpisodes(VectorWrapper):
             raise ValueError(f"`queue_bytes={queue_bytes}` must be at least 1 (a byte budget; default 512 MiB)")
         if encode_threads is not None and encode_threads < 1:
             raise ValueError(f"`encode_threads={encode_threads}` must be at least 1")
+        for name, size in (("data_files_size_in_mb", data_files_size_in_mb),
+                           ("video_files_size_in_mb", video_files_size_in_mb)):
+            if size is not None and not size > 0:
+                raise ValueError(f"`{name}={size}` must be a positive number of MB (LeRobot's default: "
+                                 f"{100 if name.startswith('data') else 200})")
         if codec is not None:
             check_codec(codec)
         self.root = str(root)
@@ -130,6 +142,7 @@ class RecordEpisodes(VectorWrapper):
         self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
         self._codec, self._crf, self._gop = codec, int(crf), int(gop)
         self._queue_bytes, self._commit_every, self._robot_type = int(queue_bytes), float(commit_every), robot_type
+        self._sizes = (data_files_size_in_mb, video_files_size_in_mb)
         self._max_episodes = max_episodes
         self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
         self.stats: dict[str, Any] = {
@@ -206,7 +219,7 @@ class RecordEpisodes(VectorWrapper):
                 },
             }
         features |= INDEX_FEATURES
-        dataset = Dataset(self.root, self.fps, features, self._robot_type)
+        dataset = Dataset(self.root, self.fps, features, self._robot_type, *self._sizes)
         try:
             codec = self._dataset_codec(dataset, codec)
             check_codec(codec)
