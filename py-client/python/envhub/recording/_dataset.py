@@ -1,25 +1,22 @@
 """A LeRobot dataset (v3.0 layout) on disk, appended to in commits, written with pyarrow.
 
-The layout, as LeRobot's loader reads it:
+The layout, as LeRobot's writer makes it and its loader reads it:
 
-    meta/info.json                          fps, features, totals, path templates
+    meta/info.json                          fps, features, totals, path templates, file sizes
     meta/tasks.parquet                      task text -> task_index
     meta/stats.json                         per-feature statistics over every frame
     meta/episodes/chunk-C/file-F.parquet    one row per episode: length, its data and video
-                                            files, its rows in the dataset, its statistics
-    data/chunk-C/file-F.parquet             one row per frame
-    videos/KEY/chunk-C/file-F.mp4           frames of a camera
+                                            files, its rows in the dataset, its time range in
+                                            each video file, its statistics
+    data/chunk-C/file-F.parquet             one row per frame, many episodes per file
+    videos/KEY/chunk-C/file-F.mp4           a camera's frames, many episodes per file
 
-Crash safety: a commit writes new files only (never rewrites data or videos), each under a
-temporary name in `.envhub/` and renamed into place, and `meta/info.json`, whose totals say
-which episodes exist, is renamed into place last. Opening the folder again removes files a
-crash left that `info.json` does not count. LeRobot's loader reads every data file it finds,
-so between the first rename of a commit and the last (a few renames, microseconds) a crash
-leaves files it would read too; the next recording into the folder removes them.
-
-Each commit writes one data file and one episodes file holding every episode it commits, and
-one MP4 per episode and camera (LeRobot's writer concatenates episodes into larger MP4s; that
-would mean rewriting files, which this writer never does).
+A commit appends its episodes to the last data, episodes and video files (or starts the next
+ones when a file would reach `data_files_size_in_mb` / `video_files_size_in_mb`): each such
+file is written anew in the private folder `.envhub/`, the committed rows or frames first,
+and renamed into place; then the new `meta/` is swapped in whole (`_durable.py`). A crash
+before the swap leaves `meta/` describing the last commit, over files that hold it first; the
+next open cuts what was appended past it and removes files no committed episode refers to.
 """
 
 from __future__ import annotations

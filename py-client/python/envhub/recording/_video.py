@@ -132,7 +132,7 @@ def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
             with av.open(str(path)) as src:
                 s = src.streams.video[0]
                 if stream is None:
-                    stream = dst.add_stream_from_template(s)
+                    stream = dst.add_stream_from_template(s, opaque=True)  # no encoder: AV1 decodes with dav1d
                 tb = s.time_base
                 taken = 0
                 for packet in src.demux(s):
