@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from ._durable import Commit, fsync_dir, fsync_file
+from ._stats import NAMES, aggregate, column_stats
 from ._video import concatenate, count_frames
 from .errors import DatasetLayoutError, RecordingError
 
@@ -89,28 +90,6 @@ def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
     return template.format(chunk_index=at[0], file_index=at[1], **kw)
 
 
-def _stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
-    """LeRobot's statistics of a column (`(frames,)` or `(frames, dims)`) per episode (rows
-    `starts[e]` on, `lengths[e]` of them) and over all of it: min, max, mean, std (of shape
-    `(dims,)`, `(1,)` for scalars) and count. Quantiles, which LeRobot's newer writer adds, are
-    left out (its `augment_dataset_quantile_stats` adds them to a dataset)."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.ndim == 1:
-        v = v[:, None]
-    n = lengths[:, None].astype(np.float64)
-    mean = np.add.reduceat(v, starts, axis=0) / n
-    centred = v - np.repeat(mean, lengths, axis=0)
-    per_episode = {
-        "min": np.minimum.reduceat(v, starts, axis=0),
-        "max": np.maximum.reduceat(v, starts, axis=0),
-        "mean": mean,
-        "std": np.sqrt(np.add.reduceat(centred * centred, starts, axis=0) / n),
-        "count": lengths[:, None].astype(np.int64),
-    }
-    whole = {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0), "count": np.array([len(v)])}
-    return per_episode, whole
-
-
 def _nested(values: np.ndarray, leaf: Any) -> Any:
     """`values` of shape `(rows, *dims)` as a pyarrow column of nested lists (one level per
     dim), built from the flat buffer."""
@@ -121,24 +100,6 @@ def _nested(values: np.ndarray, leaf: Any) -> Any:
         offsets = np.arange(0, len(array) + 1, size, dtype=np.int32)
         array = pa.ListArray.from_arrays(pa.array(offsets), array)
     return array
-
-
-def aggregate(a: dict[str, np.ndarray] | None, b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Statistics over the frames of both (LeRobot's `aggregate_feature_stats`: exact mean and
-    std)."""
-    if a is None:
-        return {k: np.asarray(v) for k, v in b.items()}
-    na, nb = float(a["count"][0]), float(b["count"][0])
-    n = na + nb
-    mean = (a["mean"] * na + b["mean"] * nb) / n
-    var = ((a["std"] ** 2 + (a["mean"] - mean) ** 2) * na + (b["std"] ** 2 + (b["mean"] - mean) ** 2) * nb) / n
-    return {
-        "min": np.minimum(a["min"], b["min"]),
-        "max": np.maximum(a["max"], b["max"]),
-        "mean": mean,
-        "std": np.sqrt(var),
-        "count": np.array([int(n)]),
-    }
 
 
 def _layout_problems(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
@@ -524,14 +485,14 @@ class Dataset:
         meta["meta/episodes/chunk_index"] = np.full(count, meta_last.at[0])
         meta["meta/episodes/file_index"] = np.full(count, meta_last.at[1])
         for key, values in columns.items():
-            per_episode, whole = _stats(values, starts, lengths)
+            per_episode, whole = column_stats(values, starts, lengths)
             self.stats[key] = aggregate(self.stats.get(key), whole)
             for name, value in per_episode.items():
                 meta[f"stats/{key}/{name}"] = value
         for key in self.video_keys:
             for ep in episodes:
                 self.stats[key] = aggregate(self.stats.get(key), ep.video_stats[key])
-            for name in ("min", "max", "mean", "std", "count"):
+            for name in NAMES:
                 meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
         meta["success"] = [ep.success for ep in episodes]
 

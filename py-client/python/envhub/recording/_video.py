@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ._stats import level_quantiles
+
 #: Encoder settings per codec: `crf` (quality, lower is better) where the encoder has one.
 CODECS: dict[str, dict[str, str]] = {
     "libx264": {"preset": "veryfast", "tune": "zerolatency"},
@@ -152,33 +154,33 @@ def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
 
 
 class _ChannelStats:
-    """Per-channel min, max, mean and std of an episode's frames in [0, 1], as LeRobot keeps
-    for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels a side."""
+    """Per-channel min, max, mean, std and quantiles of an episode's frames in [0, 1], as
+    LeRobot keeps for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels
+    a side (LeRobot samples frames and shrinks them likewise)."""
 
     def __init__(self) -> None:
-        self.n = 0
-        self.lo = np.full(3, np.inf)
-        self.hi = np.full(3, -np.inf)
-        self.sum = np.zeros(3)
-        self.sumsq = np.zeros(3)
+        self.counts = np.zeros((3, 256), dtype=np.int64)  # pixels by channel and level
 
     def add(self, frame: np.ndarray) -> None:
         step = max(1, max(frame.shape[:2]) // 150)
-        px = frame[::step, ::step].reshape(-1, 3).astype(np.float64) / 255.0
-        self.n += len(px)
-        self.lo = np.minimum(self.lo, px.min(0))
-        self.hi = np.maximum(self.hi, px.max(0))
-        self.sum += px.sum(0)
-        self.sumsq += np.square(px).sum(0)
+        px = frame[::step, ::step].reshape(-1, 3)
+        for c in range(3):
+            self.counts[c] += np.bincount(px[:, c], minlength=256)
 
     def result(self, frames: int) -> dict[str, Any]:
-        mean = self.sum / max(self.n, 1)
-        std = np.sqrt(np.maximum(self.sumsq / max(self.n, 1) - mean**2, 0.0))
+        levels = np.arange(256) / 255.0
+        n = np.maximum(self.counts.sum(1), 1)
+        mean = (self.counts * levels).sum(1) / n
+        std = np.sqrt(np.maximum((self.counts * levels**2).sum(1) / n - mean**2, 0.0))
+        seen = self.counts > 0
+        lo = np.array([levels[np.flatnonzero(s)[0]] if s.any() else 0.0 for s in seen])
+        hi = np.array([levels[np.flatnonzero(s)[-1]] if s.any() else 0.0 for s in seen])
         shape = (3, 1, 1)
         return {
-            "min": self.lo.reshape(shape),
-            "max": self.hi.reshape(shape),
+            "min": lo.reshape(shape),
+            "max": hi.reshape(shape),
             "mean": mean.reshape(shape),
             "std": std.reshape(shape),
             "count": np.array([frames]),
+            **level_quantiles(self.counts, frames),
         }
