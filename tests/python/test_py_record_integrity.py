@@ -586,3 +586,99 @@ def test_quantiles_as_lerobot_computes_them_kept_on_append(tmp_path):
     assert result["episodes"] == 8 and result["worst_relative"] < 1e-9, result
     stats = json.loads((root / "meta/stats.json").read_text())
     assert {"q01", "q10", "q50", "q90", "q99"} <= set(stats["observation.state"])
+
+
+# Dataset scale: 10,000 episodes, two cameras, a DataLoader under 1,024 open files ---------------
+
+
+def _two_cameras(env):
+    """envhub's `null` env (an image observation filled with its step count; no simulation)
+    seen as a Dict observation: a state and two cameras."""
+    import gymnasium
+    from gymnasium import spaces
+
+    class TwoCameras(gymnasium.vector.VectorObservationWrapper):
+        def __init__(self, env):
+            super().__init__(env)
+            image = env.single_observation_space
+            self.single_observation_space = spaces.Dict({
+                "state": spaces.Box(-np.inf, np.inf, (2,), np.float32),
+                "front": image,
+                "wrist": image,
+            })
+            self.observation_space = gymnasium.vector.utils.batch_space(self.single_observation_space, env.num_envs)
+
+        def observations(self, obs):
+            level = obs[:, 0, 0, 0].astype(np.float32)
+            return {"state": np.stack([level, -level], axis=1), "front": obs, "wrist": 255 - obs}
+
+    return TwoCameras(env)
+
+
+LEROBOT_DATALOADER = textwrap.dedent(
+    """\
+    # In LeRobot's interpreter, under a limit of 1,024 open files: random access to the whole
+    # dataset through a DataLoader with 4 workers.
+    import json, resource, sys, time
+    import torch
+    from ledataset.datasets.lerobot_dataset import LeRobotDataset
+
+    resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
+    ds = LeRobotDataset("envhub/scale", root=sys.argv[1])
+    samples = int(sys.argv[2])
+    g = torch.Generator().manual_seed(0)
+    sampler = torch.utils.data.RandomSampler(ds, num_samples=samples, generator=g)
+    loader = torch.utils.data.DataLoader(ds, batch_size=16, num_workers=4, sampler=sampler)
+    start, seen, wrong = time.monotonic(), 0, 0
+    for batch in loader:
+        seen += len(batch["index"])
+        # The front camera shows the step count (constant frames), the state holds it too.
+        level = batch["observation.state"][:, 0]
+        front = (batch["observation.images.front"][:, 0, 0, 0] * 255).round()
+        wrong += int(((front - level).abs() > 3).sum())
+    print(json.dumps({"frames": len(ds), "episodes": ds.num_episodes, "seen": seen, "wrong": wrong,
+                      "seconds": time.monotonic() - start}))
+    """
+)
+
+
+def test_ten_thousand_episodes_two_cameras_and_a_dataloader(tmp_path, null_registry):
+    """10,000 episodes of two steps with two 16x16 cameras: a handful of files (what LeRobot's
+    writer makes: one data file, one episodes file, one MP4 per camera); LeRobot's loader
+    samples it at random through a `DataLoader` with 4 workers while the process may open
+    only 1,024 files."""
+    import subprocess
+
+    from test_py_record import lerobot_python
+
+    python = lerobot_python()
+    os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
+    env = envhub.make_vec("null-env", 64, num_workers=2, registry=null_registry, frame=[16, 16, 3],
+                          max_episode_steps=2)
+    root = tmp_path / "scale"
+    rec = envhub.RecordEpisodes(_two_cameras(env), str(root), fps=30, task="nothing", max_episodes=10_000)
+    try:
+        rec.reset(seed=0)
+        actions = np.zeros(64, np.int64)
+        for _ in range(600):
+            rec.step(actions)
+            if rec.stats["episodes_kept"] >= 10_000:
+                break
+    finally:
+        rec.close()
+    assert rec.stats["episodes_written"] == 10_000
+    assert _files(root) == [
+        "data/chunk-000/file-000.parquet",
+        "meta/episodes/chunk-000/file-000.parquet",
+        "meta/info.json",
+        "meta/stats.json",
+        "meta/tasks.parquet",
+        "videos/observation.images.front/chunk-000/file-000.mp4",
+        "videos/observation.images.wrist/chunk-000/file-000.mp4",
+    ], _files(root)
+    script = tmp_path / "loader.py"
+    script.write_text(LEROBOT_DATALOADER)
+    proc = subprocess.run([python, str(script), str(root), "2000"], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result == {**result, "frames": 20_000, "episodes": 10_000, "seen": 2000, "wrong": 0}, result

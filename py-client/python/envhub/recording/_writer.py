@@ -4,7 +4,8 @@ It keeps every column time-major (`(steps, envs, ...)`, one copy per step, whate
 number of envs) from the oldest step of an episode in flight, encodes each env's camera frames
 into that episode's MP4 as they arrive, and when an env's episode ends cuts its rows out with
 one slice per column. Ended episodes are committed together, at most every `commit_every`
-seconds and when the recorder closes.
+seconds (or four times as long as the last commit took, if longer) and when the recorder
+closes.
 """
 
 from __future__ import annotations
@@ -133,6 +134,7 @@ class Writer:
         self._threads = threads
         self._pending: list[Episode] = []
         self._last_commit = time.monotonic()
+        self._interval = commit_every  # until a commit: `commit_every`, or 4x the last commit's time
         self._serial = 0
         self.thread = threading.Thread(target=self._run, name="envhub-recorder", daemon=True)
         self.thread.start()
@@ -142,7 +144,7 @@ class Writer:
     def _run(self) -> None:
         try:
             while True:
-                wait = max(0.0, self.commit_every - (time.monotonic() - self._last_commit))
+                wait = max(0.0, self._interval - (time.monotonic() - self._last_commit))
                 try:
                     item, nbytes = self.queue.get(timeout=wait if self._pending else None)
                 except queue.Empty:
@@ -160,7 +162,7 @@ class Writer:
                 finally:
                     del item  # its arrays, before the budget says they are gone
                     self.queue.done(nbytes)
-                if self._pending and time.monotonic() - self._last_commit >= self.commit_every:
+                if self._pending and time.monotonic() - self._last_commit >= self._interval:
                     self._commit()
             self._commit()
         except BaseException as e:  # reported by the recorder on its next call
@@ -281,11 +283,15 @@ class Writer:
         self.stats["episodes_kept"] += 1
 
     def _commit(self) -> None:
+        start = time.monotonic()
         if self._pending:
             pending, self._pending = self._pending, []
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
         self._last_commit = time.monotonic()
+        # A commit writes the last files anew (up to their size): spacing commits by four
+        # times that keeps committing under a fifth of the writer's time as files grow.
+        self._interval = max(self.commit_every, 4 * (self._last_commit - start))
 
 
 def _encode_frames(job: list[tuple[EpisodeVideo, np.ndarray]]) -> None:
