@@ -77,8 +77,9 @@ class RecordEpisodes(VectorWrapper):
 
     Episodes are written when they end, `keep="success"` keeping only those whose last
     `success` / `is_success` info is true; an episode a `reset()` cuts short is not written.
-    Ended episodes reach the disk within `commit_every` seconds, so a crash loses at most the
-    episodes in flight and those, and never leaves a dataset that does not load.
+    Ended episodes reach the disk within `commit_every` seconds (or four times as long as the
+    last commit took, if longer), so a crash loses at most the episodes in flight and those,
+    and never leaves a dataset that does not load.
 
     Stepping is not blocked by the disk or the encoder: steps go through a queue of at most
     `queue_bytes` (512 MiB by default; counting the step being written) to a writer thread. If it is full, `when_full="wait"` makes the step wait and
