@@ -1,0 +1,100 @@
+"""Suite environments that installs can share and that stay out of each other's way, on
+Meta-World's environment (the cheapest real suite), built into a cache folder of this module's
+own with `envhub env sync metaworld`.
+
+- The hub's `PYTHONPATH`, `PYTHONHOME`, `VIRTUAL_ENV` and current folder (a broken `numpy`
+  in it) do not reach a suite's worker.
+
+Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
+failure.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+from conftest import import_envhub
+
+envhub = import_envhub()
+
+from envhub._cli import BINARY  # noqa: E402
+
+REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
+# A cold build of Meta-World's environment took seconds here; the bound is for slow networks.
+SYNC_TIMEOUT_S = 600
+RUN_TIMEOUT_S = 180
+ENTRY = "metaworld-reach"
+
+
+def skip_or_fail(reason: str) -> None:
+    if REQUIRED:
+        pytest.fail(f"{reason}, and ENVHUB_PYENV_REQUIRED is set")
+    pytest.skip(reason)
+
+
+def cli(
+    *args: str,
+    cache: Path,
+    binary: Path = BINARY,
+    env: dict[str, str] | None = None,
+    cwd: Path | None = None,
+    prefix: list[str] | None = None,
+    timeout: float = RUN_TIMEOUT_S,
+) -> subprocess.CompletedProcess:
+    """`envhub ARGS` with the cache folder `cache`."""
+    return subprocess.run(
+        [*(prefix or []), str(binary), *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+        env={**os.environ, "ENVHUB_PYENV_DIR": str(cache), **(env or {})},
+    )
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A cache folder with Meta-World's environment built in it."""
+    if not BINARY.is_file():
+        skip_or_fail(f"{BINARY} is not built; run `make py-install`")
+    folder = tmp_path_factory.mktemp("shared") / "pyenvs"
+    out = cli("env", "sync", "metaworld", cache=folder, timeout=SYNC_TIMEOUT_S)
+    if out.returncode != 0:
+        skip_or_fail(f"`envhub env sync metaworld` failed: {out.stderr.strip()[-2000:]}")
+    return folder
+
+
+def ran(out: subprocess.CompletedProcess, steps: int = 10) -> None:
+    assert out.returncode == 0, out.stderr[-4000:]
+    assert f"{ENTRY}: {steps} steps" in out.stdout, out.stdout
+
+
+def broken_numpy(folder: Path) -> Path:
+    """A folder holding a `numpy` that fails at import."""
+    (folder / "numpy").mkdir(parents=True)
+    (folder / "numpy" / "__init__.py").write_text('raise ImportError("the fake numpy of a test")\n')
+    return folder
+
+
+def test_the_hubs_python_variables_and_folder_do_not_reach_a_suites_worker(cache: Path, tmp_path: Path) -> None:
+    shadow = broken_numpy(tmp_path / "shadow")
+    out = cli(
+        "run",
+        ENTRY,
+        "--num-envs",
+        "2",
+        "--steps",
+        "10",
+        cache=cache,
+        cwd=shadow,  # `python -m` would put it first on `sys.path`
+        env={
+            "PYTHONPATH": str(shadow),
+            "PYTHONHOME": str(tmp_path / "no-such-home"),
+            "VIRTUAL_ENV": str(tmp_path / "another-venv"),
+        },
+    )
+    ran(out)
