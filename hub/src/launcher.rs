@@ -181,7 +181,11 @@ pub(crate) fn launch_local(
                     crate::bounded::seconds(EXIT_AFTER_ERROR)
                 );
             }
-            Err(HubError::MakeFailed(message))
+            Err(HubError::MakeFailed(match &job.python {
+                // The suite's own packages raised: say in which environment.
+                Some(env) => format!("in python env `{}`: {message}", env.name),
+                None => message,
+            }))
         }
         Err(why) => {
             let _ = child.kill();

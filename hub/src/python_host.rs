@@ -224,14 +224,19 @@ fn bootstrap(front: &[PathBuf], after: &[PathBuf]) -> String {
     )
 }
 
-/// The Python-hosted adapters built into the `envhub` package, reported unavailable when
-/// the interpreter cannot describe them (so `envhub adapters` still says why).
-pub(crate) const BUILTIN: &[(&str, &str)] = &[
-    ("gymnasium", "gymnasium"),
-    ("maniskill", "maniskill"),
-    ("libero", "libero"),
-    ("isaac_lab", "isaac_lab"),
-    ("env_fns", "env_fns"),
+/// The Python-hosted adapters built into the `envhub` package (`envhub.hosted.BUILTIN`) and
+/// their frameworks, reported unavailable when the interpreter cannot describe them: a
+/// suite whose worker cannot start then says why, not that its framework is unknown.
+pub(crate) const BUILTIN: &[(&str, &[&str])] = &[
+    ("gymnasium", &["gymnasium"]),
+    ("maniskill", &["maniskill"]),
+    ("libero", &["libero"]),
+    ("isaac_lab", &["isaac_lab"]),
+    ("metaworld", &["metaworld", "meta_world"]),
+    ("robosuite", &["robosuite"]),
+    ("dm_control", &["dm_control", "dmc", "shimmy"]),
+    ("myosuite", &["myosuite"]),
+    ("env_fns", &["env_fns"]),
 ];
 
 #[cfg(test)]

@@ -4,6 +4,8 @@ own with `envhub env sync metaworld`.
 
 - The hub's `PYTHONPATH`, `PYTHONHOME`, `VIRTUAL_ENV` and current folder (a broken `numpy`
   in it) do not reach a suite's worker.
+- A suite whose worker cannot start says why, with Python's error and the environment's
+  name, not that its framework is unknown.
 
 Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
 failure.
@@ -16,7 +18,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import import_envhub
+import yaml
+from conftest import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 
@@ -98,3 +101,27 @@ def test_the_hubs_python_variables_and_folder_do_not_reach_a_suites_worker(cache
         },
     )
     ran(out)
+
+
+def catalog_metaworld() -> dict:
+    with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
+        catalog = yaml.safe_load(f)
+    entry = next(e for e in catalog["environments"] if e["id"] == ENTRY)
+    return {"spec": catalog["python_envs"]["metaworld"], "entry": entry}
+
+
+def test_a_suite_whose_worker_cannot_start_names_the_error_and_the_environment(cache: Path, tmp_path: Path) -> None:
+    shadow = broken_numpy(tmp_path / "declared")
+    found = catalog_metaworld()
+    # The same requirements (hence the same venv), with a `PYTHONPATH` the environment itself
+    # declares: its workers honour it, and cannot import numpy.
+    spec = {**found["spec"], "env": {**found["spec"].get("env", {}), "PYTHONPATH": str(shadow)}}
+    registry = tmp_path / "registry.yaml"
+    registry.write_text(
+        yaml.safe_dump({"python_envs": {"metaworld": spec}, "environments": [{**found["entry"], "python_env": "metaworld"}]})
+    )
+    out = cli("--registry", str(registry), "run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache)
+    assert out.returncode != 0
+    assert "python env `metaworld`" in out.stderr, out.stderr
+    assert "ImportError: the fake numpy of a test" in out.stderr, out.stderr
+    assert "unknown framework" not in out.stderr, out.stderr
