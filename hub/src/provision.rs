@@ -154,12 +154,14 @@ pub(crate) fn worker_python(
             .map_err(|e| failed(format!("{e:#}")))?
     } else {
         let plan = store.plan(name, spec).map_err(|e| failed(e.to_string()))?;
-        store.ready(&plan).ok_or_else(|| {
+        let env = store.ready(&plan).ok_or_else(|| {
             failed(format!(
                 "python env `{name}` (for `{}`) is not provisioned\nhint: {refused_hint}",
                 entry.id
             ))
-        })?
+        })?;
+        store.used(&env);
+        env
     };
     Ok(Some(WorkerPython {
         name: env.name,

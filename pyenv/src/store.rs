@@ -252,7 +252,7 @@ impl Store {
     pub fn ensure(&self, name: &str, spec: &PythonEnvSpec) -> Result<PythonEnv, PyEnvError> {
         let plan = self.plan(name, spec)?;
         if let Some(env) = self.ready(&plan) {
-            self.used(&env)?;
+            self.used(&env);
             return Ok(env);
         }
         std::fs::create_dir_all(&self.root).map_err(io(name, "create", &self.root))?;
@@ -272,13 +272,13 @@ impl Store {
             }
         })?;
         if let Some(env) = self.ready(&plan) {
-            self.used(&env)?;
+            self.used(&env);
             return Ok(env); // built by the process we waited for
         }
         self.clear_leftovers(&plan)?;
         let mut env = self.build(&plan)?;
         env.built = true;
-        self.used(&env)?;
+        self.used(&env);
         Ok(env)
     }
 
@@ -356,15 +356,21 @@ impl Store {
         Ok(removed)
     }
 
-    fn used(&self, env: &PythonEnv) -> Result<(), PyEnvError> {
+    /// Records that `env` was used, for `prune`. Best effort: a read-only cache (a CI image
+    /// built with `envhub env sync`) serves sessions all the same.
+    pub fn used(&self, env: &PythonEnv) {
         let now = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .unwrap_or_default()
             .as_secs();
         let path = env.dir.join(LAST_USE);
-        std::fs::write(&path, format!("{now}\n")).map_err(io(&env.name, "write", &path))?;
+        if let Err(e) = std::fs::write(&path, format!("{now}\n")) {
+            tracing::debug!(path = %path.display(), "cannot record the last use: {e}");
+        }
         // Re-pointed where the packages moved (another checkout, a reinstalled wheel).
-        link_packages(&env.name, &env.dir, &self.packages)
+        if let Err(e) = link_packages(&env.name, &env.dir, &self.packages) {
+            tracing::debug!("{e}");
+        }
     }
 
     fn clear_leftovers(&self, plan: &Plan) -> Result<(), PyEnvError> {

@@ -6,6 +6,7 @@ own with `envhub env sync metaworld`.
   in it) do not reach a suite's worker.
 - A suite whose worker cannot start says why, with Python's error and the environment's
   name, not that its framework is unknown.
+- A cache made read-only after `sync` (a CI image) still serves sessions.
 
 Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
 failure.
@@ -14,6 +15,7 @@ failure.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -125,3 +127,28 @@ def test_a_suite_whose_worker_cannot_start_names_the_error_and_the_environment(c
     assert "python env `metaworld`" in out.stderr, out.stderr
     assert "ImportError: the fake numpy of a test" in out.stderr, out.stderr
     assert "unknown framework" not in out.stderr, out.stderr
+
+
+def read_only(folder: Path) -> list[str]:
+    """A command prefix that runs its command with `folder` read-only: as root, who ignores
+    file modes, on a read-only bind mount in a mount namespace of its own; else after
+    `chmod -R a-w` (undone by the caller)."""
+    if os.geteuid() != 0:
+        subprocess.run(["chmod", "-R", "a-w", str(folder)], check=True)
+        return []
+    probe = subprocess.run(["unshare", "-m", "true"], check=False, capture_output=True)
+    if probe.returncode != 0 or not shutil.which("unshare"):
+        pytest.skip(f"running as root, and no mount namespace to make the cache read-only in: {probe.stderr!r}")
+    script = 'mount --bind "$0" "$0" && mount -o remount,bind,ro "$0" "$0" && exec "$@"'
+    return ["unshare", "-m", "sh", "-c", script, str(folder)]
+
+
+def test_a_read_only_cache_serves_sessions(cache: Path) -> None:
+    prefix = read_only(cache)
+    try:
+        ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix))
+        denied = subprocess.run([*prefix, "touch", str(cache / "probe")], check=False, capture_output=True)
+        assert denied.returncode != 0, "the cache was writable: the test proves nothing"
+    finally:
+        if not prefix:
+            subprocess.run(["chmod", "-R", "u+w", str(cache)], check=True)
