@@ -163,10 +163,15 @@ pub(crate) fn worker_python(
         store.used(&env);
         env
     };
+    // This install's own way into the venv: its overlay, never a link another install
+    // re-points.
+    let overlay = store.overlay(name).map_err(|e| failed(e.to_string()))?;
     Ok(Some(WorkerPython {
         name: env.name,
         interpreter: env.python,
         env: env.env,
+        sys_path: vec![overlay],
+        package: store.packages().first().cloned(),
     }))
 }
 

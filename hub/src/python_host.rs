@@ -5,7 +5,7 @@
 //! `envhub-worker`). The hub asks that module what it hosts (`describe`), as it asks the
 //! Rust worker binary, and starts it with `serve --job` for the adapters it reported.
 
-use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON};
+use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON, ENVHUB_WORKER_PROTOCOL};
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -161,6 +161,11 @@ pub(crate) fn worker_command_in(
     if !adapters.is_empty() {
         cmd.env(ENVHUB_ADAPTERS, adapters.join(","));
     }
+    // The worker refuses to serve a hub that speaks another protocol.
+    cmd.env(
+        ENVHUB_WORKER_PROTOCOL,
+        envhub_shm::WORKER_PROTOCOL.to_string(),
+    );
     cmd
 }
 
@@ -200,7 +205,7 @@ fn provisioned_command(
         after.extend(UserAdapters::of_this_process().pythonpath);
         after.extend(extra.pythonpath.iter().cloned());
     }
-    cmd.arg("-c").arg(bootstrap(&[], &unique(after)));
+    cmd.arg("-c").arg(bootstrap(&env.sys_path, &unique(after)));
     cmd
 }
 
@@ -278,6 +283,8 @@ mod tests {
             name: "suite".into(),
             interpreter: "/cache/suite-0123/bin/python".into(),
             env: [("MUJOCO_GL".to_string(), "egl".to_string())].into(),
+            sys_path: vec!["/cache/.installs/00aa".into()],
+            package: None,
         };
         let cmd = worker_command_in(Some(&env), &UserAdapters::default());
         let var = |name: &str| {
@@ -302,6 +309,7 @@ mod tests {
             .map(|a| a.to_string_lossy().into_owned())
             .collect();
         assert_eq!(args[0], "-c", "{args:?}");
+        assert!(args[1].contains(r#"sys.path[:0] = ["/cache/.installs/00aa"]"#));
         assert!(
             args[1].contains("del sys.path[0]") && args[1].contains("envhub.worker"),
             "{}",

@@ -2,15 +2,15 @@
 //!
 //! Layout of `<root>`: `<name>-<key>/` a ready venv (its `envhub-env.json` manifest written
 //! before the folder got its name), `<name>-<key>.lock` its build lock, `.tmp-<name>-<key>-*`
-//! a build in progress or one that was interrupted (cleared by the next build of that key).
-//! A build happens in the temporary folder and is renamed into place only once everything
+//! a build in progress or one that was interrupted (cleared by the next build of that key),
+//! `.installs/<hash>/` one install's overlay (see [`Store::overlay`]). A build happens in the temporary folder and is renamed into place only once everything
 //! succeeded, so nothing half-installed is ever found ready.
 
 use crate::error::{PyEnvError, io};
 use crate::interpreter::{self, Interpreter};
 use crate::lock;
 use crate::uv;
-use envhub_catalog::{PythonEnvSpec, parse_version, valid_name};
+use envhub_catalog::{PythonEnvSpec, fnv1a64, parse_version, valid_name};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -42,6 +42,8 @@ pub struct Manifest {
 
 const MANIFEST: &str = "envhub-env.json";
 const LAST_USE: &str = ".envhub-last-use";
+/// The folder of the installs' overlays in the cache folder.
+const INSTALLS: &str = ".installs";
 
 /// An environment ready to run workers.
 #[derive(Clone, Debug, PartialEq)]
@@ -108,6 +110,7 @@ pub struct Store {
     from_uv: OnceLock<Vec<Interpreter>>,
     merged: OnceLock<Vec<Interpreter>>,
     default_version: OnceLock<Option<String>>,
+    overlay: OnceLock<PathBuf>,
 }
 
 impl Store {
@@ -126,6 +129,7 @@ impl Store {
             from_uv: OnceLock::new(),
             merged: OnceLock::new(),
             default_version: OnceLock::new(),
+            overlay: OnceLock::new(),
         }
     }
 
@@ -136,8 +140,8 @@ impl Store {
         self
     }
 
-    /// Python package folders (`.../envhub`) linked into every environment's
-    /// `site-packages`, and imported once after a build as its check.
+    /// Python package folders (`.../envhub`) every environment's workers import, through
+    /// this install's [`overlay`](Store::overlay) (and once after a build, as its check).
     pub fn with_packages(mut self, packages: Vec<PathBuf>) -> Store {
         self.packages = packages;
         self
@@ -290,6 +294,7 @@ impl Store {
         let mut found: Vec<Stored> = read
             .flatten()
             .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+            .filter(|e| e.file_name() != INSTALLS)
             .map(|e| {
                 let dir = e.path();
                 Stored {
@@ -367,10 +372,51 @@ impl Store {
         if let Err(e) = std::fs::write(&path, format!("{now}\n")) {
             tracing::debug!(path = %path.display(), "cannot record the last use: {e}");
         }
-        // Re-pointed where the packages moved (another checkout, a reinstalled wheel).
-        if let Err(e) = link_packages(&env.name, &env.dir, &self.packages) {
-            tracing::debug!("{e}");
+    }
+
+    /// The package folders every environment's workers import (envhub's own).
+    pub fn packages(&self) -> &[PathBuf] {
+        &self.packages
+    }
+
+    /// This install's overlay: the folder its workers put first on `sys.path`, holding one
+    /// link per package (`envhub` → this install's package folder) and nothing else. Keyed
+    /// by the packages' paths, so each install (a checkout, a wheel) has its own, and none
+    /// re-points a link another one's workers follow. In `<root>/.installs/`, or in the
+    /// temporary folder where the cache is read-only.
+    pub fn overlay(&self, name: &str) -> Result<PathBuf, PyEnvError> {
+        if let Some(dir) = self.overlay.get() {
+            return Ok(dir.clone());
         }
+        let text: String = self
+            .packages
+            .iter()
+            .map(|p| format!("{}\n", p.display()))
+            .collect();
+        let key = format!("{:016x}", fnv1a64(text.as_bytes()));
+        let in_cache = self.root.join(INSTALLS).join(&key);
+        let dir = match fill_overlay(&in_cache, &self.packages) {
+            Ok(()) => in_cache,
+            Err(e) => {
+                // SAFETY: `getuid` cannot fail and touches no memory.
+                let uid = unsafe { libc::getuid() };
+                let elsewhere = std::env::temp_dir()
+                    .join(format!("envhub-{uid}-installs"))
+                    .join(&key);
+                tracing::debug!(
+                    "cannot make the overlay `{}` ({e}); using `{}`",
+                    in_cache.display(),
+                    elsewhere.display()
+                );
+                fill_overlay(&elsewhere, &self.packages).map_err(io(
+                    name,
+                    "make the overlay folder",
+                    &elsewhere,
+                ))?;
+                elsewhere
+            }
+        };
+        Ok(self.overlay.get_or_init(|| dir).clone())
     }
 
     fn clear_leftovers(&self, plan: &Plan) -> Result<(), PyEnvError> {
@@ -489,17 +535,20 @@ impl Store {
             uv::run(bare, every, progress("installing without dependencies"))
                 .map_err(|uv::Failed(m)| failed("`uv pip install --no-deps`", m))?;
         }
-        link_packages(name, tmp, &self.packages)?;
         if !self.packages.is_empty() {
+            let overlay = self.overlay(name)?;
             let modules: Vec<String> = self
                 .packages
                 .iter()
                 .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
                 .collect();
             let mut check = Command::new(&python);
-            check
-                .arg("-c")
-                .arg(format!("import {}", modules.join(", ")));
+            // As its workers will: through this install's overlay.
+            check.arg("-c").arg(format!(
+                "import sys; sys.path.insert(0, {:?}); import {}",
+                overlay.display().to_string(),
+                modules.join(", ")
+            ));
             uv::run(check, every, |_| {}).map_err(|uv::Failed(m)| {
                 failed(
                     "importing envhub's worker package in the new env",
@@ -538,40 +587,26 @@ fn read_manifest(dir: &Path) -> Option<Manifest> {
     serde_json::from_str(&text).ok()
 }
 
-/// Links each package folder into the venv's `site-packages` (replacing a stale link
-/// atomically: a link beside it, renamed over it).
-fn link_packages(name: &str, venv: &Path, packages: &[PathBuf]) -> Result<(), PyEnvError> {
-    if packages.is_empty() {
-        return Ok(());
-    }
-    let lib = venv.join("lib");
-    let site = std::fs::read_dir(&lib)
-        .map_err(io(name, "read", &lib))?
-        .flatten()
-        .map(|e| e.path().join("site-packages"))
-        .find(|p| p.is_dir())
-        .ok_or_else(|| PyEnvError::Io {
-            name: name.to_string(),
-            what: "find site-packages in",
-            path: lib.clone(),
-            source: std::io::ErrorKind::NotFound.into(),
-        })?;
+/// Makes `dir` hold one link per package folder (`envhub` → the package), where it does
+/// not already; a link is replaced atomically (made beside it, renamed over it).
+fn fill_overlay(dir: &Path, packages: &[PathBuf]) -> std::io::Result<()> {
     for package in packages {
         let Some(file_name) = package.file_name() else {
             continue;
         };
-        let link = site.join(file_name);
+        let link = dir.join(file_name);
         if std::fs::read_link(&link).is_ok_and(|target| &target == package) {
             continue;
         }
-        let tmp = site.join(format!(
+        std::fs::create_dir_all(dir)?;
+        let tmp = dir.join(format!(
             ".{}-{}.link",
             file_name.to_string_lossy(),
             std::process::id()
         ));
         let _ = std::fs::remove_file(&tmp);
-        std::os::unix::fs::symlink(package, &tmp).map_err(io(name, "link", &tmp))?;
-        std::fs::rename(&tmp, &link).map_err(io(name, "link", &link))?;
+        std::os::unix::fs::symlink(package, &tmp)?;
+        std::fs::rename(&tmp, &link)?;
     }
     Ok(())
 }

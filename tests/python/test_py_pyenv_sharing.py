@@ -7,6 +7,10 @@ own with `envhub env sync metaworld`.
 - A suite whose worker cannot start says why, with Python's error and the environment's
   name, not that its framework is unknown.
 - A cache made read-only after `sync` (a CI image) still serves sessions.
+- Two installs (two copies of the package, their code told apart by a marker) sharing the
+  cache: each one's workers run its own code — the package their ready line reports, the
+  `_envhub` they map — while the other uses the environment, and after a restart.
+- A worker refuses a hub of another worker protocol, naming both.
 
 Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
 failure.
@@ -14,9 +18,12 @@ failure.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -152,3 +159,133 @@ def test_a_read_only_cache_serves_sessions(cache: Path) -> None:
     finally:
         if not prefix:
             subprocess.run(["chmod", "-R", "u+w", str(cache)], check=True)
+
+
+def install_copy(folder: Path, marker: str) -> Path:
+    """A copy of this checkout's `envhub` package in `folder` (hard links where possible: the
+    binaries are large), with a marker of its own in its `__init__.py`."""
+    source = Path(envhub.__file__).parent
+
+    def link_or_copy(src: str, dst: str) -> None:
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copy2(src, dst)
+
+    target = folder / "envhub"
+    shutil.copytree(source, target, copy_function=link_or_copy, ignore=shutil.ignore_patterns("__pycache__"))
+    init = target / "__init__.py"
+    text = init.read_text()
+    init.unlink()  # a new file, not the hard-linked original
+    init.write_text(f"{text}\n_INSTALL_MARKER = {marker!r}\n")
+    return target
+
+
+CLIENT = textwrap.dedent(
+    """\
+    import json, os, signal, sys, time
+    import numpy as np
+    import envhub
+
+    def worker():
+        # The living worker (the session's pid list is the first one's).
+        for task in os.listdir("/proc/self/task"):
+            for pid in open(f"/proc/self/task/{task}/children").read().split():
+                if b"envhub.worker" in open(f"/proc/{pid}/cmdline", "rb").read():
+                    return int(pid)
+
+    def report(envs):
+        pid = worker()
+        with open(f"/proc/{pid}/maps") as f:
+            libs = sorted({l.split()[-1] for l in f if l.rstrip().endswith("_envhub.abi3.so")})
+        print(json.dumps({"pid": pid, "libs": libs, "marker": envhub._INSTALL_MARKER}), flush=True)
+
+    action = np.zeros((1, 4), dtype=np.float32)
+    envs = envhub.make_vec("metaworld-reach", 1, restart_on_crash=True)
+    envs.reset(seed=0)
+    envs.step(action)
+    report(envs)
+    sys.stdin.readline()  # the other install has used the environment meanwhile
+    os.kill(worker(), signal.SIGKILL)
+    envs.step(action)  # restarts the worker
+    envs.step(action)
+    report(envs)
+    envs.close()
+    """
+)
+
+
+def start_client(package: Path, cache: Path, log: Path) -> subprocess.Popen:
+    """A client process of the install `package`, its hub logging what its workers report."""
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(package.parent),
+        "ENVHUB_PYENV_DIR": str(cache),
+        "ENVHUB_LOG": "warn,envhub::launcher=debug",
+    }
+    env.pop("ENVHUB_PYTHON", None)
+    return subprocess.Popen(
+        [sys.executable, "-c", CLIENT],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=log.open("w"),
+        text=True,
+        env=env,
+        cwd=package.parent,
+    )
+
+
+def reported_packages(log: Path) -> list[str]:
+    """The packages the workers' ready lines named, as the hub logged them."""
+    import re
+
+    return re.findall(r'module: "([^"]+)"', log.read_text())
+
+
+def test_two_installs_sharing_the_cache_each_run_their_own_code(cache: Path, tmp_path: Path) -> None:
+    installs = {m: install_copy(tmp_path / m, m) for m in ("first", "second")}
+    logs = {m: tmp_path / f"{m}.log" for m in installs}
+    first = start_client(installs["first"], cache, logs["first"])
+    try:
+        line = first.stdout.readline()
+        assert line, logs["first"].read_text()[-3000:]
+        before = json.loads(line)
+        # The second install opens and closes a session of the same environment meanwhile.
+        second = start_client(installs["second"], cache, logs["second"])
+        out, _ = second.communicate("\n", timeout=RUN_TIMEOUT_S)
+        assert second.returncode == 0, logs["second"].read_text()[-3000:]
+        second_reports = [json.loads(line) for line in out.splitlines()]
+        out, _ = first.communicate("\n", timeout=RUN_TIMEOUT_S)
+        assert first.returncode == 0, logs["first"].read_text()[-3000:]
+        after = json.loads(out.splitlines()[-1])
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert after["pid"] != before["pid"], "the worker was not restarted"
+    for marker, reports in (("first", [before, after]), ("second", second_reports)):
+        package = installs[marker]
+        for r in reports:
+            assert r["marker"] == marker
+            assert r["libs"] == [str(package / "_envhub.abi3.so")], (marker, r)
+        told = reported_packages(logs[marker])
+        assert len(told) == len(reports) and all(os.path.realpath(t) == str(package) for t in told), (marker, told)
+    # Nothing in the venv was re-pointed at an install.
+    site = next(cache.glob("metaworld-*/lib/python*/site-packages"))
+    assert not (site / "envhub").exists()
+
+
+def test_a_worker_refuses_a_hub_of_another_protocol(tmp_path: Path) -> None:
+    package = Path(envhub.__file__).parent
+    out = subprocess.run(
+        [sys.executable, "-m", "envhub.worker", "describe"],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(package.parent), "ENVHUB_WORKER_PROTOCOL": "999"},
+    )
+    assert out.returncode != 0
+    own = envhub._envhub.WORKER_PROTOCOL
+    assert f"speaks envhub worker protocol {own}" in out.stderr, out.stderr
+    assert "the hub that started it speaks 999" in out.stderr and str(package) in out.stderr, out.stderr
