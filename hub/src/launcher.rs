@@ -125,6 +125,14 @@ pub(crate) fn launch_local(
 ) -> Result<(Child, ReadySpec), HubError> {
     // A job in a provisioned environment runs in its interpreter, whatever hosts the adapter
     // in the hub's.
+    if let Some(env) = &job.python
+        && !env.interpreter.exists()
+    {
+        return Err(HubError::PythonEnv {
+            name: env.name.clone(),
+            message: crate::python_host::removed_message(env),
+        });
+    }
     let host = match &job.python {
         Some(_) => Host::Python,
         None => crate::catalog::host_of(&job.adapter, user),

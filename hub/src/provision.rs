@@ -167,11 +167,12 @@ pub(crate) fn worker_python(
     // re-points.
     let overlay = store.overlay(name).map_err(|e| failed(e.to_string()))?;
     Ok(Some(WorkerPython {
+        sys_path: vec![overlay],
+        package: store.packages().first().cloned(),
+        hold: Some(env.hold()),
         name: env.name,
         interpreter: env.python,
         env: env.env,
-        sys_path: vec![overlay],
-        package: store.packages().first().cloned(),
     }))
 }
 

@@ -205,27 +205,62 @@ fn provisioned_command(
         after.extend(UserAdapters::of_this_process().pythonpath);
         after.extend(extra.pythonpath.iter().cloned());
     }
-    cmd.arg("-c").arg(bootstrap(&env.sys_path, &unique(after)));
+    cmd.arg("-c").arg(bootstrap(env, &unique(after)));
     cmd
 }
 
 /// The program a provisioned environment's worker starts with: `sys.path` without the
-/// current folder (which `-c` puts first), `front` before everything and `after` after, then
-/// `envhub.worker` run as `python -m` would (its arguments follow the program).
-fn bootstrap(front: &[PathBuf], after: &[PathBuf]) -> String {
+/// current folder (which `-c` puts first), the environment's `sys_path` (this install's
+/// overlay) before everything and `after` after; a serving worker then holds the
+/// environment (a shared `flock` on its `hold` file, for its whole life) or says it was
+/// removed; then `envhub.worker` runs as `python -m` would (its arguments follow the program).
+fn bootstrap(env: &envhub_shm::WorkerPython, after: &[PathBuf]) -> String {
     let list = |paths: &[PathBuf]| {
         let texts: Vec<&str> = paths.iter().filter_map(|p| p.to_str()).collect();
         serde_json::to_string(&texts).expect("strings serialize")
     };
+    let text = |s: &str| serde_json::to_string(s).expect("strings serialize");
+    let hold = env
+        .hold
+        .as_ref()
+        .and_then(|h| h.to_str())
+        .map_or("None".to_string(), text);
     format!(
         "import sys\n\
          if sys.path and sys.path[0] == '': del sys.path[0]\n\
-         sys.path[:0] = {}\n\
-         sys.path += {}\n\
+         sys.path[:0] = {front}\n\
+         sys.path += {after}\n\
+         hold = {hold}\n\
+         if hold is not None and sys.argv[1:2] == ['serve']:\n\
+         \x20   import fcntl, json, os\n\
+         \x20   try:\n\
+         \x20       fd = os.open(hold, os.O_RDONLY)\n\
+         \x20       fcntl.flock(fd, fcntl.LOCK_SH)\n\
+         \x20       if not os.path.exists(hold): raise FileNotFoundError(2, 'removed', hold)\n\
+         \x20   except OSError as e:\n\
+         \x20       print(json.dumps({{'error': {gone} + ' (' + str(e) + ')'}}), flush=True)\n\
+         \x20       sys.exit(0)\n\
          import runpy\n\
          runpy.run_module('envhub.worker', run_name='__main__', alter_sys=True)\n",
-        list(front),
-        list(after)
+        front = list(&env.sys_path),
+        after = list(after),
+        hold = hold,
+        gone = text(&removed_message(env)),
+    )
+}
+
+/// What a session says when its environment was removed under it (`envhub env remove
+/// --force`).
+pub(crate) fn removed_message(env: &envhub_shm::WorkerPython) -> String {
+    let dir = env
+        .interpreter
+        .parent()
+        .and_then(|bin| bin.parent())
+        .unwrap_or(&env.interpreter);
+    format!(
+        "python env `{0}` was removed while this session used it (`{1}` is gone)\nhint: `envhub env sync {0}` builds it again; then make the env again",
+        env.name,
+        dir.display()
     )
 }
 
@@ -285,6 +320,7 @@ mod tests {
             env: [("MUJOCO_GL".to_string(), "egl".to_string())].into(),
             sys_path: vec!["/cache/.installs/00aa".into()],
             package: None,
+            hold: Some("/cache/suite-0123/envhub-env.json".into()),
         };
         let cmd = worker_command_in(Some(&env), &UserAdapters::default());
         let var = |name: &str| {

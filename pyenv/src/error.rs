@@ -76,6 +76,18 @@ pub enum PyEnvError {
         #[source]
         source: std::io::Error,
     },
+    /// Running workers hold the environment.
+    #[error(
+        "python env `{name}` is in use by running sessions' workers ({pids}): `{}`\nhint: close those sessions first, or add `--force` (their workers then fail, saying it was removed)", dir.display()
+    )]
+    InUse {
+        /// The environment.
+        name: String,
+        /// Its folder.
+        dir: PathBuf,
+        /// `pid 1234, 1240`.
+        pids: String,
+    },
     /// No stored environment has this name.
     #[error("no python env `{name}` in `{}`{}\nhint: `envhub env list` shows them", root.display(), known_list(.known))]
     NotStored {

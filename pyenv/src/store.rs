@@ -7,12 +7,13 @@
 //! succeeded, so nothing half-installed is ever found ready.
 
 use crate::error::{PyEnvError, io};
+use crate::hold;
 use crate::interpreter::{self, Interpreter};
 use crate::lock;
 use crate::uv;
 use envhub_catalog::{PythonEnvSpec, fnv1a64, parse_version, valid_name};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -45,6 +46,29 @@ const LAST_USE: &str = ".envhub-last-use";
 /// The folder of the installs' overlays in the cache folder.
 const INSTALLS: &str = ".installs";
 
+/// Which stored environments [`Store::prune`] removes: any that one of the rules selects.
+#[derive(Clone, Debug, Default)]
+pub struct PruneRule {
+    /// Those unused (no session, no build) for this long.
+    pub unused_for: Option<Duration>,
+    /// Those whose folder is not one of these (the folders the registries' environments
+    /// resolve to); `None`: not this rule.
+    pub named: Option<Vec<PathBuf>>,
+    /// Then the least recently used, until the cache uses at most this much disk.
+    pub max_bytes: Option<u64>,
+}
+
+/// What [`Store::prune`] did.
+#[derive(Clone, Debug, Default)]
+pub struct Pruned {
+    /// The folders removed (or to remove), with the disk each used.
+    pub removed: Vec<(PathBuf, u64)>,
+    /// The folders kept because running workers hold them, with their pids.
+    pub in_use: Vec<(PathBuf, Vec<u32>)>,
+    /// Disk the environments left use together.
+    pub left_bytes: u64,
+}
+
 /// An environment ready to run workers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PythonEnv {
@@ -62,6 +86,14 @@ pub struct PythonEnv {
     pub built: bool,
 }
 
+impl PythonEnv {
+    /// The file each of its running workers holds a shared `flock` on (its manifest), so
+    /// that [`Store::remove`] can tell it is in use.
+    pub fn hold(&self) -> PathBuf {
+        self.dir.join(MANIFEST)
+    }
+}
+
 /// An environment found in the cache folder.
 #[derive(Clone, Debug)]
 pub struct Stored {
@@ -71,7 +103,8 @@ pub struct Stored {
     pub dir: PathBuf,
     /// Its manifest, when it is ready.
     pub manifest: Option<Manifest>,
-    /// Bytes of its files (hard links into uv's cache counted in full).
+    /// Disk it uses: allocated blocks, each hard-linked file once (most are links into uv's
+    /// cache, which they share with it and with other venvs).
     pub size_bytes: u64,
     /// When a hub last used it (or it was built).
     pub last_use: Option<SystemTime>,
@@ -300,7 +333,7 @@ impl Store {
                 Stored {
                     dir_name: e.file_name().to_string_lossy().into_owned(),
                     manifest: read_manifest(&dir),
-                    size_bytes: size_of(&dir),
+                    size_bytes: disk_usage(&dir, &mut HashSet::new()),
                     last_use: std::fs::metadata(dir.join(LAST_USE))
                         .and_then(|m| m.modified())
                         .ok(),
@@ -313,8 +346,10 @@ impl Store {
     }
 
     /// Removes every stored folder of the environment `name` (or the one folder named
-    /// `name`), builds in progress excepted; returns the folders removed.
-    pub fn remove(&self, name: &str) -> Result<Vec<PathBuf>, PyEnvError> {
+    /// `name`), builds in progress excepted; returns the folders removed. A folder that
+    /// running workers hold (see [`PythonEnv::hold`]) is refused with their pids, unless
+    /// `force`: then they lose it under them (a restart says it was removed).
+    pub fn remove(&self, name: &str, force: bool) -> Result<Vec<PathBuf>, PyEnvError> {
         let stored = self.list();
         let matching: Vec<&Stored> = stored
             .iter()
@@ -337,6 +372,13 @@ impl Store {
                 known,
             });
         }
+        if !force {
+            for s in &matching {
+                if let Some(pids) = self.held(s)? {
+                    return Err(in_use(name, &s.dir, &pids));
+                }
+            }
+        }
         let mut removed = Vec::new();
         for s in matching {
             // Not while it is being built: its builder holds the lock (`<name>-<key>.lock`).
@@ -349,16 +391,107 @@ impl Store {
             };
             let lock_path = self.root.join(format!("{stem}.lock"));
             let _lock = lock::acquire(name, &lock_path, Duration::ZERO, |_| {})?;
-            let trash = self.root.join(format!(
-                ".trash-{}-{}",
-                s.dir_name.trim_start_matches('.'),
-                std::process::id()
-            ));
-            std::fs::rename(&s.dir, &trash).map_err(io(name, "remove", &s.dir))?;
-            std::fs::remove_dir_all(&trash).map_err(io(name, "remove", &trash))?;
+            // Held while it goes: a worker starting meanwhile waits, then finds it gone.
+            let _hold = match hold::exclusive(&s.dir.join(MANIFEST)) {
+                Ok(Some(Ok(hold))) => Some(hold),
+                Ok(Some(Err(pids))) if !force => return Err(in_use(name, &s.dir, &pids)),
+                _ => None,
+            };
+            self.remove_dir(name, s)?;
             removed.push(s.dir.clone());
         }
         Ok(removed)
+    }
+
+    /// The pids of the running workers that hold `stored` (`Some(empty)`: held by processes
+    /// that cannot be told), or `None` when none does.
+    fn held(&self, stored: &Stored) -> Result<Option<Vec<u32>>, PyEnvError> {
+        let path = stored.dir.join(MANIFEST);
+        match hold::exclusive(&path) {
+            Ok(Some(Err(pids))) => Ok(Some(pids)),
+            Ok(_) => Ok(None),
+            Err(e) => Err(io(&stored.dir_name, "open", &path)(e)),
+        }
+    }
+
+    fn remove_dir(&self, name: &str, s: &Stored) -> Result<(), PyEnvError> {
+        let trash = self.root.join(format!(
+            ".trash-{}-{}",
+            s.dir_name.trim_start_matches('.'),
+            std::process::id()
+        ));
+        std::fs::rename(&s.dir, &trash).map_err(io(name, "remove", &s.dir))?;
+        std::fs::remove_dir_all(&trash).map_err(io(name, "remove", &trash))
+    }
+
+    /// Removes, of the stored environments, those `rule` selects — never one that running
+    /// workers hold — and says what it removed or would remove (`dry_run`).
+    pub fn prune(&self, rule: &PruneRule, dry_run: bool) -> Result<Pruned, PyEnvError> {
+        let stored: Vec<Stored> = self
+            .list()
+            .into_iter()
+            .filter(|s| !s.dir_name.starts_with('.'))
+            .collect();
+        let now = SystemTime::now();
+        let mut pruned = Pruned::default();
+        let mut left: Vec<&Stored> = Vec::new();
+        for s in &stored {
+            if let Some(pids) = self.held(s)? {
+                pruned.in_use.push((s.dir.clone(), pids));
+                continue;
+            }
+            let unused = rule.unused_for.is_some_and(|limit| {
+                s.last_use
+                    .and_then(|t| now.duration_since(t).ok())
+                    .is_none_or(|age| age >= limit)
+            });
+            let unnamed = rule
+                .named
+                .as_ref()
+                .is_some_and(|named| !named.contains(&s.dir));
+            if unused || unnamed {
+                pruned.removed.push((s.dir.clone(), s.size_bytes));
+            } else {
+                left.push(s);
+            }
+        }
+        if let Some(budget) = rule.max_bytes {
+            // The least recently used go first, until what is left fits.
+            left.sort_by_key(|s| s.last_use);
+            let kept_in_use: Vec<PathBuf> = pruned.in_use.iter().map(|(d, _)| d.clone()).collect();
+            while disk_usage_of(
+                left.iter()
+                    .map(|s| s.dir.as_path())
+                    .chain(kept_in_use.iter().map(PathBuf::as_path)),
+            ) > budget
+                && !left.is_empty()
+            {
+                let s = left.remove(0);
+                pruned.removed.push((s.dir.clone(), s.size_bytes));
+            }
+        }
+        if !dry_run {
+            for (dir, _) in &pruned.removed {
+                let s = stored.iter().find(|s| &s.dir == dir).expect("listed");
+                let name = s
+                    .manifest
+                    .as_ref()
+                    .map_or(s.dir_name.as_str(), |m| m.name.as_str());
+                let _hold = match hold::exclusive(&dir.join(MANIFEST)) {
+                    Ok(Some(Err(pids))) => return Err(in_use(name, dir, &pids)),
+                    Ok(Some(Ok(hold))) => Some(hold),
+                    _ => None,
+                };
+                self.remove_dir(name, s)?;
+            }
+        }
+        pruned.left_bytes = disk_usage_of(
+            stored
+                .iter()
+                .filter(|s| !pruned.removed.iter().any(|(d, _)| d == &s.dir))
+                .map(|s| s.dir.as_path()),
+        );
+        Ok(pruned)
     }
 
     /// Records that `env` was used, for `prune`. Best effort: a read-only cache (a CI image
@@ -611,20 +744,63 @@ fn fill_overlay(dir: &Path, packages: &[PathBuf]) -> std::io::Result<()> {
     Ok(())
 }
 
-fn size_of(dir: &Path) -> u64 {
+/// Disk used by the files under `dir`: allocated blocks, each file once however many hard
+/// links lead to it (`seen`: the files already counted, by device and inode).
+fn disk_usage(dir: &Path, seen: &mut HashSet<(u64, u64)>) -> u64 {
+    use std::os::unix::fs::MetadataExt;
     let Ok(read) = std::fs::read_dir(dir) else {
         return 0;
     };
     read.flatten()
-        .map(|e| match e.file_type() {
-            Ok(t) if t.is_dir() => size_of(&e.path()),
-            Ok(t) if t.is_file() => e.metadata().map(|m| m.len()).unwrap_or(0),
+        .map(|e| match e.metadata() {
+            Ok(m) if m.is_dir() => disk_usage(&e.path(), seen),
+            Ok(m) if seen.insert((m.dev(), m.ino())) => m.blocks() * 512,
             _ => 0,
         })
         .sum()
 }
 
+/// Disk used by all of `dirs` together (a file linked into several counted once).
+fn disk_usage_of<'a>(dirs: impl Iterator<Item = &'a Path>) -> u64 {
+    let mut seen = HashSet::new();
+    dirs.map(|d| disk_usage(d, &mut seen)).sum()
+}
+
+fn in_use(name: &str, dir: &Path, pids: &[u32]) -> PyEnvError {
+    PyEnvError::InUse {
+        name: name.to_string(),
+        dir: dir.to_path_buf(),
+        pids: if pids.is_empty() {
+            "pids unknown".into()
+        } else {
+            let list: Vec<String> = pids.iter().map(u32::to_string).collect();
+            format!("pid {}", list.join(", "))
+        },
+    }
+}
+
 fn last_lines(text: &str, n: usize) -> String {
     let lines: Vec<&str> = text.lines().collect();
     lines[lines.len().saturating_sub(n)..].join("\n")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn disk_usage_counts_a_hard_linked_file_once() {
+        let dir = std::env::temp_dir().join(format!("envhub-du-test-{}", std::process::id()));
+        let (a, b) = (dir.join("a"), dir.join("b"));
+        std::fs::create_dir_all(&a).unwrap();
+        std::fs::create_dir_all(&b).unwrap();
+        std::fs::write(a.join("data"), vec![1u8; 1 << 20]).unwrap();
+        std::fs::hard_link(a.join("data"), a.join("again")).unwrap();
+        std::fs::hard_link(a.join("data"), b.join("data")).unwrap();
+        let one = disk_usage(&a, &mut HashSet::new());
+        assert!((1 << 20..(1 << 20) + 65_536).contains(&one), "{one}");
+        assert_eq!(disk_usage_of([a.as_path(), b.as_path()].into_iter()), one);
+        assert_eq!(disk_usage(&b, &mut HashSet::new()), one);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

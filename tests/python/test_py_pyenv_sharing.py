@@ -11,6 +11,8 @@ own with `envhub env sync metaworld`.
   cache: each one's workers run its own code — the package their ready line reports, the
   `_envhub` they map — while the other uses the environment, and after a restart.
 - A worker refuses a hub of another worker protocol, naming both.
+- `envhub env remove` while a session uses the environment is refused, naming its workers'
+  pids; `--force` removes it, and the session's next worker start fails saying it was removed.
 
 Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
 failure.
@@ -289,3 +291,77 @@ def test_a_worker_refuses_a_hub_of_another_protocol(tmp_path: Path) -> None:
     own = envhub._envhub.WORKER_PROTOCOL
     assert f"speaks envhub worker protocol {own}" in out.stderr, out.stderr
     assert "the hub that started it speaks 999" in out.stderr and str(package) in out.stderr, out.stderr
+
+
+SESSION = textwrap.dedent(
+    """\
+    import json, os, signal, sys
+    import numpy as np
+    import envhub
+
+    action = np.zeros((1, 4), dtype=np.float32)
+    envs = envhub.make_vec("metaworld-reach", 1, restart_on_crash=True)
+    envs.reset(seed=0)
+    envs.step(action)
+    print(json.dumps({"pids": list(envs.worker_pids)}), flush=True)
+    sys.stdin.readline()  # the environment is removed meanwhile
+    os.kill(envs.worker_pids[0], signal.SIGKILL)
+    try:
+        envs.step(action)  # the restart needs the environment
+        print(json.dumps({"error": None}), flush=True)
+    except envhub.EnvHubError as e:
+        print(json.dumps({"error": str(e)}), flush=True)
+    envs.close()
+    """
+)
+
+
+def test_removing_an_environment_in_use_is_refused_unless_forced(tmp_path: Path) -> None:
+    own = tmp_path / "pyenvs"  # removed below: not the module's cache
+    built = cli("env", "sync", "metaworld", cache=own, timeout=SYNC_TIMEOUT_S)
+    if built.returncode != 0:
+        skip_or_fail(f"`envhub env sync metaworld` failed: {built.stderr.strip()[-2000:]}")
+    session = subprocess.Popen(
+        [sys.executable, "-c", SESSION],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "ENVHUB_PYENV_DIR": str(own)},
+    )
+    try:
+        line = session.stdout.readline()
+        assert line, session.stderr.read()[-3000:]
+        pids = json.loads(line)["pids"]
+        refused = cli("env", "remove", "metaworld", cache=own)
+        assert refused.returncode != 0
+        assert "in use" in refused.stderr and f"pid {pids[0]}" in refused.stderr, refused.stderr
+        assert "--force" in refused.stderr, refused.stderr
+        assert any(p.name.startswith("metaworld-") and p.is_dir() for p in own.iterdir())
+        forced = cli("env", "remove", "--force", "metaworld", cache=own)
+        assert forced.returncode == 0, forced.stderr
+        assert not any(p.name.startswith("metaworld-") and p.is_dir() for p in own.iterdir())
+        out, err = session.communicate("\n", timeout=RUN_TIMEOUT_S)
+    finally:
+        if session.poll() is None:
+            session.kill()
+    error = json.loads(out.splitlines()[-1])["error"]
+    assert error is not None, "the session restarted a worker without its environment"
+    assert "python env `metaworld` was removed while this session used it" in error, error
+    assert "envhub env sync metaworld" in error, error
+    assert "No such file" not in error and "ENOENT" not in error, error
+
+
+def test_prune_removes_what_the_rules_select_and_never_what_is_in_use(cache: Path, tmp_path: Path) -> None:
+    # Nothing unused for a day: the environment was just used.
+    kept = cli("env", "prune", "--unused-days", "1", cache=cache)
+    assert kept.returncode == 0 and "0 environment(s) removed" in kept.stdout, kept.stdout + kept.stderr
+    # A budget it exceeds selects it; a dry run removes nothing.
+    dry = cli("env", "prune", "--max-size", "1M", "--dry-run", cache=cache)
+    assert dry.returncode == 0, dry.stderr
+    assert "would remove" in dry.stdout and "metaworld-" in dry.stdout, dry.stdout
+    assert any(p.name.startswith("metaworld-") for p in cache.iterdir())
+    # Sizes count disk once per file: far less than the files' lengths summed twice over.
+    listed = json.loads(cli("env", "list", "--json", cache=cache).stdout)
+    size = next(r["size_bytes"] for r in listed if r["name"] == "metaworld" and r["in_catalog"])
+    assert 10e6 < size < 2e9, size

@@ -69,6 +69,10 @@ pub struct WorkerPython {
     /// against what its ready line reports.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub package: Option<std::path::PathBuf>,
+    /// A file in the venv each worker holds a shared `flock` on while it runs (its
+    /// manifest), so that `envhub env remove` can tell the environment is in use.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold: Option<std::path::PathBuf>,
 }
 
 /// The version of what the hub and its workers say to each other (the job, the ready line,
