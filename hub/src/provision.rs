@@ -9,7 +9,9 @@
 //! off. A hub serving remote clients builds for them only with `envhub serve
 //! --allow-provision`: installing packages is its operator's decision.
 
-use crate::env_vars::{ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_UV};
+use crate::env_vars::{
+    ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_PYTHON_INSTALL, ENVHUB_UV,
+};
 use envhub_catalog::EnvEntry;
 use envhub_catalog::Registry;
 use envhub_protocol::HubError;
@@ -82,7 +84,12 @@ fn make_store() -> Result<Store, String> {
         .and_then(|v| v.trim().parse::<f64>().ok())
         .filter(|s| s.is_finite() && *s >= 0.0)
         .map_or(Duration::from_secs(900), Duration::from_secs_f64);
+    let install = match std::env::var(ENVHUB_PYTHON_INSTALL) {
+        Ok(v) if !v.trim().is_empty() => matches!(v.trim(), "1" | "true" | "yes"),
+        _ => crate::settings::Settings::discover(None).is_ok_and(|s| s.python_install),
+    };
     Ok(Store::new(cache_dir(), uv, python)
+        .with_python_install(install)
         .with_extra_requirements(WORKER_REQUIREMENTS.iter().map(|s| s.to_string()).collect())
         .with_packages(vec![package])
         .with_lock_wait(wait))

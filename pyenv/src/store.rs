@@ -144,6 +144,8 @@ pub struct Store {
     merged: OnceLock<Vec<Interpreter>>,
     default_version: OnceLock<Option<String>>,
     overlay: OnceLock<PathBuf>,
+    python_install: bool,
+    qualified: std::sync::Mutex<std::collections::HashMap<PathBuf, bool>>,
 }
 
 impl Store {
@@ -163,6 +165,8 @@ impl Store {
             merged: OnceLock::new(),
             default_version: OnceLock::new(),
             overlay: OnceLock::new(),
+            python_install: false,
+            qualified: Default::default(),
         }
     }
 
@@ -177,6 +181,13 @@ impl Store {
     /// this install's [`overlay`](Store::overlay) (and once after a build, as its check).
     pub fn with_packages(mut self, packages: Vec<PathBuf>) -> Store {
         self.packages = packages;
+        self
+    }
+
+    /// Whether a CPython version that no environment can be based on here is installed by
+    /// asking uv (`uv python install`, a download; default false).
+    pub fn with_python_install(mut self, install: bool) -> Store {
+        self.python_install = install;
         self
     }
 
@@ -225,20 +236,8 @@ impl Store {
         spec.validate().map_err(invalid)?;
         let (base, version) = match &spec.python {
             Some(requested) => {
-                let matching = |list: &[Interpreter]| {
-                    list.iter()
-                        .filter(|i| version_matches(&i.version, requested))
-                        .max_by_key(|i| parse_version(&i.version))
-                        .cloned()
-                };
-                let found = matching(self.pyenv_interpreters())
-                    .or_else(|| matching(self.uv_interpreters()))
-                    .ok_or_else(|| PyEnvError::PythonNotFound {
-                        name: name.to_string(),
-                        requested: requested.clone(),
-                        present: interpreter::describe(self.interpreters()),
-                    })?;
-                (found.path, requested.trim().to_string())
+                let path = self.find_python(name, requested)?;
+                (path, requested.trim().to_string())
             }
             None => {
                 let version = self
@@ -265,6 +264,62 @@ impl Store {
             no_deps: spec.no_deps_sorted(),
             env: spec.env.clone(),
         })
+    }
+
+    /// The newest CPython (default build) matching `requested`: pyenv's, then those uv
+    /// finds, each asked what it is; else, where allowed, one uv installs.
+    fn find_python(&self, name: &str, requested: &str) -> Result<PathBuf, PyEnvError> {
+        let matching = |list: &[Interpreter]| {
+            let mut found: Vec<Interpreter> = list
+                .iter()
+                .filter(|i| version_matches(&i.version, requested))
+                .cloned()
+                .collect();
+            found.sort_by_key(|i| std::cmp::Reverse(parse_version(&i.version)));
+            found.into_iter().find(|i| self.qualifies(i))
+        };
+        if let Some(found) =
+            matching(self.pyenv_interpreters()).or_else(|| matching(self.uv_interpreters()))
+        {
+            return Ok(found.path);
+        }
+        let not_found = |tried: String| PyEnvError::PythonNotFound {
+            name: name.to_string(),
+            requested: requested.trim().to_string(),
+            present: interpreter::describe(self.interpreters()),
+            tried,
+        };
+        if !self.python_install {
+            return Err(not_found(String::new()));
+        }
+        if self.progress {
+            eprintln!("envhub: python env `{name}`: asking uv to install CPython {requested}");
+        }
+        match interpreter::install_with_uv(&self.uv, requested.trim()) {
+            Ok(path)
+                if interpreter::version_of(&path).is_some_and(|v| {
+                    version_matches(&v, requested) && interpreter::qualifies(&path, &v)
+                }) =>
+            {
+                Ok(path)
+            }
+            Ok(path) => Err(not_found(format!(
+                "; uv installed `{}`, which is not a CPython {requested} of the default build",
+                path.display()
+            ))),
+            Err(message) => Err(not_found(format!(
+                "; `uv python install {requested}` failed: {}",
+                last_lines(&message, 4)
+            ))),
+        }
+    }
+
+    /// Whether `i` is what it says and envhub can use it (asked once per interpreter).
+    fn qualifies(&self, i: &Interpreter) -> bool {
+        let mut known = self.qualified.lock().unwrap_or_else(|e| e.into_inner());
+        *known
+            .entry(i.path.clone())
+            .or_insert_with(|| interpreter::qualifies(&i.path, &i.version))
     }
 
     /// The environment of `plan` if it is ready (built completely, for these requirements).

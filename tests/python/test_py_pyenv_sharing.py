@@ -13,6 +13,8 @@ own with `envhub env sync metaworld`.
 - A worker refuses a hub of another worker protocol, naming both.
 - `envhub env remove` while a session uses the environment is refused, naming its workers'
   pids; `--force` removes it, and the session's next worker start fails saying it was removed.
+- A CPython that reports itself free-threaded (a script wrapping a real one) is not picked; the
+  error names `uv python install 3.X`.
 
 Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
 failure.
@@ -365,3 +367,48 @@ def test_prune_removes_what_the_rules_select_and_never_what_is_in_use(cache: Pat
     listed = json.loads(cli("env", "list", "--json", cache=cache).stdout)
     size = next(r["size_bytes"] for r in listed if r["name"] == "metaworld" and r["in_catalog"])
     assert 10e6 < size < 2e9, size
+
+
+def real_cpython_not_in_usr_bin() -> Path | None:
+    """A pyenv CPython whose minor version `/usr/bin` lacks (so it is the only one of it)."""
+    root = Path(os.environ.get("PYENV_ROOT") or Path.home() / ".pyenv")
+    for python in sorted(root.glob("versions/3.*/bin/python3.[0-9]*")):
+        if python.name.count(".") == 1 and python.name[-1].isdigit() and not Path("/usr/bin", python.name).exists():
+            return python
+    return None
+
+
+FREE_THREADED = """\
+#!/bin/sh
+# A CPython that says it is free-threaded: every answer it gives (uv's question, envhub's)
+# claims the GIL is disabled.
+"{python}" "$@" | sed -e 's/"gil_disabled": false/"gil_disabled": true/g'
+"""
+
+
+def test_a_free_threaded_python_is_not_picked_and_the_hint_names_the_install_command(tmp_path: Path) -> None:
+    real = real_cpython_not_in_usr_bin()
+    if real is None:
+        pytest.skip("no pyenv CPython whose version /usr/bin lacks")
+    minor = real.name.removeprefix("python")
+    fake_dir = tmp_path / "bin"
+    fake_dir.mkdir()
+    fake = fake_dir / real.name
+    fake.write_text(FREE_THREADED.format(python=real))
+    fake.chmod(0o755)
+    registry = tmp_path / "registry.yaml"
+    registry.write_text(
+        yaml.safe_dump({"python_envs": {"ft": {"python": minor, "requirements": ["packaging"]}}, "environments": []})
+    )
+    env = {
+        # The fake first; no pyenv, no uv-managed Pythons.
+        "PATH": f"{fake_dir}:/usr/bin:/bin",
+        "UV_PYTHON_INSTALL_DIR": str(tmp_path / "uv-pythons"),
+        "ENVHUB_PYTHON_INSTALL": "",
+    }
+    out = cli("--registry", str(registry), "env", "sync", "ft", cache=tmp_path / "pyenvs", env=env, timeout=SYNC_TIMEOUT_S)
+    assert out.returncode != 0, f"built on the free-threaded fake: {out.stdout}"
+    assert f"wants CPython {minor}" in out.stderr, out.stderr
+    assert f"`uv python install {minor}`" in out.stderr and "ENVHUB_PYTHON_INSTALL=1" in out.stderr, out.stderr
+    present = out.stderr.split("present:")[1].splitlines()[0]
+    assert str(fake) not in present, out.stderr
