@@ -95,13 +95,21 @@ fn make_store() -> Result<Store, String> {
         .with_lock_wait(wait))
 }
 
-/// The folder of the `envhub` package: beside this binary when it runs from a wheel
+/// The folder of the `envhub` package this code belongs to: the one holding the `_envhub`
+/// extension it runs in (a hub inside a Python client), or beside this binary
 /// (`envhub/bin/envhub`), else where `python` imports it from.
 fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
+    let is_package = |dir: &std::path::Path| {
+        dir.join("worker.py").is_file() && dir.join("__init__.py").is_file()
+    };
+    if let Some(package) = loaded_from().as_deref().and_then(std::path::Path::parent)
+        && is_package(package)
+    {
+        return Some(package.to_path_buf());
+    }
     let exe = std::env::current_exe().ok()?;
     if let Some(package) = exe.parent().and_then(|bin| bin.parent())
-        && package.join("worker.py").is_file()
-        && package.join("__init__.py").is_file()
+        && is_package(package)
     {
         return Some(package.to_path_buf());
     }
@@ -114,6 +122,24 @@ fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
         .ok()?;
     let path = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
     (out.status.success() && path.join("worker.py").is_file()).then_some(path)
+}
+
+/// The file this code was loaded from: the `_envhub` extension when the hub runs in a
+/// Python client (whose own `envhub` is the one its workers must run, whatever another
+/// interpreter would import), else the executable.
+fn loaded_from() -> Option<PathBuf> {
+    use std::os::unix::ffi::OsStrExt;
+    // SAFETY: `dladdr` only reads the address and fills `info`; `dli_fname` then points to
+    // a NUL-terminated string owned by the loader, valid while the object stays loaded.
+    unsafe {
+        let mut info: libc::Dl_info = std::mem::zeroed();
+        let here = loaded_from as *const libc::c_void;
+        if libc::dladdr(here, &mut info) == 0 || info.dli_fname.is_null() {
+            return None;
+        }
+        let name = std::ffi::CStr::from_ptr(info.dli_fname);
+        Some(PathBuf::from(std::ffi::OsStr::from_bytes(name.to_bytes())))
+    }
 }
 
 /// The environment `entry` runs in, if any: its name and spec.

@@ -188,6 +188,7 @@ def install_copy(folder: Path, marker: str) -> Path:
 CLIENT = textwrap.dedent(
     """\
     import json, os, signal, sys, time
+    sys.path.insert(0, sys.argv[1])  # as an editable install's `.pth` would
     import numpy as np
     import envhub
 
@@ -220,22 +221,24 @@ CLIENT = textwrap.dedent(
 
 
 def start_client(package: Path, cache: Path, log: Path) -> subprocess.Popen:
-    """A client process of the install `package`, its hub logging what its workers report."""
+    """A client process of the install `package` (imported without `PYTHONPATH`, from a
+    folder elsewhere, so nothing but envhub's own choice leads its workers there), its hub
+    logging what its workers report."""
     env = {
         **os.environ,
-        "PYTHONPATH": str(package.parent),
         "ENVHUB_PYENV_DIR": str(cache),
         "ENVHUB_LOG": "warn,envhub::launcher=debug",
     }
     env.pop("ENVHUB_PYTHON", None)
+    env.pop("PYTHONPATH", None)
     return subprocess.Popen(
-        [sys.executable, "-c", CLIENT],
+        [sys.executable, "-c", CLIENT, str(package.parent)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         stderr=log.open("w"),
         text=True,
         env=env,
-        cwd=package.parent,
+        cwd=log.parent,
     )
 
 
