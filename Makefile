@@ -116,6 +116,19 @@ $(MESA_STAMP):
 
 setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
 
+# Debian's Chromium for the evaluation report's browser test (Playwright drives it; its own
+# browser download is not used), installed only where missing and only by root, as Mesa.
+BROWSER_STAMP := .build/chromium.installed
+$(BROWSER_STAMP):
+	mkdir -p $(dir $@)
+	if command -v chromium >/dev/null; then \
+		touch $@; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium && touch $@; \
+	else \
+		echo "note: skipped Chromium: installing it needs root and apt-get; the report's browser test needs it: sudo apt-get install chromium" >&2; \
+	fi
+
 $(MANISKILL_STAMP): $(VENV_STAMP) requirements-maniskill.txt
 	$(UV_PIP) -r requirements-maniskill.txt
 	touch $@
@@ -182,6 +195,8 @@ lint: setup
 fmt:
 	$(CARGO) fmt --all
 
+# As root (CI, which installs Chromium), the report's browser test must run, not skip.
+BROWSER_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && echo 1)
 # As root (CI), the network-namespace tests of hubs across machines must run, not skip.
 NETNS_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v ip >/dev/null && command -v unshare >/dev/null && echo 1)
 # Tests run in the release profile: they reuse `make build`'s compiled tree (dependencies are
@@ -224,8 +239,8 @@ wheel: build
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
-py-test: py-install $(LEROBOT_STAMP)
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider
+py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \

@@ -8,6 +8,8 @@ Two rules, read from the sources (no build needed):
    (``FORBIDDEN``: the catalog compiles without shared memory or a network, say).
 2. Modules: inside each crate, the modules that name one another through ``crate::`` and
    ``super::`` paths form no cycle.
+3. The Python package: ``check_py_layers.py`` (its layers: wire, worker side, client,
+   integrations; lazy imports included).
 
 It prints every violation, naming the crates or the modules of each cycle, and exits 1 if
 there is one. ``make lint`` (and so CI) runs it.
@@ -244,12 +246,17 @@ def main() -> int:
     problems = check_crates(members)
     for member in members:
         problems.extend(check_modules(member))
+    # The Python package's layers (wire, worker side, client, integrations): its twin.
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import check_py_layers
+
+    problems.extend(check_py_layers.check())
     for p in problems:
         print(f"error: {p}", file=sys.stderr)
     if problems:
         print(f"{len(problems)} layering problem(s); see docs/architecture.md for the layers", file=sys.stderr)
         return 1
-    print(f"layers ok: {len(members)} crates, arrows point down, no module cycles")
+    print(f"layers ok: {len(members)} crates and the Python package, arrows point down, no module cycles")
     return 0
 
 

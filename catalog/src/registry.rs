@@ -19,6 +19,10 @@ struct RegistryFile {
     python_envs: std::collections::BTreeMap<String, crate::python_env_spec::PythonEnvSpec>,
     #[serde(default)]
     frameworks: std::collections::BTreeMap<String, crate::python_envs::FrameworkDefaults>,
+    /// Evaluation protocols (`envhub eval`). Kept as written: the evaluation (in the Python
+    /// package) validates them, naming the valid fields, when one is used.
+    #[serde(default)]
+    benchmarks: std::collections::BTreeMap<String, serde_json::Value>,
 }
 
 /// Filters for [`Registry::search`]. Every filter is a case-insensitive substring; empty
@@ -82,6 +86,17 @@ pub struct Registry {
     entries: Vec<EnvEntry>,
     sources: Vec<String>,
     python_envs: crate::python_envs::PythonEnvs,
+    benchmarks: std::collections::BTreeMap<String, Benchmark>,
+}
+
+/// A benchmark as a registry file declares it (`benchmarks:`), with the file it came from.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Benchmark {
+    /// The fields as written.
+    #[serde(flatten)]
+    pub fields: serde_json::Map<String, serde_json::Value>,
+    /// The registry file that declares it (later files replace a name).
+    pub source: String,
 }
 
 impl Registry {
@@ -104,6 +119,7 @@ impl Registry {
             entries,
             sources: vec![source.to_string()],
             python_envs: Default::default(),
+            benchmarks: Default::default(),
         }
     }
 
@@ -149,6 +165,27 @@ impl Registry {
             text,
             name,
         )?;
+        for (name_of, value) in file.benchmarks {
+            let serde_json::Value::Object(fields) = value else {
+                return Err(RegistryError::Benchmark {
+                    path: name.to_string(),
+                    line: text
+                        .lines()
+                        .position(|l| l.trim_start().starts_with(&format!("{name_of}:")))
+                        .map_or(0, |i| i + 1),
+                    message: format!(
+                        "`benchmarks.{name_of}`: a benchmark is a mapping of its fields (entries, episodes_per_task, horizon, ...)"
+                    ),
+                });
+            };
+            self.benchmarks.insert(
+                name_of,
+                Benchmark {
+                    fields,
+                    source: name.to_string(),
+                },
+            );
+        }
         let entries = file.environments;
         let mut seen = std::collections::HashSet::new();
         for (index, mut entry) in entries.into_iter().enumerate() {
@@ -182,6 +219,12 @@ impl Registry {
     /// The Python environments its files declare (`python_envs:`, `frameworks:`).
     pub fn python_envs(&self) -> &crate::python_envs::PythonEnvs {
         &self.python_envs
+    }
+
+    /// The benchmarks its files declare (`benchmarks:`), by name; a later file's replaces an
+    /// earlier one of the same name.
+    pub fn benchmarks(&self) -> &std::collections::BTreeMap<String, Benchmark> {
+        &self.benchmarks
     }
 
     /// The files this registry was built from, in order.

@@ -76,6 +76,16 @@ pub enum RegistryError {
         /// What is wrong, with the names that are defined and a hint.
         message: String,
     },
+    /// A `benchmarks:` definition is not a mapping of fields.
+    #[error("{path}:{line}: {message}")]
+    Benchmark {
+        /// The file.
+        path: String,
+        /// 1-based line (0 if unknown).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
     /// No entry has this id.
     #[error("unknown environment id `{id}`{}\nhint: `envhub envs` lists every id", did_you_mean(.closest))]
     UnknownId {

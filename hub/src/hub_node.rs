@@ -397,6 +397,7 @@ impl State {
             max_episode_steps: vec.max_episode_steps(),
             render_fps: vec.render_fps(),
             pid: vec.worker_pids().first().copied().unwrap_or(0),
+            worker: None,
         };
         let workers = vec.num_workers();
         let session = envhub_net::start(

@@ -21,10 +21,11 @@ from collections.abc import Callable
 
 import gymnasium
 import numpy as np
-from envhub._info_columns import ColumnReader
-from envhub._spaces import from_gymnasium
-from envhub.async_vector import INFO_ROW_BYTES, AsyncVectorEnv
+from envhub import AsyncVectorEnv
+from envhub.client.column_reader import ColumnReader
 from envhub.hosted.env_fns import DropInEnv
+from envhub.wire.info_schema import INFO_ROW_BYTES
+from envhub.wire.spaces import from_gymnasium
 from envhub.worker import HostedBatch, HostedEnv
 
 

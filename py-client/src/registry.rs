@@ -52,6 +52,12 @@ impl PyRegistry {
         serde_json::to_string(self.inner.entries()).expect("entries serialize")
     }
 
+    /// The benchmarks the files declare (`benchmarks:`) as a JSON object: name → the fields
+    /// as written, plus `source`, the file that declares it.
+    fn benchmarks_json(&self) -> String {
+        serde_json::to_string(self.inner.benchmarks()).expect("benchmarks serialize")
+    }
+
     /// One entry as JSON; an unknown id raises `UnknownEnvError` with the closest ids.
     fn get_json(&self, py: Python<'_>, id: &str) -> PyResult<String> {
         let entry = self.inner.get(id).map_err(|e| registry_error(py, e))?;

@@ -1,7 +1,7 @@
 //! The Python worker's Rust half: `python -m envhub.worker serve` creates its envs in Python
 //! and hands them to [`serve_worker`], which runs the same serve loop as the Rust worker
 //! binary ([`envhub_shm::serve_batch`]) with the worker's Python envs as one batch
-//! (`envhub.worker.HostedBatch`, one call into Python per request); or, for a simulator that
+//! (`envhub.worker.batch.HostedBatch`, one call into Python per request); or, for a simulator that
 //! holds all of the worker's envs in one vector env, to [`serve_vector_worker`], which serves
 //! that object as the whole batch.
 //!
@@ -19,7 +19,8 @@
 
 use envhub_core::{EnvError, ResetOptions, Space};
 use envhub_shm::{
-    Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerJob, env_flag, frames_section,
+    Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerIdentity, WorkerJob, env_flag,
+    frames_section,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -78,7 +79,7 @@ fn python_failed(py: Python<'_>, env_id: &str, what: &str, err: PyErr) -> EnvErr
 }
 
 /// All of a worker's Python envs (one env object each), through the wrapper
-/// `envhub.worker.HostedBatch` (methods `reset_into`, `step_into`, `render_rgb`, `close`):
+/// `envhub.worker.batch.HostedBatch` (methods `reset_into`, `step_into`, `render_rgb`, `close`):
 /// one call into Python per request for the whole batch, not one per env. The wrapper loops
 /// over the envs, applies the autoreset mode as [`EnvBatch`](envhub_shm::EnvBatch) does for
 /// native envs, writes each result straight into the env's rows of the blocks it is given
@@ -213,7 +214,7 @@ impl ServedBatch for PyBatch {
 
 /// A simulator that holds all of the worker's envs in one object (a Gymnasium `VectorEnv`:
 /// Isaac Lab, `gymnasium.make_vec(..., vectorization_mode="vector_entry_point")`), through
-/// the wrapper `envhub.worker.HostedVectorEnv` (methods `reset_into`, `step_into`,
+/// the wrapper `envhub.worker.batch.HostedVectorEnv` (methods `reset_into`, `step_into`,
 /// `render_rgb`, `close`). It steps every env at once and autoresets them itself; the wrapper
 /// checked when it was made that its autoreset mode is the session's. Each call hands the
 /// wrapper memoryviews of whole blocks, so every result is copied once, batched.
@@ -365,6 +366,7 @@ fn parse_space(what: &str, json: &str) -> PyResult<Space> {
 
 /// The job and the spec a ready worker reports, from `serve_worker`'s arguments.
 fn job_and_spec(
+    py: Python<'_>,
     job_json: &str,
     observation_space: &str,
     action_space: &str,
@@ -379,8 +381,17 @@ fn job_and_spec(
         max_episode_steps,
         render_fps,
         pid: std::process::id(),
+        worker: Some(WorkerIdentity::current(package_folder(py)?)),
     };
     Ok((job, ready))
+}
+
+/// The folder of the `envhub` package this worker imported (what its ready line reports).
+fn package_folder(py: Python<'_>) -> PyResult<std::path::PathBuf> {
+    py.import("envhub")?
+        .getattr("__path__")?
+        .get_item(0)?
+        .extract::<std::path::PathBuf>()
 }
 
 /// Runs the serve loop for `batch`, with the GIL released while waiting for requests; the
@@ -411,7 +422,7 @@ fn serve(
     .map_err(|e| PyRuntimeError::new_err(format!("worker data plane failed: {e}")))
 }
 
-/// Serves `batch` (an `envhub.worker.HostedBatch` over the job's envs) for the job `job_json` until the client
+/// Serves `batch` (an `envhub.worker.batch.HostedBatch` over the job's envs) for the job `job_json` until the client
 /// closes the session or exits: prints the ready line on the file descriptor `reply_fd`,
 /// then answers requests. `max_episode_steps` is the limit the envs apply themselves and
 /// `render_fps` their `metadata["render_fps"]` (both reported to the client). Releases the
@@ -433,6 +444,7 @@ pub(crate) fn serve_worker(
     render_fps: Option<f64>,
 ) -> PyResult<()> {
     let (job, ready) = job_and_spec(
+        py,
         job_json,
         observation_space,
         action_space,
@@ -449,7 +461,7 @@ pub(crate) fn serve_worker(
     serve(py, &job, batch, ready, reply_fd)
 }
 
-/// As [`serve_worker`], for one `envhub.worker.HostedVectorEnv` holding all of the job's
+/// As [`serve_worker`], for one `envhub.worker.batch.HostedVectorEnv` holding all of the job's
 /// envs (its `num_envs`; the loop refuses a count that is not the job's): it steps them
 /// together and autoresets them itself.
 #[pyfunction]
@@ -469,6 +481,7 @@ pub(crate) fn serve_vector_worker(
     render_fps: Option<f64>,
 ) -> PyResult<()> {
     let (job, ready) = job_and_spec(
+        py,
         job_json,
         observation_space,
         action_space,

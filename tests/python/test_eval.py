@@ -341,3 +341,32 @@ def test_tasks_run_side_by_side_with_one_policy_batch(tmp_path):
     assert max(mixed) == 1
     assert table(wide) == table(narrow)
     assert [t["task"] for t in wide["per_task"]] == ["gym-pendulum", "gym-mountain-car-continuous"]
+
+
+def test_a_user_registry_file_adds_a_benchmark(tmp_path, policies):
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(
+        textwrap.dedent(
+            """\
+            environments: []
+            benchmarks:
+              my-pendulum:
+                description: Pendulum by return, 2 episodes
+                entries: [gym-pendulum]
+                episodes_per_task: 2
+                init: {seed_start: 5}
+                horizon: 10
+                success: none
+            """
+        )
+    )
+    registry = ["--registry", "@default", "--registry", str(mine)]
+    listed = run_cli(*registry, "--list", "--json")
+    assert listed.returncode == 0, listed.stderr
+    names = [r["name"] for r in json.loads(listed.stdout)]
+    assert "my-pendulum" in names and "libero-spatial" in names
+    done = run_cli("my-pendulum", *registry, "--policy", f"{policies}:act", "--out", str(tmp_path / "o"))
+    assert done.returncode == 0, done.stderr
+    results = json.loads((tmp_path / "o" / "results.json").read_text())
+    assert results["protocol"]["source"].startswith(str(mine))
+    assert [e["init"] for e in results["episodes"]] == [{"seed": 5}, {"seed": 6}]

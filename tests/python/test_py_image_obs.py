@@ -78,7 +78,7 @@ def test_camera_frames_are_views_of_the_slot_with_no_copy(num_envs):
 def test_rendered_frames_of_any_channel_count_travel_as_rgb(shape):
     # What `HostedBatch.render_rgb` sends for a frame Gymnasium's `render()` returns: gray
     # repeated over the three channels, alpha dropped, colour as it is.
-    from envhub.worker import _rgb
+    from envhub.worker.batch import _rgb
 
     frame = np.arange(int(np.prod(shape)), dtype=np.uint8).reshape(shape)
     h, w, data = _rgb(frame)
@@ -98,7 +98,7 @@ def test_a_grayscale_env_renders_through_a_worker():
         def render(self) -> np.ndarray:
             return np.full((3, 2), 7 * (self.t + 1), np.uint8)
 
-    from envhub._spaces import from_gymnasium
+    from envhub.wire.spaces import from_gymnasium
     from envhub.worker import HostedBatch, HostedEnv
 
     env = Gray()

@@ -1,4 +1,4 @@
-"""Typed info columns (`envhub._info_columns`): the drop-in's numeric infos travel as typed
+"""Typed info columns (`envhub.wire.info_schema`, `envhub.client.column_reader`, `envhub.worker.column_writer`): the drop-in's numeric infos travel as typed
 columns of the batch slot and reach the caller as views of it, still exactly what
 Gymnasium's `AsyncVectorEnv` delivers (dtypes, key order, masks) in every autoreset mode;
 infos outside the learned schema (text, nested dicts, new keys, other dtypes) take the
@@ -16,7 +16,8 @@ from test_py_dropin import STEP_TIMEOUT, assert_same
 
 envhub = import_envhub()
 from envhub import _envhub  # noqa: E402
-from envhub._info_columns import ColumnReader, ColumnWriter  # noqa: E402
+from envhub.client.column_reader import ColumnReader  # noqa: E402
+from envhub.worker.column_writer import ColumnWriter  # noqa: E402
 
 MODES = [gym.vector.AutoresetMode.NEXT_STEP, gym.vector.AutoresetMode.SAME_STEP, gym.vector.AutoresetMode.DISABLED]
 

@@ -177,7 +177,7 @@ def test_spaces_are_ones_gymnasium_accepts():
     assert outside(space, obs) == []
     assert space.contains(obs)
     # and envhub carries every part of it
-    from envhub._spaces import from_gymnasium
+    from envhub.wire.spaces import from_gymnasium
 
     assert sorted(k for k, _ in from_gymnasium(space)["spaces"]) == sorted(obs)
 

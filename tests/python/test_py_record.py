@@ -444,7 +444,7 @@ def _slow_writer_env():
 
 def test_full_queue_waits_and_says_so(tmp_path):
     env = _slow_writer_env()
-    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_size=1, when_full="wait", codec="libaom-av1")
+    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_bytes=1, when_full="wait", codec="libaom-av1")
     try:
         with pytest.warns(envhub.recording.QueueFullWarning, match="steps wait for the writer"):
             expected = drive(rec, 45, lambda obs: np.zeros((2, 1), np.float32), seed=0)
@@ -460,7 +460,7 @@ def test_full_queue_waits_and_says_so(tmp_path):
 
 def test_full_queue_drops_whole_episodes_and_says_so(tmp_path):
     env = _slow_writer_env()
-    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_size=1, when_full="drop", codec="libaom-av1")
+    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_bytes=1, when_full="drop", codec="libaom-av1")
     try:
         with pytest.warns(envhub.recording.QueueFullWarning, match="a step is dropped"):
             expected = drive(rec, 100, lambda obs: np.zeros((2, 1), np.float32), seed=0)

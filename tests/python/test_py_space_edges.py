@@ -76,7 +76,7 @@ class IntBoxEnv(gym.Env):
 def test_integer_box_bounds_at_the_dtype_limits_come_back_as_gymnasium_has_them():
     # The spaces `make`/`make_vec` report are rebuilt from the Rust description, whose
     # bounds are doubles: 2**63 - 1 rounds up to 2**63 and wrapped to -2**63 in the cast.
-    from envhub._spaces import from_gymnasium, to_gymnasium
+    from envhub.wire.spaces import from_gymnasium, to_gymnasium
 
     for dtype in (np.int64, np.int32, np.int8, np.uint8):
         info = np.iinfo(dtype)

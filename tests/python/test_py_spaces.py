@@ -11,7 +11,7 @@ from conftest import import_envhub
 from gymnasium import spaces
 
 import_envhub()
-from envhub._spaces import Codec, to_gymnasium  # noqa: E402
+from envhub.wire.spaces import Codec, to_gymnasium  # noqa: E402
 
 GOAL_DICT = {
     "type": "dict",

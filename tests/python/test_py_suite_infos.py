@@ -1,4 +1,4 @@
-"""`envhub._info_tree`: nested infos (MyoSuite's, Meta-World's episode statistics) through the
+"""`envhub.wire.info_tree`: nested infos (MyoSuite's, Meta-World's episode statistics) through the
 data plane's text values, exactly and without pickle. Needs no suite."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from conftest import import_envhub
 
 import_envhub()
 
-from envhub import _info_tree  # noqa: E402
+from envhub.wire import info_tree as _info_tree  # noqa: E402
 
 
 class Kind(enum.IntEnum):

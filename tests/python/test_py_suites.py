@@ -138,6 +138,11 @@ def native_run(c: dict[str, Any], tmp_path: Path) -> dict[str, Any]:
 
 # The suites' own ids ------------------------------------------------------------------------
 
+#: The environment of a suite's interpreter run directly, with this envhub importable as its
+#: workers have it (a venv holds the suite only; workers reach envhub through their install's
+#: overlay).
+WITH_ENVHUB = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
+
 # In the suite's interpreter, with `entries` defined: prints the ids of entries it lacks.
 CHECK_IDS = {
     "metaworld": "import metaworld; names = set(metaworld.ALL_V3_ENVIRONMENTS); "
@@ -173,7 +178,7 @@ def test_entries_name_ids_the_suite_has(framework):
     python = suite_python(SUITES[framework])
     entries = [e for e in ENTRIES.values() if e["framework"] == framework]
     code = f"import json; entries = json.loads({json.dumps(json.dumps(entries))}); {CHECK_IDS[framework]}"
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S, env=WITH_ENVHUB)
     assert done.returncode == 0, done.stderr[-3000:]
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []
 
@@ -185,7 +190,7 @@ def test_suite_runs_on_the_python_it_names(framework):
     env = SUITES[framework]
     python = suite_python(env)
     code = "import sys, envhub._envhub; print('%d.%d' % sys.version_info[:2])"
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S, env=WITH_ENVHUB)
     assert done.returncode == 0, done.stderr[-3000:]
     want = REGISTRY["python_envs"][env].get("python")
     if want:

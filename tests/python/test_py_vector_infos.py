@@ -1,5 +1,5 @@
-"""The one-pass batching of infos (`envhub._infos.flat_infos`) against Gymnasium's own
-`VectorEnv._add_info` (and `envhub.vector._add_info`, for infos that came as JSON): same keys in the same order, same dtypes, shapes,
+"""The one-pass batching of infos (`envhub.client.infos.flat_infos`) against Gymnasium's own
+`VectorEnv._add_info` (and `envhub.client.vector._add_info`, for infos that came as JSON): same keys in the same order, same dtypes, shapes,
 values and masks, for every kind of info value it takes; and it declines (None) where
 Gymnasium's recursion or special cases apply."""
 
@@ -10,8 +10,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from envhub._infos import flat_infos as _flat_infos
-from envhub.vector import _add_info
+from envhub.client.infos import flat_infos as _flat_infos
+from envhub.client.vector import _add_info
 
 
 class _Batch:

@@ -80,6 +80,15 @@ pub const ENVHUB_UV: &str = "ENVHUB_UV";
 /// `envhub serve --allow-provision`, whatever this says.
 pub const ENVHUB_PROVISION: &str = "ENVHUB_PROVISION";
 
+/// The worker protocol version of the hub that starts a Python worker (set by the hub): a
+/// worker of another version refuses to start, naming both (see `envhub_shm::WORKER_PROTOCOL`).
+pub const ENVHUB_WORKER_PROTOCOL: &str = "ENVHUB_WORKER_PROTOCOL";
+
+/// `1` lets envhub ask uv to install (download) a CPython version that a suite's Python
+/// environment names and this machine lacks (`uv python install 3.X`); the config's
+/// `python_install: true` does too. Unset, a missing version is an error naming that command.
+pub const ENVHUB_PYTHON_INSTALL: &str = "ENVHUB_PYTHON_INSTALL";
+
 /// Seconds a process waits for another one's build of the same Python environment before
 /// giving up (default 900).
 pub const ENVHUB_PYENV_WAIT: &str = "ENVHUB_PYENV_WAIT";

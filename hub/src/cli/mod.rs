@@ -4,6 +4,7 @@ mod adapters;
 mod bench;
 mod env_cmd;
 mod envs;
+mod eval;
 mod hubs;
 mod match_cmd;
 mod record;
@@ -66,6 +67,8 @@ enum Command {
     Env(env_cmd::Args),
     /// Record episodes into a LeRobot dataset (v3: Parquet, MP4 per camera, meta/).
     Record(record::Args),
+    /// Evaluate a policy on a benchmark's protocol (`envhub eval --list` names them).
+    Eval(eval::Args),
 }
 
 /// What a subcommand reports besides its output: success, or "ran fine but found nothing".
@@ -129,6 +132,10 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
         Command::Record(args) => {
             hub()?;
             record::run(&cli.registries, cli.config.as_deref(), &args)
+        }
+        Command::Eval(args) => {
+            hub()?; // applies the config's `python:` (the evaluation's interpreter)
+            eval::run(&cli.registries, cli.config.as_deref(), &args)
         }
         Command::Bench(args) => bench::run(&hub()?, &args),
         Command::Serve(args) => serve::run(Hub::new(registry()?), net, &args),

@@ -21,12 +21,8 @@ import sys
 from pathlib import Path
 
 from . import _envhub
-from ._factory import make, make_env, make_vec
-from .adapters import AdapterRegistry, EnvAdapter
-from .async_vector import AsyncVectorEnv
-from .config import EnvConfig
-from .env import Env
-from .errors import (
+from .registration import register_envs
+from .wire.errors import (
     AdapterUnavailableError,
     DataPlaneError,
     EnvFailedError,
@@ -48,10 +44,51 @@ from .errors import (
     WorkerBinaryError,
     WorkerDiedError,
 )
-from .recording import RecordEpisodes, record
-from .registration import register_envs
-from .registry import EnvEntry, EnvRegistry, MatchResult, TaskSpec, match_task_to_env
-from .vector import VectorEnv
+
+# The rest of the public API is imported on first use (PEP 562), so a worker process, which
+# imports this package before `envhub.worker`, loads no client or integration code: the
+# worker side must run on what each suite pins (see `envhub.worker`).
+_LAZY = {
+    "make": "client.factory",
+    "make_env": "client.factory",
+    "make_vec": "client.factory",
+    "AdapterRegistry": "client.adapters",
+    "EnvAdapter": "hosted.base",
+    "AsyncVectorEnv": "client.async_vector",
+    "EnvConfig": "wire.config",
+    "Env": "client.env",
+    "VectorEnv": "client.vector",
+    "EnvEntry": "client.registry",
+    "EnvRegistry": "client.registry",
+    "MatchResult": "client.registry",
+    "TaskSpec": "client.registry",
+    "match_task_to_env": "client.registry",
+    "RecordEpisodes": "recording",
+    "record": "recording",
+    "evaluate": "evaluation",
+}
+# Subpackages reached as attributes (`envhub.sb3.make_vec`, `envhub.recording.RecordingError`).
+_SUBMODULES = frozenset({"sb3", "recording", "evaluation", "worker", "hosted", "client", "wire", "errors"})
+
+
+def __getattr__(name: str):
+    import importlib
+
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    elif name == "eval":
+        value = importlib.import_module(".evaluation", __name__).evaluate
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f".{name}", __name__)
+    else:
+        raise AttributeError(f"module 'envhub' has no attribute '{name}'")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY) | {"eval"} | _SUBMODULES)
+
 
 __version__: str = _envhub.__version__
 
@@ -101,7 +138,6 @@ __all__ = [
     "HubLostError",
     "HubRefusedError",
     "NetworkError",
-    "RecordEpisodes",
     "UnknownHubError",
     "InvalidActionError",
     "InvalidConfigError",

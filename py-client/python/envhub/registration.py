@@ -1,5 +1,7 @@
 """Gymnasium ids for the registry: `gymnasium.make("envhub/<id>")` and
-`gymnasium.make_vec("envhub/<id>", num_envs)` work once `envhub` is imported."""
+`gymnasium.make_vec("envhub/<id>", num_envs)` work once `envhub` is imported. It imports the
+registry and Gymnasium only (the package root runs it, in workers too); the entry points name
+the client classes, which Gymnasium imports when an id is made."""
 
 from __future__ import annotations
 
@@ -7,27 +9,9 @@ from typing import Any
 
 import gymnasium
 
-from .env import Env
-from .registry import EnvEntry, EnvRegistry
+from .client.registry import NAMESPACE, EnvEntry, EnvRegistry
 
 __all__ = ["NAMESPACE", "register_envs"]
-
-NAMESPACE = "envhub"
-
-# The largest limit a worker takes (`max_episode_steps` is a u32): in effect none, for envs
-# whose limit Gymnasium's `TimeLimit` applies instead.
-_NO_LIMIT = 2**32 - 1
-
-
-class _TimeLimitedByGymnasium(Env):
-    """`Env` as `gymnasium.make` creates it for a spec with `max_episode_steps`: `make` wraps
-    it in `TimeLimit` (the spec's limit, or the one passed to `make`, or none with -1), so
-    the worker applies no limit of its own and episodes truncate exactly once, where
-    Gymnasium's own env would."""
-
-    def __init__(self, registry_id: str, **kwargs: Any) -> None:
-        kwargs.setdefault("max_episode_steps", _NO_LIMIT)
-        super().__init__(registry_id, **kwargs)
 
 
 def _spec_fields(entry: EnvEntry) -> dict[str, Any]:
@@ -67,10 +51,10 @@ def register_envs(registry: EnvRegistry | None = None) -> list[str]:
             try:
                 gymnasium.register(
                     id=gym_id,
-                    entry_point=f"envhub.registration:{_TimeLimitedByGymnasium.__name__}"
+                    entry_point="envhub.client.env:TimeLimitedByGymnasium"
                     if limited
-                    else "envhub.env:Env",
-                    vector_entry_point="envhub.vector:VectorEnv",
+                    else "envhub.client.env:Env",
+                    vector_entry_point="envhub.client.vector:VectorEnv",
                     kwargs={"registry_id": entry.id},
                     **fields,
                 )

@@ -26,10 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from ._batched import env_info as _env_info
-from ._batched import env_value as _env_value
-from .errors import InvalidConfigError, InvalidStateError
-from .vector import VectorEnv
+from .client.vector import VectorEnv
+from .wire.batched import env_info as _env_info
+from .wire.batched import env_value as _env_value
+from .wire.errors import InvalidConfigError, InvalidStateError
 
 __all__ = ["VecAdapter", "make_vec", "wrap"]
 

@@ -9,6 +9,7 @@ import json
 import sys
 from typing import Any
 
+from ..wire.errors import RegistryError
 from .benchmarks import BenchmarkError
 from .results import ResumeError
 
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
             step_timeout=args.step_timeout,
             progress=not args.quiet,
         )
-    except (BenchmarkError, FileExistsError, ResumeError) as e:
+    except (BenchmarkError, FileExistsError, ResumeError, RegistryError) as e:
         print(f"envhub eval: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -74,7 +74,7 @@ def make_policy(
 
 
 def _versions() -> dict[str, Any]:
-    from .. import __version__
+    from .._envhub import __version__
 
     packages = {}
     for dist in PACKAGES:

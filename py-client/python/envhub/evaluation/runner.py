@@ -119,7 +119,7 @@ class Runner:
         """Every episode of every task, but those in `skip` (`<task id>#<index>`)."""
         from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-        from .. import EnvHubError
+        from ..wire.errors import EnvHubError
 
         pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
         for spec in self.bench.tasks:
@@ -172,7 +172,7 @@ class Runner:
     def _make(self, spec: TaskSpec, n: int) -> Any:
         import os
 
-        from .. import make_vec
+        from ..client.factory import make_vec
 
         # By default a session gets the share of the cores its envs are of `num_envs` (at least
         # one worker): sessions run side by side, and every worker is an interpreter to start.
@@ -195,7 +195,7 @@ class Runner:
         """The session a start gave, with its first episodes reset: True; False where the
         task cannot run (its episodes failed with the reason); or the task to start again
         when its first reset broke the session."""
-        from .. import EnvHubError
+        from ..wire.errors import EnvHubError
 
         try:
             envs = future.result()
@@ -347,7 +347,7 @@ class Runner:
             slot.pos = 0
 
     def _send_all(self) -> None:
-        from .. import EnvHubError
+        from ..wire.errors import EnvHubError
 
         for s in list(self.sessions):
             ids = [i for i, slot in enumerate(s.slots) if slot.running]

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from .. import _calls
-from .._pickled import unwrap
+from ..wire import calls as _calls
+from ..wire.pickled import unwrap
 from .base import EnvAdapter
 
 #: Registry framework (and adapter name) of a drop-in session.

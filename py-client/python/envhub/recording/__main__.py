@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from ..errors import EnvHubError
+from ..wire.errors import EnvHubError
 
 #: The exit status when fewer episodes than asked were kept (`--max-steps`); `envhub record`
 #: reads it.

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import EnvHubError
+from ..wire.errors import EnvHubError
 from ._video import DEFAULT_CODEC, DEFAULT_CRF, EpisodeVideo, check_codec
 from ._wrapper import RecordEpisodes
 from .errors import require
@@ -78,7 +78,7 @@ def record(
     actions. `max_steps` bounds the batched steps (for `keep="success"` with a policy that
     rarely succeeds); `progress(kept, episodes)` is called as episodes are kept; `recorder`
     holds more `RecordEpisodes` options; `make_kwargs` go to `envhub.make_vec`."""
-    from .._factory import make_vec
+    from ..client.factory import make_vec
 
     require()
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
@@ -139,7 +139,7 @@ def record_video(
 ) -> int:
     """`render()` frames of one env of catalog entry `id` over `steps` steps (episodes
     following each other), as an MP4 at `out`; returns the number of frames."""
-    from .._factory import make_vec
+    from ..client.factory import make_vec
 
     require()
     check_codec(codec)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..errors import EnvHubError
+from ..wire.errors import EnvHubError
 
 __all__ = [
     "DatasetLayoutError",

@@ -24,12 +24,13 @@ from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
-from ._calls import Calls
-from ._infos import flat_infos
-from ._pickled import decode_info, wrap
-from .errors import InvalidConfigError, InvalidStateError, MakeError
-from .hosted.env_fns import FRAMEWORK, write_payload
-from .vector import VectorEnv, _autoreset_mode
+from ..hosted.env_fns import FRAMEWORK, write_payload
+from ..wire.autoreset import autoreset_mode as _autoreset_mode
+from ..wire.calls import Calls
+from ..wire.errors import InvalidConfigError, InvalidStateError, MakeError
+from ..wire.pickled import decode_info, wrap
+from .infos import flat_infos
+from .vector import VectorEnv
 
 __all__ = ["AsyncVectorEnv"]
 

@@ -12,14 +12,18 @@ import json
 import os
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any
+from typing import Any, Union
 
-from . import _envhub
-from .errors import NoMatchError
+from .. import _envhub
+from ..wire.errors import NoMatchError
 
-__all__ = ["EnvEntry", "EnvRegistry", "MatchResult", "TaskSpec", "match_task_to_env"]
+__all__ = ["NAMESPACE", "EnvEntry", "EnvRegistry", "MatchResult", "TaskSpec", "match_task_to_env"]
 
-PathLike = str | os.PathLike[str]
+#: Gymnasium's namespace for the registry's ids (`gymnasium.make("envhub/<id>")`).
+NAMESPACE = "envhub"
+
+# A runtime alias, so written for CPython 3.9 (the package root imports this module in workers too).
+PathLike = Union[str, "os.PathLike[str]"]
 
 
 @dataclass(frozen=True)

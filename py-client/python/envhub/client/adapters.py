@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from . import _envhub
-from .hosted import ADAPTERS_VAR, PICKLED, EnvAdapter, user_adapter_paths
+from .. import _envhub
+from ..hosted import ADAPTERS_VAR, PICKLED, EnvAdapter, user_adapter_paths
 
 __all__ = ["AdapterRegistry", "EnvAdapter"]
 

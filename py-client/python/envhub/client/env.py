@@ -8,11 +8,12 @@ from typing import Any, SupportsFloat
 import gymnasium
 import numpy as np
 
-from . import _info_tree, _spaces
-from ._session import RegistryArg, check_seed, fps_metadata, start
-from .config import EnvConfig, to_json
+from ..wire import info_tree as _info_tree
+from ..wire import spaces as _spaces
+from ..wire.config import EnvConfig, to_json
+from .session import RegistryArg, check_seed, fps_metadata, start
 
-__all__ = ["Env"]
+__all__ = ["Env", "TimeLimitedByGymnasium"]
 
 
 class Env(gymnasium.Env[Any, Any]):
@@ -134,3 +135,17 @@ class Env(gymnasium.Env[Any, Any]):
         return f"<envhub.Env {getattr(self, 'registry_id', '?')}{where}>"
 
 
+# The largest limit a worker takes (`max_episode_steps` is a u32): in effect none, for envs
+# whose limit Gymnasium's `TimeLimit` applies instead.
+_NO_LIMIT = 2**32 - 1
+
+
+class TimeLimitedByGymnasium(Env):
+    """`Env` as `gymnasium.make` creates it for a spec with `max_episode_steps`: `make` wraps
+    it in `TimeLimit` (the spec's limit, or the one passed to `make`, or none with -1), so
+    the worker applies no limit of its own and episodes truncate exactly once, where
+    Gymnasium's own env would."""
+
+    def __init__(self, registry_id: str, **kwargs: Any) -> None:
+        kwargs.setdefault("max_episode_steps", _NO_LIMIT)
+        super().__init__(registry_id, **kwargs)

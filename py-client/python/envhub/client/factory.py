@@ -8,10 +8,9 @@ from typing import Any
 import gymnasium
 from gymnasium.vector import AutoresetMode
 
-from ._session import HubsArg, RegistryArg
 from .env import Env
-from .registration import NAMESPACE
-from .registry import EnvEntry
+from .registry import NAMESPACE, EnvEntry
+from .session import HubsArg, RegistryArg
 from .vector import VectorEnv
 
 __all__ = ["make", "make_env", "make_vec"]

@@ -6,9 +6,9 @@ import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from . import _envhub
-from .config import EnvConfig
-from .errors import InvalidConfigError
+from .. import _envhub
+from ..wire.config import EnvConfig
+from ..wire.errors import InvalidConfigError
 from .registry import EnvRegistry
 
 RegistryArg = EnvRegistry | _envhub.Registry | str | os.PathLike[str] | Sequence[str | os.PathLike[str]] | None

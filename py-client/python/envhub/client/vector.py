@@ -10,12 +10,16 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from . import _info_tree, _spaces
-from ._info_columns import INFO_ROW_BYTES, ColumnReader
-from ._infos import flat_infos
-from ._session import HubsArg, RegistryArg, check_seed, fps_metadata, start
-from .config import EnvConfig, to_json
-from .errors import InvalidActionError, InvalidConfigError, InvalidStateError
+from ..wire import info_tree as _info_tree
+from ..wire import spaces as _spaces
+from ..wire.autoreset import RUST_MODES as _RUST_MODES
+from ..wire.autoreset import autoreset_mode as _autoreset_mode
+from ..wire.config import EnvConfig, to_json
+from ..wire.errors import InvalidActionError, InvalidConfigError, InvalidStateError
+from ..wire.info_schema import INFO_ROW_BYTES
+from .column_reader import ColumnReader
+from .infos import flat_infos
+from .session import HubsArg, RegistryArg, check_seed, fps_metadata, start
 
 __all__ = ["VectorEnv"]
 
@@ -51,26 +55,6 @@ def _add_info(infos: dict[str, Any], env_info: dict[str, Any], k: int, n: int) -
         mask[k] = True
         infos[key], infos[f"_{key}"] = array, mask
     return infos
-
-
-_RUST_MODES = {
-    AutoresetMode.NEXT_STEP: "next_step",
-    AutoresetMode.SAME_STEP: "same_step",
-    AutoresetMode.DISABLED: "disabled",
-}
-
-
-def _autoreset_mode(mode: str | AutoresetMode) -> AutoresetMode:
-    """Gymnasium's enum from itself, its value (`"NextStep"`) or envhub's name (`"next_step"`)."""
-    if isinstance(mode, AutoresetMode):
-        return mode
-    for m, name in _RUST_MODES.items():
-        if isinstance(mode, str) and mode.lower().replace("-", "_") in (name, m.value.lower(), name.replace("_", "")):
-            return m
-    raise InvalidConfigError(
-        f"unknown autoreset mode `{mode}`; valid modes are `next_step`, `same_step`, `disabled` "
-        "(or gymnasium.vector.AutoresetMode)"
-    )
 
 
 class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
