@@ -5,7 +5,7 @@ sees after the 10 settling steps equals, bit for bit, LIBERO's `OffScreenRenderE
 in-process in LIBERO's interpreter as vla-eval's `benchmarks/libero` runs it (256x256
 cameras, `env.seed(7)`, `reset()` then `set_init_state(init_states[k])`, 10 steps of
 `[0]*6 + [-1]`, images flipped `[::-1, ::-1]`); and a fixed action sequence (gripper sent by
-its sign) gives the same success flags step for step. The horizon is cut to a few steps to
+its sign) gives the same success flags step for step; each episode gets its MP4 (`--video`). The horizon is cut to a few steps to
 keep it short; the rest is the catalog's `libero-spatial` protocol.
 
 LIBERO's reset draws the scene's placement from its seeded generator, and `set_init_state`
@@ -151,6 +151,7 @@ def test_first_observation_and_success_flags_match_libero_in_process(tmp_path):
         tasks=["0"],
         episodes=INIT_STATES,
         out=tmp_path / "eval",
+        video=True,
         progress=False,
     )
     assert results["summary"]["errors"] == 0, [e["error"] for e in results["episodes"]]
@@ -163,3 +164,5 @@ def test_first_observation_and_success_flags_match_libero_in_process(tmp_path):
         assert episode["init"] == {"init_state": k, "seed": 7}
         assert episode["success"] == bool(flags.any())
         assert episode["length"] == len(flags)
+        # The episode's video: the upright agentview image of each step, off the stepping path.
+        assert episode["video"] and (tmp_path / "eval" / episode["video"]).stat().st_size > 0
