@@ -17,7 +17,8 @@ and after whatever it runs: the reference here seeds before each episode too, wh
 vla-eval's own sequence for each env's first episode.
 
 Skipped with the reason where LIBERO's catalog environment cannot be built or has no
-LIBERO (`envhub env sync libero`); failed instead under ENVHUB_LIBERO_REQUIRED=1, as
+LIBERO (`envhub env sync libero`); failed instead under ENVHUB_LIBERO_REQUIRED=1 or
+ENVHUB_SUITES_REQUIRED=1 (`make py-test`, which builds the suites' environments), as
 test_py_libero.py does.
 """
 
@@ -37,7 +38,7 @@ envhub = import_envhub()
 from envhub.evaluation import evaluate  # noqa: E402
 from envhub.evaluation.catalog import Catalog  # noqa: E402
 
-REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED"))
+REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVHUB_SUITES_REQUIRED"))
 HORIZON = 12
 INIT_STATES = 2
 
