@@ -146,7 +146,6 @@ def test_every_autoreset_mode_over_gymnasiums_vector_envs(tmp_path, mode, asynch
 def test_a_step_where_one_env_failed_keeps_the_others_steps(tmp_path, null_registry):
     """envhub's `EnvFailedError` carries the other envs' results: their steps are recorded,
     the failed env's episode is dropped, and it records again from its reset."""
-    os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
     env = envhub.make_vec("null-env", 3, num_workers=1, registry=null_registry, max_episode_steps=4, error_after=9)
     # Env 0 steps twice alone first, so it fails (its 9th step) while the others go on.
     env.reset(seed=0)
@@ -350,7 +349,6 @@ def test_the_queue_is_bounded_in_bytes_and_encoding_in_threads(tmp_path, null_re
     the writer encodes them: the queue never holds more than its byte budget (the step being
     written included), and encoding takes no more threads than `encode_threads` (one per
     encoder, FFmpeg's default being one per core for each of the eight)."""
-    os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
     env = envhub.make_vec("null-env", 8, num_workers=1, registry=null_registry, frame=[128, 128, 3],
                           max_episode_steps=10)
     budget = 1_000_000  # two steps and a half
@@ -652,7 +650,6 @@ def test_ten_thousand_episodes_two_cameras_and_a_dataloader(tmp_path, null_regis
     from test_py_record import lerobot_python
 
     python = lerobot_python()
-    os.environ["ENVHUB_TEST_ADAPTERS"] = "1"
     env = envhub.make_vec("null-env", 64, num_workers=2, registry=null_registry, frame=[16, 16, 3],
                           max_episode_steps=2)
     root = tmp_path / "scale"
