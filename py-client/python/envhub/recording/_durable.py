@@ -56,6 +56,14 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(errno, os.strerror(errno), str(b))
 
 
+def _link(src: str, dst: str) -> None:
+    """A hard link (nothing copied), or a copy where the file system has none."""
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
 def _hook(rel: str) -> None:
     if rename_hook is not None:
         rename_hook(rel)
@@ -70,7 +78,7 @@ class Commit:
         self.meta = staging / "meta"
         shutil.rmtree(self.meta, ignore_errors=True)
         if (root / "meta").is_dir():
-            shutil.copytree(root / "meta", self.meta, copy_function=os.link)  # links: no copying
+            shutil.copytree(root / "meta", self.meta, copy_function=_link)
         else:
             self.meta.mkdir(parents=True)
         self._renames: list[tuple[Path, str]] = []

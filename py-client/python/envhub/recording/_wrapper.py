@@ -82,9 +82,10 @@ class RecordEpisodes(VectorWrapper):
     and never leaves a dataset that does not load.
 
     Stepping is not blocked by the disk or the encoder: steps go through a queue of at most
-    `queue_bytes` (512 MiB by default; counting the step being written) to a writer thread. If it is full, `when_full="wait"` makes the step wait and
-    `"drop"` drops the step, and with it the episodes in flight (each env records again from
-    its next episode); either way a `QueueFullWarning` says so, and `stats` counts it.
+    `queue_bytes` (512 MiB by default; counting the step being written) to a writer thread.
+    If it is full, `when_full="wait"` makes the step wait and `"drop"` drops the step, and
+    with it the episodes in flight (each env records again from its next episode); either way
+    a `QueueFullWarning` says so, and `stats` counts it.
 
     `max_episodes` stops keeping episodes once that many are kept (later ones are counted in
     `stats["episodes_beyond"]`). Frames are encoded on `encode_threads` threads (default: up to
