@@ -16,10 +16,8 @@
 
 use crate::hub::Hub;
 use crate::launcher::launch_local;
-use crate::python_host::UserAdapters;
-use envhub_core::EnvConfig;
 use envhub_protocol::HubError;
-use envhub_shm::WorkerJob;
+use envhub_protocol::daemon::{self, Request};
 use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::io::{BufReader, Write};
@@ -28,7 +26,6 @@ use std::path::{Path, PathBuf};
 use std::process::Child;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Duration;
 
 /// The default control socket: `$XDG_RUNTIME_DIR/envhub.sock`, else
 /// `/tmp/envhub-<uid>/envhub.sock` in a folder only this user may enter (a socket directly
@@ -107,7 +104,7 @@ impl Connection {
         let mut reader = BufReader::new(stream);
         let mut line = String::new();
         loop {
-            use crate::daemon_guard::{MAX_LINE, read_line_bounded};
+            use envhub_protocol::daemon::{MAX_LINE, read_line_bounded};
             match read_line_bounded(&mut reader, MAX_LINE, &mut line) {
                 Ok(0) => break,
                 Ok(_) => {}
@@ -119,63 +116,44 @@ impl Connection {
                     break;
                 }
             }
-            let reply = match serde_json::from_str::<Value>(&line) {
-                Ok(request) => match self.handle(&request) {
-                    Ok(ok) => json!({ "ok": ok }),
-                    // The text for people (and older clients), the error itself for clients
-                    // to rebuild: the same variant as an embedded hub's.
-                    Err(e) => json!({ "err": e.to_string(), "error": e }),
-                },
-                Err(e) => json!({ "err": format!("unreadable request: {e}") }),
-            };
-            let mut text = reply.to_string();
+            let reply = Request::parse(&line).and_then(|request| self.handle(request));
+            let mut text = daemon::encode_reply(&reply);
             text.push('\n');
             writer.write_all(text.as_bytes())?;
         }
         Ok(())
     }
 
-    fn handle(&mut self, request: &Value) -> Result<Value, HubError> {
-        let bad = |what: &str| HubError::InvalidConfig {
-            what: "daemon request",
-            reason: format!("missing or invalid `{what}`"),
-        };
-        match request["op"].as_str().unwrap_or_default() {
-            "ping" => Ok(json!("pong")),
-            "adapters" => {
-                let user = user_adapters(request)?;
+    fn handle(&mut self, request: Request) -> Result<Value, HubError> {
+        match request {
+            Request::Ping => Ok(json!("pong")),
+            Request::Adapters { user } => {
                 Ok(serde_json::to_value(self.hub.adapters_with(&user)?)
                     .expect("adapters serialize"))
             }
-            "status" => Ok(json!({"workers": self.workers.load(Ordering::Relaxed)})),
-            "route" => {
-                let id = request["id"].as_str().ok_or_else(|| bad("id"))?;
-                let config: EnvConfig =
-                    serde_json::from_value(request["config"].clone()).map_err(|e| {
-                        HubError::InvalidConfig {
-                            what: "config",
-                            reason: e.to_string(),
-                        }
-                    })?;
-                let user = user_adapters(request)?;
-                Ok(
-                    serde_json::to_value(self.hub.route_with(id, &config, &user)?)
-                        .expect("routes serialize"),
-                )
-            }
-            "launch" => {
-                let job: WorkerJob =
-                    serde_json::from_value(request["job"].clone()).map_err(|_| bad("job"))?;
-                let timeout =
-                    Duration::from_millis(request["start_timeout_ms"].as_u64().unwrap_or(60_000));
-                let (child, spec) = launch_local(&job, &user_adapters(request)?, timeout)?;
+            Request::Status => Ok(json!({"workers": self.workers.load(Ordering::Relaxed)})),
+            Request::Route { id, config, user } => Ok(serde_json::to_value(
+                self.hub.route_with(&id, &config, &user)?,
+            )
+            .expect("routes serialize")),
+            Request::Launch {
+                job,
+                start_timeout,
+                user,
+            } => {
+                let (child, spec) = launch_local(&job, &user, start_timeout)?;
                 self.children.insert(child.id(), child);
                 self.workers.fetch_add(1, Ordering::Relaxed);
                 Ok(serde_json::to_value(spec).expect("specs serialize"))
             }
-            "exit_status" => {
-                let pid = request["pid"].as_u64().ok_or_else(|| bad("pid"))? as u32;
-                let child = self.children.get_mut(&pid).ok_or_else(|| bad("pid"))?;
+            Request::ExitStatus { pid } => {
+                let child = self
+                    .children
+                    .get_mut(&pid)
+                    .ok_or_else(|| HubError::InvalidConfig {
+                        what: "daemon request",
+                        reason: format!("pid {pid} is no worker of this connection"),
+                    })?;
                 match child.try_wait() {
                     Ok(Some(status)) => {
                         // Reaped and reported: the worker is gone for good.
@@ -186,39 +164,8 @@ impl Connection {
                     _ => Ok(Value::Null),
                 }
             }
-            other => Err(HubError::InvalidConfig {
-                what: "daemon request",
-                reason: format!(
-                    "unknown op `{other}`; valid: ping, adapters, status, route, launch, exit_status"
-                ),
-            }),
         }
     }
-}
-
-/// The client's user adapters of a request (none when the field is absent, as from a client
-/// that predates it). Folders must be absolute: the daemon's working directory is not the
-/// client's.
-pub(crate) fn user_adapters(request: &Value) -> Result<UserAdapters, HubError> {
-    let invalid = |reason: String| HubError::InvalidConfig {
-        what: "daemon request",
-        reason: format!("invalid `user_adapters`: {reason}"),
-    };
-    let user: UserAdapters = match request.get("user_adapters") {
-        None | Some(Value::Null) => return Ok(UserAdapters::default()),
-        Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
-            invalid(format!(
-                "{e}; expected {{\"adapters\": [\"module:Class\"], \"pythonpath\": [\"/abs/dir\"]}}"
-            ))
-        })?,
-    };
-    if let Some(relative) = user.pythonpath.iter().find(|p| p.is_relative()) {
-        return Err(invalid(format!(
-            "`pythonpath` entry `{}` is relative; send absolute folders",
-            relative.display()
-        )));
-    }
-    Ok(user)
 }
 
 impl Drop for Connection {

@@ -6,12 +6,13 @@
 //! an adapter registered since is included.
 
 use crate::catalog::AdapterInfo;
-use crate::python_host::UserAdapters;
+use crate::python_host::user_adapters_of_this_process;
 use envhub_core::EnvConfig;
 use envhub_protocol::HubError;
 use envhub_protocol::Route;
+use envhub_protocol::daemon::{self, ReplyError, Request};
 use envhub_shm::{ReadySpec, WorkerJob};
-use serde_json::{Value, json};
+use serde_json::Value;
 use std::io::{BufReader, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
@@ -71,21 +72,20 @@ impl DaemonClient {
             conn: Mutex::new((reader, stream)),
             pid,
         };
-        client.call(json!({"op": "ping"}))?;
+        client.call(Request::Ping)?;
         Ok(Arc::new(client))
     }
 
     /// How long a call may wait for its reply: a daemon that accepts and never answers (stuck,
     /// stopped, or not a daemon at all) must not hang its clients.
-    fn time_limit(request: &Value) -> Duration {
-        match request["op"].as_str() {
+    fn time_limit(request: &Request) -> Duration {
+        match request {
             // Starting a worker takes up to its start timeout.
-            Some("launch") => {
-                Duration::from_millis(request["start_timeout_ms"].as_u64().unwrap_or(60_000))
-                    + Duration::from_secs(10)
+            Request::Launch { start_timeout, .. } => {
+                start_timeout.saturating_add(Duration::from_secs(10))
             }
             // May ask Python adapters what they host (an interpreter's start, imports).
-            Some("adapters" | "route") => Duration::from_secs(120),
+            Request::Adapters { .. } | Request::Route { .. } => Duration::from_secs(120),
             _ => Duration::from_secs(5),
         }
     }
@@ -114,19 +114,9 @@ impl DaemonClient {
         }
     }
 
-    /// Adds this process's user adapters to `request`, when it has any (an older daemon
-    /// ignores the field).
-    fn with_user_adapters(mut request: Value) -> Value {
-        let user = UserAdapters::of_this_process();
-        if !user.is_empty() {
-            request["user_adapters"] = serde_json::to_value(user).expect("paths serialize");
-        }
-        request
-    }
-
     /// Sends one request and reads its reply: `{"ok": ...}`, or `{"err": "...", "error":
     /// {...}}` (the error rebuilt as the daemon had it; text only from an older daemon).
-    fn call(&self, request: Value) -> Result<Value, HubError> {
+    fn call(&self, request: Request) -> Result<Value, HubError> {
         let mut conn = self
             .conn
             .lock()
@@ -136,17 +126,13 @@ impl DaemonClient {
         writer
             .set_read_timeout(Some(limit))
             .map_err(|e| self.fail(format!("set a time limit: {e}")))?;
-        let mut line = request.to_string();
+        let mut line = request.encode();
         line.push('\n');
         writer
             .write_all(line.as_bytes())
             .map_err(|e| self.fail(format!("send: {e}")))?;
         let mut reply = String::new();
-        let n = crate::daemon_guard::read_line_bounded(
-            reader,
-            crate::daemon_guard::MAX_LINE,
-            &mut reply,
-        )
+        let n = daemon::read_line_bounded(reader, daemon::MAX_LINE, &mut reply)
         .map_err(|e| {
             if matches!(
                 e.kind(),
@@ -156,7 +142,7 @@ impl DaemonClient {
                 let _ = writer.shutdown(std::net::Shutdown::Both);
                 self.fail(format!(
                     "no reply to `{}` within {limit:?}; the daemon is stuck, stopped or not an envhub daemon",
-                    request["op"].as_str().unwrap_or("?")
+                    request.op()
                 ))
             } else {
                 self.fail(format!("receive: {e}"))
@@ -165,19 +151,11 @@ impl DaemonClient {
         if n == 0 {
             return Err(self.fail("the daemon closed the connection"));
         }
-        let mut reply: Value = serde_json::from_str(&reply)
-            .map_err(|e| self.fail(format!("unreadable reply: {e}")))?;
-        if let Some(error) = reply.get_mut("error").map(Value::take)
-            && let Ok(error) = serde_json::from_value::<HubError>(error)
-        {
-            return Err(self.checked(error));
-        }
-        if let Some(err) = reply.get("err") {
-            return Err(HubError::Remote(
-                err.as_str().unwrap_or("unknown error").to_string(),
-            ));
-        }
-        Ok(reply.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+        daemon::parse_reply(&reply).map_err(|e| match e {
+            ReplyError::Unreadable(why) => self.fail(format!("unreadable reply: {why}")),
+            ReplyError::Error(error) => self.checked(error),
+            ReplyError::Text(text) => HubError::Remote(text),
+        })
     }
 
     /// Holds the worker the daemon reports as `pid` by a pidfd, once it is checked to be the
@@ -204,37 +182,41 @@ impl DaemonClient {
         job: &WorkerJob,
         start_timeout: Duration,
     ) -> Result<ReadySpec, HubError> {
-        let ok = self.call(Self::with_user_adapters(json!({
-            "op": "launch",
-            "job": job,
-            "start_timeout_ms": start_timeout.as_millis() as u64,
-        })))?;
+        let ok = self.call(Request::Launch {
+            job: Box::new(job.clone()),
+            start_timeout,
+            user: user_adapters_of_this_process(),
+        })?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable ready spec: {e}")))
     }
 
     /// How a worker the daemon started has ended (`None`: still running).
     pub(crate) fn exit_status(&self, pid: u32) -> Result<Option<String>, HubError> {
-        let ok = self.call(json!({"op": "exit_status", "pid": pid}))?;
+        let ok = self.call(Request::ExitStatus { pid })?;
         Ok(ok.as_str().map(str::to_string))
     }
 
     /// Routes a registry id with the daemon's registry and adapters.
     pub(crate) fn route(&self, id: &str, config: &EnvConfig) -> Result<Route, HubError> {
-        let ok = self.call(Self::with_user_adapters(
-            json!({"op": "route", "id": id, "config": config}),
-        ))?;
+        let ok = self.call(Request::Route {
+            id: id.to_string(),
+            config: config.clone(),
+            user: user_adapters_of_this_process(),
+        })?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable route: {e}")))
     }
 
     /// The daemon's adapters.
     pub fn adapters(&self) -> Result<Vec<AdapterInfo>, HubError> {
-        let ok = self.call(Self::with_user_adapters(json!({"op": "adapters"})))?;
+        let ok = self.call(Request::Adapters {
+            user: user_adapters_of_this_process(),
+        })?;
         serde_json::from_value(ok).map_err(|e| self.fail(format!("unreadable adapters: {e}")))
     }
 
     /// Workers the daemon runs, over all clients.
     pub fn worker_count(&self) -> Result<usize, HubError> {
-        let ok = self.call(json!({"op": "status"}))?;
+        let ok = self.call(Request::Status)?;
         Ok(ok["workers"].as_u64().unwrap_or(0) as usize)
     }
 }

@@ -9,6 +9,10 @@
 //! until `ENVHUB_FUZZ_SECS` seconds (default 2) have passed. A target fails on a panic or on a
 //! broken invariant, and proptest shrinks the input it prints. Every run prints its count of
 //! executions. `ENVHUB_FUZZ_SEED` picks the random stream (default: fixed, reproducible).
+//!
+//! This is the quick tier, run by every `cargo test`. The coverage-guided tier is the
+//! cargo-fuzz crate `fuzz/` (libFuzzer with AddressSanitizer, `scripts/fuzz.sh`), with a target
+//! for each of these parsers and more (docs/fuzzing.md).
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRunner};
@@ -412,13 +416,16 @@ mod targets {
     #[test]
     fn fuzz_daemon_request() {
         fuzz("daemon_request", Vec::new(), |bytes| {
-            let Ok(request) = serde_json::from_slice::<serde_json::Value>(bytes) else {
-                return Ok(());
-            };
-            let _ = request["op"].as_str();
-            let _ = crate::daemon::user_adapters(&request);
-            let _ = serde_json::from_value::<envhub_core::EnvConfig>(request["config"].clone());
-            let _ = serde_json::from_value::<envhub_shm::WorkerJob>(request["job"].clone());
+            let text = String::from_utf8_lossy(bytes);
+            if let Ok(request) = envhub_protocol::daemon::Request::parse(&text) {
+                // What the client sends reads back as the same request.
+                let again = envhub_protocol::daemon::Request::parse(&request.encode())
+                    .map_err(|e| format!("an encoded {} request fails: {e}", request.op()))?;
+                if again.op() != request.op() {
+                    return Err("a request changed its op on the way".into());
+                }
+            }
+            let _ = envhub_protocol::daemon::parse_reply(&text);
             Ok(())
         });
     }

@@ -6,6 +6,8 @@
 //! Rust worker binary, and starts it with `serve --job` for the adapters it reported.
 
 use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON, ENVHUB_WORKER_PROTOCOL};
+/// User adapters beyond this hub's own, as they travel to a daemon.
+pub(crate) use envhub_protocol::daemon::UserAdapters;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -66,50 +68,31 @@ pub fn python_interpreter() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("python3"))
 }
 
-/// User adapters beyond this hub's own (its config's `adapters:` and `ENVHUB_ADAPTERS`):
-/// import paths, and the `PYTHONPATH` entries their modules need. A hub daemon gets them
-/// from each client with its requests, because the client's environment never reaches the
-/// daemon's workers; empty (the default, also for an older client) means none.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub(crate) struct UserAdapters {
-    /// Import paths, `module:Class`.
-    pub adapters: Vec<String>,
-    /// Absolute folders to put first on the worker's `PYTHONPATH`.
-    pub pythonpath: Vec<PathBuf>,
-}
-
-impl UserAdapters {
-    /// What a Python worker started by this process would host beyond the built-in
-    /// adapters: the config's `adapters:` and `ENVHUB_ADAPTERS`, with this process's
-    /// `PYTHONPATH` and working directory (which `python -m` puts on `sys.path`) made
-    /// absolute. Empty when there are no user adapters.
-    pub(crate) fn of_this_process() -> UserAdapters {
-        let adapters = own_adapters();
-        if adapters.is_empty() {
-            return UserAdapters::default();
-        }
-        let cwd = std::env::current_dir().unwrap_or_default();
-        let mut pythonpath: Vec<PathBuf> = std::env::var_os("PYTHONPATH")
-            .map(|v| std::env::split_paths(&v).collect())
-            .unwrap_or_default();
-        pythonpath.push(cwd.clone());
-        UserAdapters {
-            adapters,
-            pythonpath: unique(
-                pythonpath
-                    .into_iter()
-                    .filter(|p| !p.as_os_str().is_empty())
-                    .map(|p| cwd.join(p))
-                    // Sent as JSON text: a folder whose name is not UTF-8 cannot travel.
-                    .filter(|p| p.to_str().is_some()),
-            ),
-        }
+/// User adapters beyond this hub's own (its config's `adapters:` and `ENVHUB_ADAPTERS`), which
+/// a client sends the daemon with its requests: what a Python worker started by this process
+/// would host beyond the built-in adapters, with this process's `PYTHONPATH` and working
+/// directory (which `python -m` puts on `sys.path`) made absolute. Empty when there are no
+/// user adapters.
+pub(crate) fn user_adapters_of_this_process() -> UserAdapters {
+    let adapters = own_adapters();
+    if adapters.is_empty() {
+        return UserAdapters::default();
     }
-
-    /// Whether there are none.
-    pub(crate) fn is_empty(&self) -> bool {
-        self.adapters.is_empty() && self.pythonpath.is_empty()
+    let cwd = std::env::current_dir().unwrap_or_default();
+    let mut pythonpath: Vec<PathBuf> = std::env::var_os("PYTHONPATH")
+        .map(|v| std::env::split_paths(&v).collect())
+        .unwrap_or_default();
+    pythonpath.push(cwd.clone());
+    UserAdapters {
+        adapters,
+        pythonpath: unique(
+            pythonpath
+                .into_iter()
+                .filter(|p| !p.as_os_str().is_empty())
+                .map(|p| cwd.join(p))
+                // Sent as JSON text: a folder whose name is not UTF-8 cannot travel.
+                .filter(|p| p.to_str().is_some()),
+        ),
     }
 }
 
@@ -202,7 +185,7 @@ fn provisioned_command(
     // shadow the suite's pins.
     let mut after = Vec::new();
     if !adapters.is_empty() {
-        after.extend(UserAdapters::of_this_process().pythonpath);
+        after.extend(user_adapters_of_this_process().pythonpath);
         after.extend(extra.pythonpath.iter().cloned());
     }
     cmd.arg("-c").arg(bootstrap(env, &unique(after)));

@@ -10,6 +10,7 @@
 //! `envhub-shm` (layouts only), `ring` (the AEAD that seals session messages). Must not depend
 //! on: Zenoh, iceoryx2 services, processes.
 
+pub mod daemon;
 mod error;
 mod frame;
 mod ids;
