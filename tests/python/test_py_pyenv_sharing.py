@@ -155,10 +155,14 @@ def read_only(folder: Path) -> list[str]:
     return ["unshare", "-m", "sh", "-c", script, str(folder)]
 
 
-def test_a_read_only_cache_serves_sessions(cache: Path) -> None:
+def test_a_read_only_cache_serves_sessions(cache: Path, tmp_path: Path) -> None:
+    # Another install too, whose overlay the read-only cache cannot hold (it goes under the
+    # temporary folder).
+    other = install_copy(tmp_path / "other", "other")
     prefix = read_only(cache)
     try:
         ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix))
+        ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix, binary=other / "bin" / "envhub"))
         denied = subprocess.run([*prefix, "touch", str(cache / "probe")], check=False, capture_output=True)
         assert denied.returncode != 0, "the cache was writable: the test proves nothing"
     finally:
