@@ -35,6 +35,10 @@ pub struct Manifest {
     /// Installed after them without their dependencies.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub no_deps: Vec<String>,
+    /// What everything resolved to (`uv pip freeze`: `name==version`, sorted): what an
+    /// unpinned requirement became on this machine, that day.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub resolved: Vec<String>,
     /// When it was built (seconds since the Unix epoch).
     pub created_unix: u64,
     /// How long building it took.
@@ -744,6 +748,17 @@ impl Store {
                 )
             })?;
         }
+        let mut freeze = Command::new(&self.uv);
+        freeze.args(["pip", "freeze", "--python"]).arg(&python);
+        let frozen =
+            uv::run(freeze, every, |_| {}).map_err(|uv::Failed(m)| failed("`uv pip freeze`", m))?;
+        let mut resolved: Vec<String> = frozen
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .map(String::from)
+            .collect();
+        resolved.sort();
         let manifest = Manifest {
             name: name.clone(),
             key: plan.key.clone(),
@@ -751,6 +766,7 @@ impl Store {
             base_interpreter: plan.base.clone(),
             requirements: plan.requirements.clone(),
             no_deps: plan.no_deps.clone(),
+            resolved,
             created_unix: SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .unwrap_or_default()

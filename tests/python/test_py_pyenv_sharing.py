@@ -13,6 +13,7 @@ own with `envhub env sync metaworld`.
 - A worker refuses a hub of another worker protocol, naming both.
 - `envhub env remove` while a session uses the environment is refused, naming its workers'
   pids; `--force` removes it, and the session's next worker start fails saying it was removed.
+- `envhub env list --json` shows what each environment's requirements resolved to.
 - A CPython that reports itself free-threaded (a script wrapping a real one) is not picked; the
   error names `uv python install 3.X`.
 
@@ -154,10 +155,14 @@ def read_only(folder: Path) -> list[str]:
     return ["unshare", "-m", "sh", "-c", script, str(folder)]
 
 
-def test_a_read_only_cache_serves_sessions(cache: Path) -> None:
+def test_a_read_only_cache_serves_sessions(cache: Path, tmp_path: Path) -> None:
+    # Another install too, whose overlay the read-only cache cannot hold (it goes under the
+    # temporary folder).
+    other = install_copy(tmp_path / "other", "other")
     prefix = read_only(cache)
     try:
         ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix))
+        ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix, binary=other / "bin" / "envhub"))
         denied = subprocess.run([*prefix, "touch", str(cache / "probe")], check=False, capture_output=True)
         assert denied.returncode != 0, "the cache was writable: the test proves nothing"
     finally:
@@ -415,3 +420,14 @@ def test_a_free_threaded_python_is_not_picked_and_the_hint_names_the_install_com
     assert f"`uv python install {minor}`" in out.stderr and "ENVHUB_PYTHON_INSTALL=1" in out.stderr, out.stderr
     present = out.stderr.split("present:")[1].splitlines()[0]
     assert str(fake) not in present, out.stderr
+
+
+def test_the_list_shows_what_the_requirements_resolved_to(cache: Path) -> None:
+    listed = cli("env", "list", "--json", cache=cache)
+    assert listed.returncode == 0, listed.stderr
+    row = next(r for r in json.loads(listed.stdout) if r["name"] == "metaworld" and r["in_catalog"])
+    resolved = row["resolved"]
+    assert "metaworld==3.1.1" in resolved and "mujoco==3.3.0" in resolved, resolved
+    # What the unpinned requirements became, with their versions.
+    assert any(r.startswith("numpy==") for r in resolved) and any(r.startswith("packaging==") for r in resolved)
+    assert resolved == sorted(resolved)

@@ -125,6 +125,10 @@ pub struct ReadySpec {
 /// The one line a worker prints on stdout when it has started, or failed to.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one reply per worker start, read once: boxing would save nothing"
+)]
 pub enum WorkerReply {
     /// Envs created, channel open.
     Ready(ReadySpec),

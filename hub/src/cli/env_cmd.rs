@@ -211,6 +211,9 @@ struct Row {
     size_bytes: Option<u64>,
     last_use_unix: Option<u64>,
     requirements: Vec<String>,
+    /// What they resolved to when it was built (`name==version`; empty: not built, or
+    /// built by an envhub that did not record it).
+    resolved: Vec<String>,
 }
 
 fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow::Result<Outcome> {
@@ -238,6 +241,9 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                     size_bytes: found.map(|s| s.size_bytes),
                     last_use_unix: found.and_then(|s| unix(s.last_use)),
                     requirements: plan.requirements,
+                    resolved: found
+                        .and_then(|s| s.manifest.as_ref().map(|m| m.resolved.clone()))
+                        .unwrap_or_default(),
                 });
             }
             Err(e) => eprintln!("warning: {e}"),
@@ -263,6 +269,11 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                 .manifest
                 .as_ref()
                 .map(|m| m.requirements.clone())
+                .unwrap_or_default(),
+            resolved: s
+                .manifest
+                .as_ref()
+                .map(|m| m.resolved.clone())
                 .unwrap_or_default(),
         });
     }
