@@ -3,8 +3,9 @@
 //! Layout of `<root>`: `<name>-<key>/` a ready venv (its `envhub-env.json` manifest written
 //! before the folder got its name), `<name>-<key>.lock` its build lock, `.tmp-<name>-<key>-*`
 //! a build in progress or one that was interrupted (cleared by the next build of that key),
-//! `.installs/<hash>/` one install's overlay (see [`Store::overlay`]). A build happens in the temporary folder and is renamed into place only once everything
-//! succeeded, so nothing half-installed is ever found ready.
+//! `.installs/<hash>/` one install's overlay (see [`Store::overlay`]). A build happens in
+//! the temporary folder and is renamed into place only once everything succeeded, so nothing
+//! half-installed is ever found ready.
 
 use crate::error::{PyEnvError, io};
 use crate::hold;
@@ -574,8 +575,8 @@ impl Store {
     /// This install's overlay: the folder its workers put first on `sys.path`, holding one
     /// link per package (`envhub` → this install's package folder) and nothing else. Keyed
     /// by the packages' paths, so each install (a checkout, a wheel) has its own, and none
-    /// re-points a link another one's workers follow. In `<root>/.installs/`, or in the
-    /// temporary folder where the cache is read-only.
+    /// re-points a link another one's workers follow. In `<root>/.installs/`, or, where the
+    /// cache is read-only, in a folder only this user can write.
     pub fn overlay(&self, name: &str) -> Result<PathBuf, PyEnvError> {
         if let Some(dir) = self.overlay.get() {
             return Ok(dir.clone());
@@ -590,11 +591,12 @@ impl Store {
         let dir = match fill_overlay(&in_cache, &self.packages) {
             Ok(()) => in_cache,
             Err(e) => {
-                // SAFETY: `getuid` cannot fail and touches no memory.
-                let uid = unsafe { libc::getuid() };
-                let elsewhere = std::env::temp_dir()
-                    .join(format!("envhub-{uid}-installs"))
-                    .join(&key);
+                let base = private_folder().map_err(io(
+                    name,
+                    "make a private folder for the overlay in",
+                    &std::env::temp_dir(),
+                ))?;
+                let elsewhere = base.join(&key);
                 tracing::debug!(
                     "cannot make the overlay `{}` ({e}); using `{}`",
                     in_cache.display(),
@@ -789,6 +791,33 @@ fn version_matches(version: &str, requested: &str) -> bool {
 fn read_manifest(dir: &Path) -> Option<Manifest> {
     let text = std::fs::read_to_string(dir.join(MANIFEST)).ok()?;
     serde_json::from_str(&text).ok()
+}
+
+/// A folder only this user can write, for overlays when the cache is read-only:
+/// `$XDG_RUNTIME_DIR/envhub-installs`, else `<tmp>/envhub-<uid>-installs` — made with mode
+/// 0700 and refused unless this user owns it and nobody else can write it (another user
+/// could otherwise point the worker's `envhub` at their code).
+fn private_folder() -> std::io::Result<PathBuf> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    // SAFETY: `getuid` cannot fail and touches no memory.
+    let uid = unsafe { libc::getuid() };
+    let dir = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(runtime) => PathBuf::from(runtime).join("envhub-installs"),
+        None => std::env::temp_dir().join(format!("envhub-{uid}-installs")),
+    };
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(e),
+    }
+    let meta = std::fs::symlink_metadata(&dir)?;
+    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o022 != 0 {
+        return Err(std::io::Error::other(format!(
+            "`{}` is not a folder of this user's that only it can write",
+            dir.display()
+        )));
+    }
+    Ok(dir)
 }
 
 /// Makes `dir` hold one link per package folder (`envhub` → the package), where it does
