@@ -4,7 +4,10 @@ The `envhub` tests need the compiled package (`make py-install` builds it into `
 `make py-test` does that first). Without it they are skipped, unless `ENVHUB_PY_REQUIRED`
 is set (as `make py-test` does), when a missing package is an error.
 
-Every test process gets its own iceoryx2 namespace, so parallel runs never share files.
+Every test process gets its own iceoryx2 namespace, so parallel runs never share files:
+`pytest{pid}_`, and under pytest-xdist (`-n N`) the controller's prefix plus the worker's
+name (`pytest{pid}_gw0_`), so the controller's clean-up at the end also covers its workers'.
+The rules that let tests run side by side under `-n N` are in README.md beside this file.
 """
 
 from __future__ import annotations
@@ -16,8 +19,15 @@ from pathlib import Path
 
 import pytest
 
-NAMESPACE = f"pytest{os.getpid()}_"
-os.environ.setdefault("ENVHUB_NAMESPACE", NAMESPACE)
+# An xdist worker inherits its controller's environment, and with it the controller's
+# namespace: each worker takes its own inside it, never the shared one.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER")
+if _WORKER and os.environ.get("ENVHUB_NAMESPACE"):
+    NAMESPACE = f"{os.environ['ENVHUB_NAMESPACE']}{_WORKER}_"
+    os.environ["ENVHUB_NAMESPACE"] = NAMESPACE
+else:
+    NAMESPACE = f"pytest{os.getpid()}_"
+    os.environ.setdefault("ENVHUB_NAMESPACE", NAMESPACE)
 # The tests must not pick up a developer's own registry or daemon.
 os.environ.pop("ENVHUB_REGISTRY", None)
 os.environ.pop("ENVHUB_HUB", None)
