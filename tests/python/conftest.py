@@ -12,6 +12,7 @@ The rules that let tests run side by side under `-n N` are in README.md beside t
 
 from __future__ import annotations
 
+import fcntl
 import glob
 import os
 import textwrap
@@ -73,6 +74,40 @@ def mujoco_or_skip(envhub) -> None:
     if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
         pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
     pytest.skip(message)
+
+
+def pytest_configure(config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "serial: the test runs while no other test does (under pytest-xdist): it times how fast "
+        "something happens, and tests on the other workers would take the cores it is timed on",
+    )
+    # Registered by pytest-xdist too; here so that a run without xdist does not warn.
+    config.addinivalue_line("markers", "xdist_group(name): under `--dist loadgroup`, one worker runs the group")
+
+
+@pytest.fixture(autouse=True)
+def _serial_tests_run_alone(request, tmp_path_factory):
+    """Under pytest-xdist, a `serial` test holds a lock file exclusively and every other test
+    holds it shared, so a serial test waits for the running tests and runs alone. A turnstile
+    lock in front makes the tests that come after a waiting serial test wait behind it.
+    Without xdist (one test at a time) this does nothing."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        yield
+        return
+    # Each worker's base temporary folder lies in the controller's: one folder per run.
+    shared = tmp_path_factory.getbasetemp().parent
+    serial = request.node.get_closest_marker("serial") is not None
+    with open(shared / "serial.turnstile", "a") as turnstile, open(shared / "serial.lock", "a") as lock:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX if serial else fcntl.LOCK_SH)
+        finally:
+            fcntl.flock(turnstile, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 @pytest.fixture
