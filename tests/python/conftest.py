@@ -82,8 +82,22 @@ def pytest_configure(config) -> None:
         "serial: the test runs while no other test does (under pytest-xdist): it times how fast "
         "something happens, and tests on the other workers would take the cores it is timed on",
     )
+    config.addinivalue_line(
+        "markers",
+        "slow: the test takes over a minute on a two-core machine (a `# slow: <why>` comment "
+        "says why); pytest-xdist hands these out first",
+    )
     # Registered by pytest-xdist too; here so that a run without xdist does not warn.
     config.addinivalue_line("markers", "xdist_group(name): under `--dist loadgroup`, one worker runs the group")
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Under pytest-xdist, the `slow` tests come first (in their order), so that the workers
+    start them early and the short tests fill in around them: a slow test handed out last
+    would keep one worker busy while the others sit idle. Every worker sorts alike, as xdist
+    requires. Alone, the tests keep the files' order."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 @pytest.fixture(autouse=True)
