@@ -92,12 +92,24 @@ def pytest_configure(config) -> None:
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Under pytest-xdist, the `slow` tests come first (in their order), so that the workers
-    start them early and the short tests fill in around them: a slow test handed out last
-    would keep one worker busy while the others sit idle. Every worker sorts alike, as xdist
-    requires. Alone, the tests keep the files' order."""
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    """Under pytest-xdist, the order in which tests are handed out:
+    - the `serial` tests last: each waits for the tests running beside it, and at the end
+      those are few and short;
+    - with `--dist loadgroup` (a test at a time to whichever worker is free), the `slow`
+      tests first, so that the short tests fill in around them: a slow test handed out last
+      keeps one worker busy while the others sit idle. (`--dist load` hands out long runs
+      of consecutive tests at first, which would put the slow ones on one worker.)
+    Every worker sorts alike, as xdist requires. Alone, the tests keep the files' order."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    slow_first = bool(getattr(config.option, "loadgroup", False))  # a worker's `--dist loadgroup`
+
+    def rank(item) -> int:
+        if item.get_closest_marker("serial"):
+            return 2
+        return 0 if slow_first and item.get_closest_marker("slow") else 1
+
+    items.sort(key=rank)
 
 
 @pytest.fixture(autouse=True)
