@@ -170,6 +170,9 @@ def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[d
 # Native, Python-hosted, Dict with a camera -------------------------------------------------
 
 
+# slow: 60 steps of three Hoppers, each step rendered (MuJoCo offscreen through Mesa's software
+# EGL here); the 60 steps give the six episodes of different lengths the test checks.
+@pytest.mark.slow
 def test_native_mujoco_with_render_frames(tmp_path):
     """A native MuJoCo env (Hopper, three envs, `next_step` autoreset) with `rgb_array`
     frames: episodes of different lengths, states and actions bit for bit, the video within

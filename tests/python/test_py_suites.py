@@ -237,7 +237,15 @@ if LIBERO_ENV:
     CASES += [libero_case("libero-spatial", 5, 40), libero_case("libero-goal", 2, 40)]
 
 
-@pytest.mark.parametrize("c", CASES, ids=[c["entry"] for c in CASES])
+# slow (robosuite and LIBERO cases): each runs twice, in the suite's interpreter and through
+# envhub, and each run builds the scene (robosuite's model compiled from XML, LIBERO's assets,
+# cameras rendered offscreen); the step counts are the ones the comparisons need (resets
+# and limits crossed, see CASES).
+@pytest.mark.parametrize(
+    "c",
+    [pytest.param(c, marks=pytest.mark.slow) if c["framework"] in ("robosuite", "libero") else c for c in CASES],
+    ids=[c["entry"] for c in CASES],
+)
 def test_entry_runs_bit_for_bit_like_the_suite(c, tmp_path):
     ref = native_run(c, tmp_path)
     got = suite_runs.envhub_run(c)
@@ -265,6 +273,9 @@ def test_nested_infos_arrive_with_their_dtypes():
 # One client, many interpreters -------------------------------------------------------------
 
 
+# slow: five (six with LIBERO) workers in five interpreters start, each importing its suite;
+# the 40 steps are few next to that.
+@pytest.mark.slow
 def test_one_client_opens_every_suite_and_a_native_env_at_once():
     """Meta-World, MyoSuite, dm_control, robosuite (and LIBERO, where the catalog has its
     environment) tasks and a native MuJoCo env, open together in this process, whose
