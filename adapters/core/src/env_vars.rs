@@ -57,6 +57,11 @@ pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
 /// users' sight, and only `envhub bench` and tests that name them directly use them.
 pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";
 
+/// Seconds a worker may take to create its envs and report ready before its session fails
+/// (default 120: a suite such as LIBERO or robosuite imports and builds scenes for tens of
+/// seconds, more on a loaded machine). A session's own `start_timeout` option wins.
+pub const ENVHUB_START_TIMEOUT: &str = "ENVHUB_START_TIMEOUT";
+
 /// Seconds that asking a worker what it hosts (`envhub-worker describe`,
 /// `python -m envhub.worker describe`) may take before it is killed and reported as hung
 /// (default 30): an adapter module that blocks at import cannot stall the hub.
