@@ -229,27 +229,14 @@ impl Network {
         let reply = rx
             .recv_timeout(timeout + Duration::from_secs(1))
             .map_err(|_| lost(format!("no answer to `{key}` within {timeout:?}")))?;
-        let sample = reply
-            .result()
-            .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
-        let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
-            .map_err(|e| lost(format!("unreadable reply: {e}")))?;
-        if let Some(error) = value.get_mut("error").map(Value::take)
-            && let Ok(error) = serde_json::from_value::<HubError>(error)
-        {
-            return Err(envhub_protocol::untrusted::from_hub(hub, error));
-        }
-        if let Some(err) = value.get("err") {
-            return Err(envhub_protocol::untrusted::from_hub(
-                hub,
-                HubError::Remote(err.as_str().unwrap_or("error").to_string()),
-            ));
-        }
-        serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
-            .map_err(|e| lost(format!("unreadable reply: {e}")))
+        read_reply(hub, &reply)
     }
 
     /// Opens a session on `hub` (starting its workers takes up to `start_timeout`).
+    ///
+    /// The reply carries the session's key, so it must come from the hub: the query goes to
+    /// every queryable under the hub's name and waits for all of them, and two answers (another
+    /// peer taking the hub's name) open nothing.
     pub(crate) fn open_session(
         &self,
         hub: &str,
@@ -257,12 +244,43 @@ impl Network {
         start_timeout: Duration,
     ) -> Result<OpenReply, HubError> {
         let payload = serde_json::to_vec(request).expect("requests serialize");
-        self.query(
-            hub,
-            &keys::hub_open(hub),
-            Some(payload),
-            start_timeout + Duration::from_secs(5),
-        )
+        let timeout = start_timeout + Duration::from_secs(5);
+        let key = keys::hub_open(hub);
+        let lost = |why: String| HubError::HubLost {
+            hub: hub.to_string(),
+            envs: "-".into(),
+            why,
+        };
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.session
+            .get(&key)
+            .payload(payload)
+            .timeout(timeout)
+            .target(zenoh::query::QueryTarget::All)
+            .consolidation(zenoh::query::ConsolidationMode::None)
+            .callback(move |reply| {
+                let _ = tx.send(reply);
+            })
+            .wait()
+            .map_err(|e| lost(format!("query failed: {e}")))?;
+        // Every answer, until the query ends (the channel closes) or times out.
+        let deadline = Instant::now() + timeout + Duration::from_secs(1);
+        let mut answers = Vec::new();
+        while let Ok(reply) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            if reply.result().is_ok() {
+                answers.push(reply);
+            }
+        }
+        match answers.len() {
+            0 => Err(lost(format!("no answer to `{key}` within {timeout:?}"))),
+            1 => read_reply(hub, &answers[0]),
+            n => Err(HubError::Network {
+                reason: format!(
+                    "{n} peers answer as hub `{hub}`: another peer takes its name, so no session is opened"
+                ),
+                hint: "find who else answers under this name; TLS with server names checked tells hubs by their certificates (docs/security.md)".into(),
+            }),
+        }
     }
 
     /// Times `n` raw Zenoh round trips of `bytes`-byte messages to hub `hub`'s echo, with the
@@ -349,6 +367,33 @@ impl Network {
         inboxes.retain(|w| w.strong_count() > 0);
         inboxes.push(Arc::downgrade(inbox));
     }
+}
+
+/// A hub's `{"ok": ...}` reply, or the error it sent.
+fn read_reply<T: DeserializeOwned>(hub: &str, reply: &zenoh::query::Reply) -> Result<T, HubError> {
+    let lost = |why: String| HubError::HubLost {
+        hub: hub.to_string(),
+        envs: "-".into(),
+        why,
+    };
+    let sample = reply
+        .result()
+        .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
+    let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
+        .map_err(|e| lost(format!("unreadable reply: {e}")))?;
+    if let Some(error) = value.get_mut("error").map(Value::take)
+        && let Ok(error) = serde_json::from_value::<HubError>(error)
+    {
+        return Err(envhub_protocol::untrusted::from_hub(hub, error));
+    }
+    if let Some(err) = value.get("err") {
+        return Err(envhub_protocol::untrusted::from_hub(
+            hub,
+            HubError::Remote(err.as_str().unwrap_or("error").to_string()),
+        ));
+    }
+    serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+        .map_err(|e| lost(format!("unreadable reply: {e}")))
 }
 
 /// The error for a hub name that is not live: the live ones and the closest names.

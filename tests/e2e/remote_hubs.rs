@@ -290,7 +290,7 @@ fn forge_on_answer(
 fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     use std::sync::{Arc, Mutex};
     use zenoh::Wait;
-    const STEPS: usize = 150;
+    const STEPS: usize = 100;
     let a = RemoteHub::start("ga", &[], &[]);
     let spy_endpoint = format!("tcp/127.0.0.1:{}", envhub_e2e::remote::free_port());
     let mut spy_net = net_to(&[&a]);
@@ -322,8 +322,10 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     quiet.close();
     // The observer: every request and answer it sees, kept for replays; on every answer, a
     // forged next request and next answer.
-    let requests: Arc<Mutex<Vec<(String, Vec<u8>)>>> = Arc::default();
-    let answers: Arc<Mutex<Vec<(String, Vec<u8>)>>> = Arc::default();
+    /// Messages seen: (key, bytes).
+    type Seen = Arc<Mutex<Vec<(String, Vec<u8>)>>>;
+    let requests: Seen = Arc::default();
+    let answers: Seen = Arc::default();
     let _requests = {
         let requests = requests.clone();
         spy.declare_subscriber("envhub/session/ga/*/req")
@@ -636,4 +638,57 @@ fn with_restart_on_crash_a_lost_hub_s_envs_move_to_the_hubs_that_remain() {
         std::thread::sleep(Duration::from_millis(100));
     }
     eprintln!("rb live again {:?} after it restarted", start.elapsed());
+}
+
+/// A peer that declares a queryable under a live hub's name and answers opens in its place
+/// (with a key of its own) is not believed: the client opens nothing.
+#[test]
+fn a_rogue_open_queryable_under_a_hub_s_name_is_not_believed() {
+    use zenoh::Wait;
+    let a = RemoteHub::start("gq", &[], &[]);
+    let rogue_endpoint = format!("tcp/127.0.0.1:{}", envhub_e2e::remote::free_port());
+    let mut rogue_net = net_to(&[&a]);
+    rogue_net.listen = vec![rogue_endpoint.clone()];
+    let rogue = zenoh::open(rogue_net.zenoh_config(false).unwrap())
+        .wait()
+        .unwrap();
+    let answered = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let _open = {
+        let answered = answered.clone();
+        rogue
+            .declare_queryable("envhub/hub/gq/open")
+            .callback(move |query| {
+                answered.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let reply = serde_json::json!({"ok": {
+                    "session": "rogue-1",
+                    "spec": {
+                        "observation_space": {"type": "box", "dtype": "float32", "shape": [4],
+                            "low": [0.0, 0.0, 0.0, 0.0], "high": [1.0, 1.0, 1.0, 1.0]},
+                        "action_space": {"type": "discrete", "n": 2, "start": 0},
+                        "max_episode_steps": 500, "pid": 1,
+                    },
+                    "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
+                    "workers": 1,
+                    "key": "cd".repeat(32),
+                }});
+                let _ = query
+                    .reply(query.key_expr().clone(), reply.to_string())
+                    .wait();
+            })
+            .wait()
+            .unwrap()
+    };
+    let mut net = net_to(&[&a]);
+    net.connect.push(rogue_endpoint);
+    let hub = Hub::new(envhub::Registry::builtin()).with_network(net);
+    std::thread::sleep(Duration::from_millis(300));
+    let err = hub
+        .make_vec_on("gym-cartpole", 1, &EnvConfig::default(), &hubs(&[&a]))
+        .err()
+        .expect("an open answered by two peers is refused");
+    assert!(
+        answered.load(std::sync::atomic::Ordering::Relaxed) > 0,
+        "the rogue was never asked"
+    );
+    assert!(err.to_string().contains("answer as hub `gq`"), "{err}");
 }
