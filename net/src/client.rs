@@ -232,11 +232,9 @@ impl Network {
         read_reply(hub, &reply)
     }
 
-    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`).
-    ///
-    /// The reply carries the session's key, so it must come from the hub: the query goes to
-    /// every queryable under the hub's name and waits for all of them, and two answers (another
-    /// peer taking the hub's name) open nothing.
+    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`). The first
+    /// answer is taken: a peer answering under a live hub's name is not told apart (a query
+    /// waiting for every answerer stalled opens across a veth; see docs/security.md).
     pub(crate) fn open_session(
         &self,
         hub: &str,
@@ -244,43 +242,12 @@ impl Network {
         start_timeout: Duration,
     ) -> Result<OpenReply, HubError> {
         let payload = serde_json::to_vec(request).expect("requests serialize");
-        let timeout = start_timeout + Duration::from_secs(5);
-        let key = keys::hub_open(hub);
-        let lost = |why: String| HubError::HubLost {
-            hub: hub.to_string(),
-            envs: "-".into(),
-            why,
-        };
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.session
-            .get(&key)
-            .payload(payload)
-            .timeout(timeout)
-            .target(zenoh::query::QueryTarget::All)
-            .consolidation(zenoh::query::ConsolidationMode::None)
-            .callback(move |reply| {
-                let _ = tx.send(reply);
-            })
-            .wait()
-            .map_err(|e| lost(format!("query failed: {e}")))?;
-        // Every answer, until the query ends (the channel closes) or times out.
-        let deadline = Instant::now() + timeout + Duration::from_secs(1);
-        let mut answers = Vec::new();
-        while let Ok(reply) = rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
-            if reply.result().is_ok() {
-                answers.push(reply);
-            }
-        }
-        match answers.len() {
-            0 => Err(lost(format!("no answer to `{key}` within {timeout:?}"))),
-            1 => read_reply(hub, &answers[0]),
-            n => Err(HubError::Network {
-                reason: format!(
-                    "{n} peers answer as hub `{hub}`: another peer takes its name, so no session is opened"
-                ),
-                hint: "find who else answers under this name; TLS with server names checked tells hubs by their certificates (docs/security.md)".into(),
-            }),
-        }
+        self.query(
+            hub,
+            &keys::hub_open(hub),
+            Some(payload),
+            start_timeout + Duration::from_secs(5),
+        )
     }
 
     /// Times `n` raw Zenoh round trips of `bytes`-byte messages to hub `hub`'s echo, with the
