@@ -229,27 +229,12 @@ impl Network {
         let reply = rx
             .recv_timeout(timeout + Duration::from_secs(1))
             .map_err(|_| lost(format!("no answer to `{key}` within {timeout:?}")))?;
-        let sample = reply
-            .result()
-            .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
-        let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
-            .map_err(|e| lost(format!("unreadable reply: {e}")))?;
-        if let Some(error) = value.get_mut("error").map(Value::take)
-            && let Ok(error) = serde_json::from_value::<HubError>(error)
-        {
-            return Err(envhub_protocol::untrusted::from_hub(hub, error));
-        }
-        if let Some(err) = value.get("err") {
-            return Err(envhub_protocol::untrusted::from_hub(
-                hub,
-                HubError::Remote(err.as_str().unwrap_or("error").to_string()),
-            ));
-        }
-        serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
-            .map_err(|e| lost(format!("unreadable reply: {e}")))
+        read_reply(hub, &reply)
     }
 
-    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`).
+    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`). The first
+    /// answer is taken: a peer answering under a live hub's name is not told apart (a query
+    /// waiting for every answerer stalled opens across a veth; see docs/security.md).
     pub(crate) fn open_session(
         &self,
         hub: &str,
@@ -349,6 +334,33 @@ impl Network {
         inboxes.retain(|w| w.strong_count() > 0);
         inboxes.push(Arc::downgrade(inbox));
     }
+}
+
+/// A hub's `{"ok": ...}` reply, or the error it sent.
+fn read_reply<T: DeserializeOwned>(hub: &str, reply: &zenoh::query::Reply) -> Result<T, HubError> {
+    let lost = |why: String| HubError::HubLost {
+        hub: hub.to_string(),
+        envs: "-".into(),
+        why,
+    };
+    let sample = reply
+        .result()
+        .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
+    let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
+        .map_err(|e| lost(format!("unreadable reply: {e}")))?;
+    if let Some(error) = value.get_mut("error").map(Value::take)
+        && let Ok(error) = serde_json::from_value::<HubError>(error)
+    {
+        return Err(envhub_protocol::untrusted::from_hub(hub, error));
+    }
+    if let Some(err) = value.get("err") {
+        return Err(envhub_protocol::untrusted::from_hub(
+            hub,
+            HubError::Remote(err.as_str().unwrap_or("error").to_string()),
+        ));
+    }
+    serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+        .map_err(|e| lost(format!("unreadable reply: {e}")))
 }
 
 /// The error for a hub name that is not live: the live ones and the closest names.

@@ -290,7 +290,7 @@ fn forge_on_answer(
 fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     use std::sync::{Arc, Mutex};
     use zenoh::Wait;
-    const STEPS: usize = 150;
+    const STEPS: usize = 100;
     let a = RemoteHub::start("ga", &[], &[]);
     let spy_endpoint = format!("tcp/127.0.0.1:{}", envhub_e2e::remote::free_port());
     let mut spy_net = net_to(&[&a]);
@@ -322,8 +322,10 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     quiet.close();
     // The observer: every request and answer it sees, kept for replays; on every answer, a
     // forged next request and next answer.
-    let requests: Arc<Mutex<Vec<(String, Vec<u8>)>>> = Arc::default();
-    let answers: Arc<Mutex<Vec<(String, Vec<u8>)>>> = Arc::default();
+    /// Messages seen: (key, bytes).
+    type Seen = Arc<Mutex<Vec<(String, Vec<u8>)>>>;
+    let requests: Seen = Arc::default();
+    let answers: Seen = Arc::default();
     let _requests = {
         let requests = requests.clone();
         spy.declare_subscriber("envhub/session/ga/*/req")
