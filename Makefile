@@ -239,11 +239,15 @@ wheel: build
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
+# The tests mostly wait (hubs, workers, installs): PY_TEST_JOBS of them run side by side
+# (pytest-xdist; the isolation rules are in tests/python/README.md). `--dist loadgroup` hands
+# out one test at a time, slow ones first (conftest.py). PY_TEST_JOBS=0: one at a time.
+PY_TEST_JOBS ?= 2
 py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup --durations=25
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
-			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider; \
+			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider --durations=10; \
 	fi
 
 test: lint rust-test py-test

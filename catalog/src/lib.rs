@@ -20,7 +20,7 @@ mod tags;
 
 pub use entry::EnvEntry;
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
-pub use python_env_spec::{PythonEnvSpec, package_name, parse_version, valid_name};
+pub use python_env_spec::{PythonEnvSpec, fnv1a64, package_name, parse_version, valid_name};
 pub use python_envs::{FrameworkDefaults, PythonEnvs};
 pub use registry::{
     Benchmark, DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery,

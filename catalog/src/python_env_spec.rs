@@ -111,7 +111,7 @@ fn normalized<'a>(requirements: impl Iterator<Item = &'a String>) -> Vec<String>
 /// FNV-1a, 64 bits: tiny, and fixed by its definition (std's hashers may change between Rust
 /// releases, which would rename every venv). Not a defence against crafted collisions; the
 /// venv's manifest records its full requirement list, which readiness checks.
-fn fnv1a64(bytes: &[u8]) -> u64 {
+pub fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
     for b in bytes {
         hash ^= u64::from(*b);

@@ -338,27 +338,35 @@ fn python(env: Option<&WorkerPython>, user: &UserAdapters) -> Vec<AdapterInfo> {
         ),
         Err(why) => why.to_string(),
     };
-    let hint = if hung {
-        format!(
+    let hint = match env {
+        _ if hung => format!(
             "find what blocks with `{} -m envhub.worker describe` (with the same ENVHUB_ADAPTERS and PYTHONPATH); a slow but working import needs a larger {ENVHUB_DESCRIBE_TIMEOUT}",
             python.display()
-        )
-    } else {
-        "run `make py-install`, or point ENVHUB_PYTHON (or `python:` in envhub.yaml) at an interpreter with the `envhub` package".into()
+        ),
+        Some(env) => format!(
+            "the python env `{0}` cannot start envhub's worker: check the variables its `env:` declares, or rebuild it (`envhub env remove {0}`, then `envhub env sync {0}`)",
+            env.name
+        ),
+        None => "run `make py-install`, or point ENVHUB_PYTHON (or `python:` in envhub.yaml) at an interpreter with the `envhub` package".into(),
+    };
+    let asked = match env {
+        Some(env) => format!(
+            "`{} -m envhub.worker describe` in python env `{}`",
+            python.display(),
+            env.name
+        ),
+        None => format!("`{} -m envhub.worker describe`", python.display()),
     };
     tracing::debug!(python = %python.display(), %failure, "no Python-hosted adapters");
     python_host::BUILTIN
         .iter()
-        .map(|(name, framework)| AdapterInfo {
+        .map(|(name, frameworks)| AdapterInfo {
             name: name.to_string(),
-            frameworks: vec![framework.to_string()],
+            frameworks: frameworks.iter().map(|f| f.to_string()).collect(),
             requires: vec!["python".into(), "envhub (Python package)".into()],
-            description: format!("{framework} envs hosted in a Python worker"),
+            description: format!("{name} envs hosted in a Python worker"),
             availability: Availability::Unavailable {
-                reason: format!(
-                    "`{} -m envhub.worker describe` failed: {failure}",
-                    python.display()
-                ),
+                reason: format!("{asked} failed: {failure}"),
                 hint: hint.clone(),
             },
             envs: vec![],

@@ -345,7 +345,7 @@ mod targets {
                 return Ok(());
             };
             let n = [1, 4, 1 << 20, usize::MAX / 4][usize::from(pick % 4)];
-            if let Ok((req, rows)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
+            if let Ok((req, rows, _key)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
                 let obs = reply.spec.observation_space.byte_len();
                 if rows.obs_bytes != obs || req.act_bytes != reply.spec.action_space.byte_len() {
                     return Err("checked sizes differ from the spaces' own".into());
@@ -354,6 +354,28 @@ mod targets {
                 let _ = reply.spec.observation_space.leaves();
                 if obs <= 1 << 16 {
                     let _ = reply.spec.observation_space.validate(&vec![0u8; obs]);
+                }
+            }
+            Ok(())
+        });
+    }
+
+    /// Sealed session messages: whatever arrives on a session's keys is opened (or refused)
+    /// without a panic, and nothing the fuzzer writes passes for the key's.
+    #[test]
+    fn fuzz_sealed() {
+        use envhub_protocol::seal::{Direction, SessionKey};
+        let key = SessionKey::new(&[5; 32]);
+        let mut sealed = 7u64.to_le_bytes().to_vec();
+        sealed.extend_from_slice(&[0u8; 48]);
+        key.seal(Direction::Request, &mut sealed);
+        fuzz("sealed", vec![sealed.clone()], |bytes| {
+            for direction in [Direction::Request, Direction::Response] {
+                let mut m = bytes.to_vec();
+                if key.open(direction, &mut m).is_ok()
+                    && !(direction == Direction::Request && bytes == &sealed[..])
+                {
+                    return Err("bytes the fuzzer made opened with the session's key".into());
                 }
             }
             Ok(())

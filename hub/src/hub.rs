@@ -255,7 +255,8 @@ impl Hub {
             crate::provision::worker_python(&self.registry, entry, may_build, &hint)?
         {
             // The environment's own packages decide which adapter runs the entry.
-            let mut found = route(entry, &catalog::adapters_in(&python, user), config)?;
+            let mut found = route(entry, &catalog::adapters_in(&python, user), config)
+                .map_err(|e| in_python_env(e, &python.name))?;
             found.python = Some(python);
             return Ok(found);
         }
@@ -323,4 +324,32 @@ pub fn make(id: &str, config: &EnvConfig) -> Result<Env, HubError> {
 /// `num_envs` envs of registry entry `id` on the embedded hub.
 pub fn make_vec(id: &str, num_envs: usize, config: &EnvConfig) -> Result<VecEnv, HubError> {
     Hub::from_env()?.make_vec(id, num_envs, config)
+}
+
+/// `error` of routing an entry within the python env `name`, saying so: what the environment
+/// lacks (its suite does not import, its worker does not start) is where to look.
+fn in_python_env(error: HubError, name: &str) -> HubError {
+    match error {
+        HubError::Unavailable {
+            adapter,
+            reason,
+            hint,
+        } if !reason.contains(&format!("python env `{name}`")) => HubError::Unavailable {
+            adapter,
+            reason: format!("in python env `{name}`: {reason}"),
+            hint,
+        },
+        HubError::NoAdapter {
+            env_id,
+            framework,
+            detail,
+            hint,
+        } => HubError::NoAdapter {
+            env_id,
+            framework,
+            detail: format!("{detail} (in python env `{name}`)"),
+            hint,
+        },
+        other => other,
+    }
 }

@@ -26,9 +26,13 @@ pub struct HubNode {
     _queryables: Vec<zenoh::query::Queryable<()>>,
     _requests: zenoh::pubsub::Subscriber<()>,
     _clients: zenoh::pubsub::Subscriber<()>,
+    /// Keys of client tokens gone, for the watcher thread (which ends when this goes).
+    _gone: Arc<GoneClients>,
     _echo: zenoh::pubsub::Subscriber<()>,
     sessions: Arc<Sessions>,
     exposure_notice: Option<String>,
+    /// Its entry among this machine's hubs (loopback only), removed when it leaves.
+    _local: Option<envhub_net::local::Published>,
 }
 
 impl HubNode {
@@ -74,7 +78,11 @@ pub fn join(
     policy: ServePolicy,
 ) -> Result<HubNode, HubError> {
     keys::check_name(name)?;
-    let (session, exposure_notice) = envhub_net::open_hub(net, &policy)?;
+    let envhub_net::HubSession {
+        session,
+        notice: exposure_notice,
+        local,
+    } = envhub_net::open_hub(name, net, &policy)?;
     let zerr = |what: &str| {
         let what = what.to_string();
         move |e: zenoh::Error| HubError::Network {
@@ -142,13 +150,12 @@ pub fn join(
         session
             .declare_subscriber(keys::all_requests(&name))
             .callback(move |sample| {
-                let payload = sample.payload().to_bytes().into_owned();
                 envhub_net::dispatch(
                     &sessions,
                     &zenoh,
                     &name,
                     sample.key_expr().as_str(),
-                    payload,
+                    &sample.payload().to_bytes(),
                 );
             })
             .wait()
@@ -157,23 +164,34 @@ pub fn join(
     // A client that leaves (exits, crashes, or is cut off past its lease) takes its sessions.
     // Any peer can declare and drop a token of the same key, so a deletion ends sessions only
     // once no token of that key is left on the network: the real client's still answers.
-    let clients = {
-        let (sessions, zenoh) = (sessions.clone(), session.clone());
-        session
-            .liveliness()
-            .declare_subscriber(keys::ALL_CLIENTS)
-            .callback(move |sample| {
-                if sample.kind() == zenoh::sample::SampleKind::Delete {
-                    let (sessions, zenoh) = (sessions.clone(), zenoh.clone());
-                    let key = sample.key_expr().as_str().to_string();
-                    // Not on Zenoh's thread: the check is a query.
-                    std::thread::spawn(move || {
+    // The check is a query: one watcher thread makes them, for the keys gone since it last
+    // looked (a set, so a flapping token costs one check, and bounded).
+    let gone = Arc::new(GoneClients::default());
+    {
+        let (gone, sessions, zenoh) = (Arc::downgrade(&gone), sessions.clone(), session.clone());
+        std::thread::Builder::new()
+            .name("envhub-clients".into())
+            .spawn(move || {
+                while let Some(keys) = GoneClients::next(&gone) {
+                    for key in keys {
                         if client_token_remains(&zenoh, &key) {
                             tracing::warn!(client = %key, "a token of a live client was dropped by another peer: its sessions go on");
                         } else {
                             sessions.client_gone(&key);
                         }
-                    });
+                    }
+                }
+            })
+            .map_err(|e| HubError::InvalidState(format!("cannot start the client watcher: {e}")))?;
+    }
+    let clients = {
+        let gone = gone.clone();
+        session
+            .liveliness()
+            .declare_subscriber(keys::ALL_CLIENTS)
+            .callback(move |sample| {
+                if sample.kind() == zenoh::sample::SampleKind::Delete {
+                    gone.push(sample.key_expr().as_str());
                 }
             })
             .wait()
@@ -186,7 +204,7 @@ pub fn join(
         let publisher = session
             .declare_publisher(rep)
             .express(true)
-            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .congestion_control(zenoh::qos::CongestionControl::Drop)
             .priority(zenoh::qos::Priority::DataHigh)
             .wait()
             .map_err(zerr("declare echo"))?;
@@ -210,10 +228,50 @@ pub fn join(
         _queryables: queryables,
         _requests: requests,
         _clients: clients,
+        _gone: gone,
         _echo: echo,
         sessions,
         exposure_notice,
+        _local: local,
     })
+}
+
+/// Client token keys deleted and not yet checked: a set (a key flapping a thousand times is
+/// checked once), of at most [`GoneClients::MAX`] keys (past it a deletion is dropped; the
+/// idle timeout still ends a session whose client is gone).
+#[derive(Default)]
+struct GoneClients {
+    keys: std::sync::Mutex<std::collections::HashSet<String>>,
+    bell: std::sync::Condvar,
+}
+
+impl GoneClients {
+    const MAX: usize = 4096;
+
+    fn push(&self, key: &str) {
+        let mut keys = self.keys.lock().unwrap_or_else(|e| e.into_inner());
+        if keys.len() < Self::MAX {
+            keys.insert(key.to_string());
+            self.bell.notify_one();
+        } else {
+            tracing::warn!(client = key, "too many clients gone at once: not checked");
+        }
+    }
+
+    /// The keys gone since the last call (waiting for some); `None` once the hub has left.
+    fn next(this: &std::sync::Weak<GoneClients>) -> Option<Vec<String>> {
+        loop {
+            let gone = this.upgrade()?;
+            let keys = gone.keys.lock().unwrap_or_else(|e| e.into_inner());
+            let (mut keys, _) = gone
+                .bell
+                .wait_timeout_while(keys, Duration::from_millis(500), |k| k.is_empty())
+                .unwrap_or_else(|e| e.into_inner());
+            if !keys.is_empty() {
+                return Some(keys.drain().collect());
+            }
+        }
+    }
 }
 
 /// A place among the queries answered at once, given back when dropped.
@@ -353,6 +411,14 @@ impl State {
                     "remote clients run the hub's own registry entries; its owner can allow files with `envhub serve --allow-remote-files`",
                 ));
             }
+            // An allowlist of values: numbers, booleans, strings that name no file, and
+            // lists and maps of those.
+            if let Err(why) = envhub_protocol::untrusted::check_remote_kwargs(&config.extra) {
+                return Err(self.refuse(
+                    format!("a kwarg is not a plain value: {why}"),
+                    "remote clients may pass numbers, booleans, strings that are not paths, and lists and maps of those; its owner can allow files with `envhub serve --allow-remote-files`",
+                ));
+            }
         }
         let num_envs = config.num_envs;
         let workers = envhub_session::workers_for(&config, num_envs.max(1));
@@ -397,9 +463,10 @@ impl State {
             max_episode_steps: vec.max_episode_steps(),
             render_fps: vec.render_fps(),
             pid: vec.worker_pids().first().copied().unwrap_or(0),
+            worker: None,
         };
         let workers = vec.num_workers();
-        let session = envhub_net::start(
+        let started = envhub_net::start(
             &self.sessions,
             &self.zenoh,
             &self.name,
@@ -408,12 +475,13 @@ impl State {
             reservation,
             self.policy.idle_timeout,
         )?;
-        tracing::info!(id = %request.id, num_envs, workers, client = %request.client, %session, "remote session opened");
+        tracing::info!(id = %request.id, num_envs, workers, client = %request.client, session = %started.id, "remote session opened");
         Ok(OpenReply {
-            session,
+            session: started.id,
             spec,
             route,
             workers,
+            key: started.key,
         })
     }
 }
@@ -447,6 +515,31 @@ fn names_a_file(key: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_flapping_client_token_is_checked_once_and_the_set_is_bounded() {
+        let gone = Arc::new(GoneClients::default());
+        for _ in 0..100_000 {
+            gone.push("envhub/client/flapper");
+        }
+        for i in 0..(2 * GoneClients::MAX) {
+            gone.push(&format!("envhub/client/{i}"));
+        }
+        let keys = GoneClients::next(&Arc::downgrade(&gone)).unwrap();
+        assert_eq!(keys.len(), GoneClients::MAX);
+        assert_eq!(
+            keys.iter()
+                .filter(|k| *k == "envhub/client/flapper")
+                .count(),
+            1
+        );
+        let weak = Arc::downgrade(&gone);
+        drop(gone);
+        assert!(
+            GoneClients::next(&weak).is_none(),
+            "the watcher ends with the hub"
+        );
+    }
 
     #[test]
     fn kwargs_that_name_files_are_recognised() {

@@ -6,7 +6,7 @@ use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
 use envhub_protocol::HubError;
 use envhub_session::{Launch, Process};
-use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
+use envhub_shm::{ReadySpec, WorkerIdentity, WorkerJob, WorkerPython, WorkerReply};
 use std::io::BufRead;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
@@ -125,6 +125,14 @@ pub(crate) fn launch_local(
 ) -> Result<(Child, ReadySpec), HubError> {
     // A job in a provisioned environment runs in its interpreter, whatever hosts the adapter
     // in the hub's.
+    if let Some(env) = &job.python
+        && !env.interpreter.exists()
+    {
+        return Err(HubError::PythonEnv {
+            name: env.name.clone(),
+            message: crate::python_host::removed_message(env),
+        });
+    }
     let host = match &job.python {
         Some(_) => Host::Python,
         None => crate::catalog::host_of(&job.adapter, user),
@@ -170,7 +178,17 @@ pub(crate) fn launch_local(
     })?;
     let pid = child.id();
     match read_reply(&mut child, start_timeout) {
-        Ok(WorkerReply::Ready(spec)) => Ok((child, spec)),
+        Ok(WorkerReply::Ready(spec)) => {
+            tracing::debug!(pid, worker = ?spec.worker, "worker ready");
+            if let Some(env) = &job.python
+                && let Err(e) = check_identity(env, &spec)
+            {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(e);
+            }
+            Ok((child, spec))
+        }
         Ok(WorkerReply::Error(message)) => {
             // It exits once it has said why; one that hangs on the way out (a simulator's
             // teardown, a Python exit handler) is killed rather than waited on.
@@ -181,7 +199,11 @@ pub(crate) fn launch_local(
                     crate::bounded::seconds(EXIT_AFTER_ERROR)
                 );
             }
-            Err(HubError::MakeFailed(message))
+            Err(HubError::MakeFailed(match &job.python {
+                // The suite's own packages raised: say in which environment.
+                Some(env) => format!("in python env `{}`: {message}", env.name),
+                None => message,
+            }))
         }
         Err(why) => {
             let _ = child.kill();
@@ -193,6 +215,51 @@ pub(crate) fn launch_local(
                 why: format!("failed to start: {why} ({status})"),
             })
         }
+    }
+}
+
+/// A worker in a provisioned environment must speak this hub's protocol and run this
+/// install's `envhub` package (the one its overlay leads to); anything else would be
+/// another install's code behind this hub's shared memory.
+fn check_identity(env: &WorkerPython, spec: &ReadySpec) -> Result<(), HubError> {
+    let ours = WorkerIdentity::current(std::env::current_exe().unwrap_or_default());
+    let refused = |message: String| HubError::PythonEnv {
+        name: env.name.clone(),
+        message: format!(
+            "the worker in python env `{}` {message}\nhint: a `PYTHONPATH` its `env:` declares may lead to another envhub; else rebuild it (`envhub env remove {0}`, then `envhub env sync {0}`)",
+            env.name
+        ),
+    };
+    let Some(worker) = &spec.worker else {
+        return Err(refused(format!(
+            "reports no worker protocol: it runs an envhub older than this hub (protocol {}, envhub {})",
+            ours.protocol, ours.version
+        )));
+    };
+    if worker.protocol != ours.protocol {
+        return Err(refused(format!(
+            "speaks worker protocol {} (envhub {} at `{}`), this hub speaks {} (envhub {} at `{}`)",
+            worker.protocol,
+            worker.version,
+            worker.module.display(),
+            ours.protocol,
+            ours.version,
+            env.package.as_ref().unwrap_or(&ours.module).display()
+        )));
+    }
+    let same = |a: &std::path::Path, b: &std::path::Path| {
+        a == b
+            || a.canonicalize()
+                .ok()
+                .is_some_and(|a| b.canonicalize().ok() == Some(a))
+    };
+    match &env.package {
+        Some(package) if !same(package, &worker.module) => Err(refused(format!(
+            "runs envhub from `{}`, not this hub's `{}`",
+            worker.module.display(),
+            package.display()
+        ))),
+        _ => Ok(()),
     }
 }
 

@@ -9,7 +9,9 @@
 //! off. A hub serving remote clients builds for them only with `envhub serve
 //! --allow-provision`: installing packages is its operator's decision.
 
-use crate::env_vars::{ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_UV};
+use crate::env_vars::{
+    ENVHUB_PROVISION, ENVHUB_PYENV_DIR, ENVHUB_PYENV_WAIT, ENVHUB_PYTHON_INSTALL, ENVHUB_UV,
+};
 use envhub_catalog::EnvEntry;
 use envhub_catalog::Registry;
 use envhub_protocol::HubError;
@@ -82,19 +84,32 @@ fn make_store() -> Result<Store, String> {
         .and_then(|v| v.trim().parse::<f64>().ok())
         .filter(|s| s.is_finite() && *s >= 0.0)
         .map_or(Duration::from_secs(900), Duration::from_secs_f64);
+    let install = match std::env::var(ENVHUB_PYTHON_INSTALL) {
+        Ok(v) if !v.trim().is_empty() => matches!(v.trim(), "1" | "true" | "yes"),
+        _ => crate::settings::Settings::discover(None).is_ok_and(|s| s.python_install),
+    };
     Ok(Store::new(cache_dir(), uv, python)
+        .with_python_install(install)
         .with_extra_requirements(WORKER_REQUIREMENTS.iter().map(|s| s.to_string()).collect())
         .with_packages(vec![package])
         .with_lock_wait(wait))
 }
 
-/// The folder of the `envhub` package: beside this binary when it runs from a wheel
+/// The folder of the `envhub` package this code belongs to: the one holding the `_envhub`
+/// extension it runs in (a hub inside a Python client), or beside this binary
 /// (`envhub/bin/envhub`), else where `python` imports it from.
 fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
+    let is_package = |dir: &std::path::Path| {
+        dir.join("worker").join("__main__.py").is_file() && dir.join("__init__.py").is_file()
+    };
+    if let Some(package) = loaded_from().as_deref().and_then(std::path::Path::parent)
+        && is_package(package)
+    {
+        return Some(package.to_path_buf());
+    }
     let exe = std::env::current_exe().ok()?;
     if let Some(package) = exe.parent().and_then(|bin| bin.parent())
-        && package.join("worker").join("__main__.py").is_file()
-        && package.join("__init__.py").is_file()
+        && is_package(package)
     {
         return Some(package.to_path_buf());
     }
@@ -106,7 +121,25 @@ fn envhub_package(python: &std::path::Path) -> Option<PathBuf> {
         .output()
         .ok()?;
     let path = PathBuf::from(String::from_utf8_lossy(&out.stdout).trim());
-    (out.status.success() && path.join("worker").join("__main__.py").is_file()).then_some(path)
+    (out.status.success() && is_package(&path)).then_some(path)
+}
+
+/// The file this code was loaded from: the `_envhub` extension when the hub runs in a
+/// Python client (whose own `envhub` is the one its workers must run, whatever another
+/// interpreter would import), else the executable.
+fn loaded_from() -> Option<PathBuf> {
+    use std::os::unix::ffi::OsStrExt;
+    // SAFETY: `dladdr` only reads the address and fills `info`; `dli_fname` then points to
+    // a NUL-terminated string owned by the loader, valid while the object stays loaded.
+    unsafe {
+        let mut info: libc::Dl_info = std::mem::zeroed();
+        let here = loaded_from as *const libc::c_void;
+        if libc::dladdr(here, &mut info) == 0 || info.dli_fname.is_null() {
+            return None;
+        }
+        let name = std::ffi::CStr::from_ptr(info.dli_fname);
+        Some(PathBuf::from(std::ffi::OsStr::from_bytes(name.to_bytes())))
+    }
 }
 
 /// The environment `entry` runs in, if any: its name and spec.
@@ -154,14 +187,22 @@ pub(crate) fn worker_python(
             .map_err(|e| failed(format!("{e:#}")))?
     } else {
         let plan = store.plan(name, spec).map_err(|e| failed(e.to_string()))?;
-        store.ready(&plan).ok_or_else(|| {
+        let env = store.ready(&plan).ok_or_else(|| {
             failed(format!(
                 "python env `{name}` (for `{}`) is not provisioned\nhint: {refused_hint}",
                 entry.id
             ))
-        })?
+        })?;
+        store.used(&env);
+        env
     };
+    // This install's own way into the venv: its overlay, never a link another install
+    // re-points.
+    let overlay = store.overlay(name).map_err(|e| failed(e.to_string()))?;
     Ok(Some(WorkerPython {
+        sys_path: vec![overlay],
+        package: store.packages().first().cloned(),
+        hold: Some(env.hold()),
         name: env.name,
         interpreter: env.python,
         env: env.env,

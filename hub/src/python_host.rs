@@ -5,7 +5,7 @@
 //! `envhub-worker`). The hub asks that module what it hosts (`describe`), as it asks the
 //! Rust worker binary, and starts it with `serve --job` for the adapters it reported.
 
-use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON};
+use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON, ENVHUB_WORKER_PROTOCOL};
 /// User adapters beyond this hub's own, as they travel to a daemon.
 pub(crate) use envhub_protocol::daemon::UserAdapters;
 use std::path::PathBuf;
@@ -117,45 +117,149 @@ fn unique<T: PartialEq>(items: impl IntoIterator<Item = T>) -> Vec<T> {
 
 /// `python -m envhub.worker`, hosting this process's user adapters and `extra` ones (a
 /// daemon's client's) in `ENVHUB_ADAPTERS`, with `extra`'s folders first on `PYTHONPATH`.
-/// It runs in the provisioned environment `env` (its interpreter and variables), or in the
+/// It runs in the provisioned environment `env` (see [`provisioned_command`]), or in the
 /// hub's interpreter.
 pub(crate) fn worker_command_in(
     env: Option<&envhub_shm::WorkerPython>,
     extra: &UserAdapters,
 ) -> Command {
+    let adapters = unique(own_adapters().into_iter().chain(extra.adapters.clone()));
     let mut cmd = match env {
-        Some(env) => {
-            let mut cmd = Command::new(&env.interpreter);
-            cmd.envs(&env.env);
+        Some(env) => provisioned_command(env, &adapters, extra),
+        None => {
+            let mut cmd = Command::new(python_interpreter());
+            cmd.arg("-m").arg("envhub.worker");
+            if !extra.pythonpath.is_empty() {
+                let own = std::env::var_os("PYTHONPATH")
+                    .map(|v| std::env::split_paths(&v).collect::<Vec<_>>())
+                    .unwrap_or_default();
+                let all = unique(extra.pythonpath.iter().cloned().chain(own));
+                if let Ok(joined) = std::env::join_paths(all) {
+                    cmd.env("PYTHONPATH", joined);
+                }
+            }
             cmd
         }
-        None => Command::new(python_interpreter()),
     };
-    cmd.arg("-m").arg("envhub.worker");
-    let adapters = unique(own_adapters().into_iter().chain(extra.adapters.clone()));
     if !adapters.is_empty() {
         cmd.env(ENVHUB_ADAPTERS, adapters.join(","));
     }
-    if !extra.pythonpath.is_empty() {
-        let own = std::env::var_os("PYTHONPATH")
-            .map(|v| std::env::split_paths(&v).collect::<Vec<_>>())
-            .unwrap_or_default();
-        let all = unique(extra.pythonpath.iter().cloned().chain(own));
-        if let Ok(joined) = std::env::join_paths(all) {
-            cmd.env("PYTHONPATH", joined);
-        }
-    }
+    // The worker refuses to serve a hub that speaks another protocol.
+    cmd.env(
+        ENVHUB_WORKER_PROTOCOL,
+        envhub_shm::WORKER_PROTOCOL.to_string(),
+    );
     cmd
 }
 
-/// The Python-hosted adapters built into the `envhub` package, reported unavailable when
-/// the interpreter cannot describe them (so `envhub adapters` still says why).
-pub(crate) const BUILTIN: &[(&str, &str)] = &[
-    ("gymnasium", "gymnasium"),
-    ("maniskill", "maniskill"),
-    ("libero", "libero"),
-    ("isaac_lab", "isaac_lab"),
-    ("env_fns", "env_fns"),
+/// Variables of the hub's own Python set-up that would make a suite's worker import other
+/// packages than its environment's (a ROS or conda `PYTHONPATH`, an activated venv).
+const HUB_PYTHON_VARS: &[&str] = &["PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONUSERBASE"];
+
+/// The worker in a provisioned environment: its interpreter, with none of the hub's Python
+/// variables, as if its venv were activated (`VIRTUAL_ENV`, its `bin/` first on `PATH`),
+/// then the variables the environment declares. It starts through [`bootstrap`] rather than
+/// `-m`, which would put the current folder first on `sys.path` (`-P` exists only from 3.11).
+fn provisioned_command(
+    env: &envhub_shm::WorkerPython,
+    adapters: &[String],
+    extra: &UserAdapters,
+) -> Command {
+    let mut cmd = Command::new(&env.interpreter);
+    for var in HUB_PYTHON_VARS {
+        cmd.env_remove(var);
+    }
+    if let Some(venv) = env.interpreter.parent().and_then(|bin| bin.parent()) {
+        cmd.env("VIRTUAL_ENV", venv);
+        let path = std::env::var_os("PATH")
+            .map(|v| std::env::split_paths(&v).collect::<Vec<_>>())
+            .unwrap_or_default();
+        if let Ok(joined) =
+            std::env::join_paths(unique(std::iter::once(venv.join("bin")).chain(path)))
+        {
+            cmd.env("PATH", joined);
+        }
+    }
+    cmd.envs(&env.env);
+    // User adapters' folders go after the venv's own packages: they can add modules, never
+    // shadow the suite's pins.
+    let mut after = Vec::new();
+    if !adapters.is_empty() {
+        after.extend(user_adapters_of_this_process().pythonpath);
+        after.extend(extra.pythonpath.iter().cloned());
+    }
+    cmd.arg("-c").arg(bootstrap(env, &unique(after)));
+    cmd
+}
+
+/// The program a provisioned environment's worker starts with: `sys.path` without the
+/// current folder (which `-c` puts first), the environment's `sys_path` (this install's
+/// overlay) before everything and `after` after; a serving worker then holds the
+/// environment (a shared `flock` on its `hold` file, for its whole life) or says it was
+/// removed; then `envhub.worker` runs as `python -m` would (its arguments follow the program).
+fn bootstrap(env: &envhub_shm::WorkerPython, after: &[PathBuf]) -> String {
+    let list = |paths: &[PathBuf]| {
+        let texts: Vec<&str> = paths.iter().filter_map(|p| p.to_str()).collect();
+        serde_json::to_string(&texts).expect("strings serialize")
+    };
+    let text = |s: &str| serde_json::to_string(s).expect("strings serialize");
+    let hold = env
+        .hold
+        .as_ref()
+        .and_then(|h| h.to_str())
+        .map_or("None".to_string(), text);
+    format!(
+        "import sys\n\
+         if sys.path and sys.path[0] == '': del sys.path[0]\n\
+         sys.path[:0] = {front}\n\
+         sys.path += {after}\n\
+         hold = {hold}\n\
+         if hold is not None and sys.argv[1:2] == ['serve']:\n\
+         \x20   import fcntl, json, os\n\
+         \x20   try:\n\
+         \x20       fd = os.open(hold, os.O_RDONLY)\n\
+         \x20       fcntl.flock(fd, fcntl.LOCK_SH)\n\
+         \x20       if not os.path.exists(hold): raise FileNotFoundError(2, 'removed', hold)\n\
+         \x20   except OSError as e:\n\
+         \x20       print(json.dumps({{'error': {gone} + ' (' + str(e) + ')'}}), flush=True)\n\
+         \x20       sys.exit(0)\n\
+         import runpy\n\
+         runpy.run_module('envhub.worker', run_name='__main__', alter_sys=True)\n",
+        front = list(&env.sys_path),
+        after = list(after),
+        hold = hold,
+        gone = text(&removed_message(env)),
+    )
+}
+
+/// What a session says when its environment was removed under it (`envhub env remove
+/// --force`).
+pub(crate) fn removed_message(env: &envhub_shm::WorkerPython) -> String {
+    let dir = env
+        .interpreter
+        .parent()
+        .and_then(|bin| bin.parent())
+        .unwrap_or(&env.interpreter);
+    format!(
+        "python env `{0}` was removed while this session used it (`{1}` is gone)\nhint: `envhub env sync {0}` builds it again; then make the env again",
+        env.name,
+        dir.display()
+    )
+}
+
+/// The Python-hosted adapters built into the `envhub` package (`envhub.hosted.BUILTIN`) and
+/// their frameworks, reported unavailable when the interpreter cannot describe them: a
+/// suite whose worker cannot start then says why, not that its framework is unknown.
+pub(crate) const BUILTIN: &[(&str, &[&str])] = &[
+    ("gymnasium", &["gymnasium"]),
+    ("maniskill", &["maniskill"]),
+    ("libero", &["libero"]),
+    ("isaac_lab", &["isaac_lab"]),
+    ("metaworld", &["metaworld", "meta_world"]),
+    ("robosuite", &["robosuite"]),
+    ("dm_control", &["dm_control", "dmc", "shimmy"]),
+    ("myosuite", &["myosuite"]),
+    ("env_fns", &["env_fns"]),
 ];
 
 #[cfg(test)]
@@ -189,5 +293,46 @@ mod tests {
         // Nothing extra: the worker inherits this process's PYTHONPATH untouched.
         let plain = worker_command_in(None, &UserAdapters::default());
         assert!(!plain.get_envs().any(|(k, _)| k == OsStr::new("PYTHONPATH")));
+    }
+
+    #[test]
+    fn a_provisioned_worker_gets_its_environments_variables_and_none_of_the_hubs() {
+        let env = envhub_shm::WorkerPython {
+            name: "suite".into(),
+            interpreter: "/cache/suite-0123/bin/python".into(),
+            env: [("MUJOCO_GL".to_string(), "egl".to_string())].into(),
+            sys_path: vec!["/cache/.installs/00aa".into()],
+            package: None,
+            hold: Some("/cache/suite-0123/envhub-env.json".into()),
+        };
+        let cmd = worker_command_in(Some(&env), &UserAdapters::default());
+        let var = |name: &str| {
+            cmd.get_envs()
+                .find(|(k, _)| *k == OsStr::new(name))
+                .map(|(_, v)| v.map(|v| v.to_string_lossy().into_owned()))
+        };
+        for removed in ["PYTHONPATH", "PYTHONHOME", "PYTHONUSERBASE"] {
+            assert_eq!(var(removed), Some(None), "{removed}");
+        }
+        assert_eq!(var("VIRTUAL_ENV"), Some(Some("/cache/suite-0123".into())));
+        assert!(
+            var("PATH")
+                .unwrap()
+                .unwrap()
+                .starts_with("/cache/suite-0123/bin:")
+        );
+        assert_eq!(var("MUJOCO_GL"), Some(Some("egl".into())));
+        // `-c` with a program that drops the current folder, not `-m`.
+        let args: Vec<String> = cmd
+            .get_args()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(args[0], "-c", "{args:?}");
+        assert!(args[1].contains(r#"sys.path[:0] = ["/cache/.installs/00aa"]"#));
+        assert!(
+            args[1].contains("del sys.path[0]") && args[1].contains("envhub.worker"),
+            "{}",
+            args[1]
+        );
     }
 }

@@ -28,6 +28,9 @@ pub struct Settings {
     /// Interpreter for Python-hosted adapters (`ENVHUB_PYTHON` overrides it); relative paths
     /// are relative to the config file.
     pub python: Option<PathBuf>,
+    /// Let envhub ask uv to install (download) a CPython version a suite's Python
+    /// environment names and this machine lacks (`ENVHUB_PYTHON_INSTALL=1` does too).
+    pub python_install: bool,
     /// User adapters hosted in Python workers, as import paths (`my_pkg.sim:MySimAdapter`):
     /// `envhub.EnvAdapter` subclasses; registry entries with their `framework` route to them.
     pub adapters: Vec<String>,
@@ -53,7 +56,7 @@ pub enum SettingsError {
     },
     /// The file is not valid.
     #[error(
-        "{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `adapters`, `zenoh` (with `connect`, `listen`, `config`, `multicast`, `lease_ms`)"
+        "{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `python_install`, `adapters`, `zenoh` (with `connect`, `listen`, `config`, `multicast`, `lease_ms`)"
     )]
     Parse {
         /// The file.

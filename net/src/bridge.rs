@@ -1,18 +1,25 @@
 //! The hub's side of a remote session: a local `VecEnv` (workers over iceoryx2, as any
 //! session) driven by the requests that arrive over Zenoh, one thread per session.
 //!
-//! Each request carries a sequence number. The answer to the last one is kept: a request
-//! sent again (the client heard nothing back, e.g. across a reconnect) is answered again
-//! without stepping twice; an older one is ignored. Anything unreadable is answered with an
-//! error naming what was wrong, and the session goes on.
+//! Every request and response is sealed with the session's key ([`envhub_protocol::seal`]),
+//! which only the client that opened the session has. A request is checked as it arrives,
+//! before it is queued: one of the wrong size, or that does not open with the key (forged,
+//! changed, from another session), or older than the last answered (a replay) is dropped
+//! unanswered, counted and logged at debug level, and takes no place in the session's queue;
+//! the session goes on. Each request carries a sequence number. The answer to the last
+//! one is kept: a request sent again (the client heard nothing back, e.g. across a reconnect)
+//! is answered again with the very same bytes, without stepping twice; an older one (a replay)
+//! is dropped. A sealed request that is unreadable is answered with an error naming what was
+//! wrong, and the session goes on.
 
 use crate::policy::{SESSION_QUEUE, ServePolicy};
+use envhub_protocol::seal::{Direction, KEY_LEN, SessionKey};
 use envhub_protocol::wire::{self, RowsOut};
 use envhub_protocol::{HubError, keys};
 use envhub_session::{Batch, VecEnv};
 use envhub_shm::{BatchLayout, Layout, command, frames_section, status};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -26,13 +33,43 @@ struct Entry {
     envs: usize,
     workers: usize,
     requests: Option<SyncSender<Vec<u8>>>,
+    /// The sizes its sealed requests may have (checked before one is queued).
+    request_sizes: std::ops::RangeInclusive<usize>,
+    /// Its key: a request is opened before it is queued, so forgeries take no place there.
+    key: Arc<SessionKey>,
+    /// The last sequence number it answered: older requests (replays) are not queued.
+    answered: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
 }
+
+/// Messages a hub dropped without answering them: not sealed with their session's key,
+/// replays, the wrong size, for no open session, or past a full queue.
+pub static DROPPED: AtomicU64 = AtomicU64::new(0);
+
+fn dropped(why: &str, session: &str) {
+    DROPPED.fetch_add(1, Ordering::Relaxed);
+    tracing::debug!(session, why, "request dropped");
+}
+
+/// A session that ended lately: what it takes to tell its client so, sealed.
+struct Closed {
+    id: String,
+    key: Arc<SessionKey>,
+    request_sizes: std::ops::RangeInclusive<usize>,
+    /// The last sequence number the session answered (never sealed again).
+    last_seq: u64,
+    /// The "closed" answer sent, kept for a repeat of its request.
+    answer: Option<(u64, zenoh::bytes::ZBytes)>,
+}
+
+/// Ended sessions remembered, to answer their clients that they are closed.
+const CLOSED_REMEMBERED: usize = 256;
 
 /// A hub's remote sessions, and the envs and workers they hold (for its limits).
 #[derive(Default)]
 pub struct Sessions {
     entries: Mutex<HashMap<String, Entry>>,
+    closed: Mutex<std::collections::VecDeque<Closed>>,
     /// Clients whose token went away (the latest few): a session still starting for one of
     /// them when it went is ended as soon as it is registered.
     gone: Mutex<std::collections::VecDeque<String>>,
@@ -194,10 +231,9 @@ impl Sessions {
     }
 }
 
-/// A session id no one can guess (128 random bits from the OS): the session's keys are
-/// known only to those that see its traffic.
-fn session_id() -> Result<String, HubError> {
-    let mut bytes = [0u8; 16];
+/// Bytes from the OS random source.
+fn random<const N: usize>() -> Result<[u8; N], HubError> {
+    let mut bytes = [0u8; N];
     // SAFETY: `bytes` is a valid buffer of its length; getrandom fills it or fails.
     let filled = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
     if filled != bytes.len() as isize {
@@ -206,11 +242,25 @@ fn session_id() -> Result<String, HubError> {
             std::io::Error::last_os_error()
         )));
     }
-    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    Ok(bytes)
+}
+
+/// A session id no one can guess (128 random bits from the OS). It names the session's keys,
+/// which every peer that sees its traffic learns: the session's secret is its key.
+fn session_id() -> Result<String, HubError> {
+    let hex: String = random::<16>()?.iter().map(|b| format!("{b:02x}")).collect();
     Ok(format!("s{hex}"))
 }
 
-/// Registers a started session and runs it on its own thread; returns its id.
+/// A started session: its id, and its key (hex) for the client's open reply alone.
+pub struct Started {
+    /// The session's id (part of its keys).
+    pub id: String,
+    /// Its secret key, 64 hex digits.
+    pub key: String,
+}
+
+/// Registers a started session and runs it on its own thread; returns its id and key.
 pub fn start(
     sessions: &Arc<Sessions>,
     zenoh: &zenoh::Session,
@@ -219,12 +269,17 @@ pub fn start(
     vec: VecEnv,
     reservation: Reservation<'_>,
     idle_timeout: Option<Duration>,
-) -> Result<String, HubError> {
+) -> Result<Started, HubError> {
     let id = session_id()?;
+    let key_bytes = random::<KEY_LEN>()?;
+    let key = Arc::new(SessionKey::new(&key_bytes));
+    // A client that does not read its answers must not hold the hub's other sessions back:
+    // what does not fit the link's queue is dropped (the client asks again after its resend
+    // delay, and a repeat is answered from the kept answer).
     let publisher = zenoh
         .declare_publisher(keys::responses(hub, &id))
         .express(true)
-        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
         .priority(zenoh::qos::Priority::DataHigh)
         .wait()
         .map_err(|e| HubError::Network {
@@ -232,6 +287,10 @@ pub fn start(
             hint: "the hub's Zenoh session is failing; see its log".into(),
         })?;
     let (tx, rx) = std::sync::mpsc::sync_channel(SESSION_QUEUE);
+    let request_sizes =
+        wire::sealed_request_sizes(&Layout::new(vec.num_envs(), vec.action_space().byte_len()));
+    let entry_sizes = request_sizes.clone();
+    let answered = Arc::new(AtomicU64::new(0));
     let mut entries = sessions.lock();
     // The client may have gone while the workers started (it was killed, or gave up).
     let client_gone = sessions
@@ -247,6 +306,9 @@ pub fn start(
             envs: vec.num_envs(),
             workers: vec.num_workers(),
             requests: Some(tx),
+            request_sizes: entry_sizes,
+            key: key.clone(),
+            answered: answered.clone(),
             stop: stop.clone(),
         },
     );
@@ -256,51 +318,94 @@ pub fn start(
     std::thread::Builder::new()
         .name(format!("envhub-session-{id}"))
         .spawn(move || {
-            run(vec, rx, &publisher, &stop, idle_timeout);
+            let last_seq = run(vec, rx, &publisher, &key, &answered, &stop, idle_timeout);
+            // Remembered as closed before it stops being open: a request finds one or the
+            // other.
+            {
+                let mut closed = sessions.closed.lock().unwrap_or_else(|e| e.into_inner());
+                if closed.len() == CLOSED_REMEMBERED {
+                    closed.pop_front();
+                }
+                closed.push_back(Closed {
+                    id: thread_id.clone(),
+                    key,
+                    request_sizes,
+                    last_seq,
+                    answer: None,
+                });
+            }
             sessions.lock().remove(&thread_id);
             tracing::info!(session = %thread_id, "remote session closed");
         })
         .map_err(|e| HubError::InvalidState(format!("cannot start a session thread: {e}")))?;
-    Ok(id)
+    Ok(Started {
+        id,
+        key: envhub_protocol::seal::to_hex(&key_bytes),
+    })
 }
 
-/// Hands a request to its session, or answers that there is no such session.
-pub fn dispatch(
-    sessions: &Sessions,
-    zenoh: &zenoh::Session,
-    hub: &str,
-    key: &str,
-    payload: Vec<u8>,
-) {
+/// Hands a request to its session's queue, opened, if it is sealed with the session's key and
+/// not a replay; anything else is dropped unanswered (nothing unauthenticated is answered).
+/// A request of a session that ended lately is answered that it is closed.
+pub fn dispatch(sessions: &Sessions, zenoh: &zenoh::Session, hub: &str, key: &str, payload: &[u8]) {
     let Some(id) = keys::session_of(hub, key) else {
         return;
     };
-    let seq = seq_of(&payload);
-    let sent = match sessions.lock().get(id).and_then(|s| s.requests.as_ref()) {
-        Some(tx) => tx.try_send(payload),
-        None => Err(TrySendError::Disconnected(Vec::new())),
+    let entries = sessions.lock();
+    let Some((tx, entry)) = entries.get(id).and_then(|s| Some((s.requests.clone()?, s))) else {
+        drop(entries);
+        return answer_closed(sessions, zenoh, hub, id, payload);
     };
-    let message = match sent {
-        Ok(()) => return,
-        Err(TrySendError::Full(_)) => {
-            tracing::warn!(session = id, "requests flood a session: refused");
-            format!(
-                "hub `{hub}`: session `{id}` already has {SESSION_QUEUE} requests waiting; this one is refused (a client sends one at a time)"
-            )
-        }
-        Err(TrySendError::Disconnected(_)) => {
-            tracing::warn!(session = id, "request for an unknown or closed session");
-            format!("hub `{hub}` has no open session `{id}` (closed, or never opened)")
-        }
+    // The size is checked before anything is copied, the seal before anything is queued.
+    if !entry.request_sizes.contains(&payload.len()) {
+        return dropped("not the size of this session's requests", id);
+    }
+    let (key, answered) = (entry.key.clone(), entry.answered.clone());
+    drop(entries);
+    let mut request = payload.to_vec();
+    let Ok(seq) = key.open(Direction::Request, &mut request) else {
+        return dropped("not sealed with the session's key", id);
     };
-    let answer = wire::encode_response(seq, status::ERROR, 0, &[], message.as_bytes());
-    let _ = zenoh.put(keys::responses(hub, id), answer).wait();
+    if seq < answered.load(Ordering::Acquire) {
+        return dropped("out of sequence (a replay)", id);
+    }
+    match tx.try_send(request) {
+        Ok(()) => {}
+        Err(TrySendError::Full(_)) => dropped("the session's queue is full", id),
+        Err(TrySendError::Disconnected(_)) => dropped("the session is closing", id),
+    }
 }
 
-fn seq_of(payload: &[u8]) -> u64 {
-    payload
-        .get(..8)
-        .map_or(0, |b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+/// Answers a request of a session that ended lately that it is closed (sealed with its key,
+/// so its client believes it and fails the call at once); anything else is dropped.
+fn answer_closed(sessions: &Sessions, zenoh: &zenoh::Session, hub: &str, id: &str, payload: &[u8]) {
+    let mut closed = sessions.closed.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(session) = closed.iter_mut().find(|c| c.id == id) else {
+        return dropped("no session of this id", id);
+    };
+    if !session.request_sizes.contains(&payload.len()) {
+        return dropped("not the size of this session's requests", id);
+    }
+    let mut request = payload.to_vec();
+    let Ok(seq) = session.key.open(Direction::Request, &mut request) else {
+        return dropped("not sealed with the session's key", id);
+    };
+    let answer = match &session.answer {
+        Some((s, answer)) if *s == seq => answer.clone(),
+        // Sequence numbers the session (or this answer) sealed already: replays.
+        Some((s, _)) if seq < *s => return dropped("out of sequence (a replay)", id),
+        _ if seq <= session.last_seq => return dropped("out of sequence (a replay)", id),
+        _ => {
+            let text = format!("hub `{hub}` has no open session `{id}` (closed)");
+            let mut answer = wire::encode_response(seq, status::ERROR, 0, &[], text.as_bytes());
+            session.key.seal(Direction::Response, &mut answer);
+            let answer = zenoh::bytes::ZBytes::from(answer);
+            session.answer = Some((seq, answer.clone()));
+            answer
+        }
+    };
+    drop(closed);
+    let _ = zenoh.put(keys::responses(hub, id), answer).wait();
 }
 
 /// How long a session's thread looks for the next request (yielding the core) before it
@@ -333,9 +438,11 @@ fn run(
     mut vec: VecEnv,
     rx: Receiver<Vec<u8>>,
     publisher: &zenoh::pubsub::Publisher<'_>,
+    key: &SessionKey,
+    answered: &AtomicU64,
     stop: &AtomicBool,
     idle_timeout: Option<Duration>,
-) {
+) -> u64 {
     let layout = Layout::new(vec.num_envs(), vec.action_space().byte_len());
     let rows_layout = BatchLayout::new(
         vec.num_envs(),
@@ -360,24 +467,21 @@ fn run(
             }
             Err(RecvTimeoutError::Disconnected) => break,
         };
+        // Opened (its seal checked) before it was queued.
+        let seq = u64::from_le_bytes(bytes[..8].try_into().expect("a sequence number"));
         last_heard = Instant::now();
-        let seq = seq_of(&bytes);
         if let Some((last_seq, answer)) = &last
             && seq == *last_seq
         {
-            // Sent again: answer again, do not step again.
+            // Sent again: answer again with the same bytes, do not step again.
             let _ = publisher.put(answer.clone()).wait();
             continue;
         }
         let expected = last.as_ref().map_or(1, |(s, _)| s + 1);
         if seq != expected {
-            // Not the next request: stale, forged or garbage. Answered, never run, and the
-            // session's sequence is left as it was.
-            tracing::warn!(seq, expected, "out-of-sequence request");
-            let text = format!("request {seq} is out of sequence; the session expects {expected}");
-            let answer =
-                wire::encode_response(seq, status::ERROR, layout.num_envs, &[], text.as_bytes());
-            let _ = publisher.put(answer).wait();
+            // A replay of an older request (or one the client never sent): dropped. Answering
+            // would seal a second message under the same sequence number.
+            dropped("out of sequence (a replay)", "");
             continue;
         }
         let (answer, closing) = match wire::parse_request(&bytes, &layout) {
@@ -400,17 +504,21 @@ fn run(
                 )
             }
         };
+        let mut answer = answer;
+        key.seal(Direction::Response, &mut answer);
         // Kept for a repeat of this request: a shared buffer, not a copy.
         let answer = zenoh::bytes::ZBytes::from(answer);
         if let Err(e) = publisher.put(answer.clone()).wait() {
             tracing::warn!(error = %e, "could not send a response");
         }
         last = Some((seq, answer));
+        answered.store(seq, Ordering::Release);
         if closing {
             break;
         }
     }
     vec.close();
+    last.map_or(0, |(seq, _)| seq)
 }
 
 /// Runs one request on the local session; the encoded response.
@@ -616,6 +724,9 @@ mod tests {
                                 envs: 1,
                                 workers: 1,
                                 requests: None,
+                                request_sizes: 0..=0,
+                                key: Arc::new(SessionKey::new(&[0; KEY_LEN])),
+                                answered: Arc::default(),
                                 stop: Arc::new(AtomicBool::new(false)),
                             },
                         );

@@ -49,14 +49,18 @@ impl std::fmt::Debug for Network {
 
 impl Network {
     /// The process's network for `net` (opened on first use, then shared).
+    /// A config that names no endpoint reaches this user's local hubs: when they change (a
+    /// hub started or left), a new network is opened for what follows (sessions keep theirs).
     pub fn get(net: &NetConfig) -> Result<Arc<Network>, HubError> {
-        static OPEN: Mutex<Vec<(NetConfig, Arc<Network>)>> = Mutex::new(Vec::new());
+        static OPEN: Mutex<Vec<(NetConfig, NetConfig, Arc<Network>)>> = Mutex::new(Vec::new());
+        let resolved = net.with_local_hubs();
         let mut open = OPEN.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, n)) = open.iter().find(|(c, _)| c == net) {
+        if let Some((_, _, n)) = open.iter().find(|(c, r, _)| c == net && *r == resolved) {
             return Ok(n.clone());
         }
-        let n = Arc::new(Network::open(net)?);
-        open.push((net.clone(), n.clone()));
+        let n = Arc::new(Network::open(&resolved)?);
+        open.retain(|(c, _, _)| c != net);
+        open.push((net.clone(), resolved, n.clone()));
         Ok(n)
     }
 
@@ -225,27 +229,12 @@ impl Network {
         let reply = rx
             .recv_timeout(timeout + Duration::from_secs(1))
             .map_err(|_| lost(format!("no answer to `{key}` within {timeout:?}")))?;
-        let sample = reply
-            .result()
-            .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
-        let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
-            .map_err(|e| lost(format!("unreadable reply: {e}")))?;
-        if let Some(error) = value.get_mut("error").map(Value::take)
-            && let Ok(error) = serde_json::from_value::<HubError>(error)
-        {
-            return Err(envhub_protocol::untrusted::from_hub(hub, error));
-        }
-        if let Some(err) = value.get("err") {
-            return Err(envhub_protocol::untrusted::from_hub(
-                hub,
-                HubError::Remote(err.as_str().unwrap_or("error").to_string()),
-            ));
-        }
-        serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
-            .map_err(|e| lost(format!("unreadable reply: {e}")))
+        read_reply(hub, &reply)
     }
 
-    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`).
+    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`). The first
+    /// answer is taken: a peer answering under a live hub's name is not told apart (a query
+    /// waiting for every answerer stalled opens across a veth; see docs/security.md).
     pub(crate) fn open_session(
         &self,
         hub: &str,
@@ -347,6 +336,33 @@ impl Network {
     }
 }
 
+/// A hub's `{"ok": ...}` reply, or the error it sent.
+fn read_reply<T: DeserializeOwned>(hub: &str, reply: &zenoh::query::Reply) -> Result<T, HubError> {
+    let lost = |why: String| HubError::HubLost {
+        hub: hub.to_string(),
+        envs: "-".into(),
+        why,
+    };
+    let sample = reply
+        .result()
+        .map_err(|e| lost(format!("error reply: {:?}", e.payload().to_bytes())))?;
+    let mut value: Value = serde_json::from_slice(&sample.payload().to_bytes())
+        .map_err(|e| lost(format!("unreadable reply: {e}")))?;
+    if let Some(error) = value.get_mut("error").map(Value::take)
+        && let Ok(error) = serde_json::from_value::<HubError>(error)
+    {
+        return Err(envhub_protocol::untrusted::from_hub(hub, error));
+    }
+    if let Some(err) = value.get("err") {
+        return Err(envhub_protocol::untrusted::from_hub(
+            hub,
+            HubError::Remote(err.as_str().unwrap_or("error").to_string()),
+        ));
+    }
+    serde_json::from_value(value.get_mut("ok").map(Value::take).unwrap_or(Value::Null))
+        .map_err(|e| lost(format!("unreadable reply: {e}")))
+}
+
 /// The error for a hub name that is not live: the live ones and the closest names.
 pub fn unknown_hub(name: &str, live: &[String]) -> HubError {
     let mut scored: Vec<(f64, &String)> = live
@@ -371,6 +387,9 @@ pub fn unknown_hub(name: &str, live: &[String]) -> HubError {
     }
 }
 
+/// Answers one link of a session keeps waiting at most.
+pub(crate) const INBOX_LIMIT: usize = 16;
+
 /// Per link, its responses with the connection that received each.
 type Mailboxes = HashMap<usize, VecDeque<(u64, Vec<u8>)>>;
 
@@ -392,11 +411,16 @@ impl Inbox {
     }
 
     /// Files a response that connection `from` of link `link` received and wakes the waiters.
+    /// A link holds at most [`INBOX_LIMIT`] answers (a hub sends one per request, and a few
+    /// repeats); past it the oldest goes.
     pub fn post(&self, link: usize, from: u64, bytes: Vec<u8>) {
-        self.lock()
-            .entry(link)
-            .or_default()
-            .push_back((from, bytes));
+        let mut mail = self.lock();
+        let queue = mail.entry(link).or_default();
+        if queue.len() >= INBOX_LIMIT {
+            queue.pop_front();
+            tracing::warn!(link, "too many answers waiting: dropped the oldest");
+        }
+        queue.push_back((from, bytes));
         self.bell.notify_all();
     }
 
@@ -470,5 +494,23 @@ mod tests {
             Some(&b"from its successor"[..])
         );
         assert_eq!(inbox.take(0, new), None);
+    }
+
+    #[test]
+    fn an_inbox_keeps_a_bounded_number_of_answers_per_link() {
+        let inbox = Inbox::default();
+        let c = Inbox::connection();
+        for i in 0..(INBOX_LIMIT + 10) {
+            inbox.post(0, c, vec![i as u8]);
+        }
+        let mut kept = Vec::new();
+        while let Some(b) = inbox.take(0, c) {
+            kept.push(b[0] as usize);
+        }
+        assert_eq!(
+            kept,
+            (10..INBOX_LIMIT + 10).collect::<Vec<_>>(),
+            "the newest are kept"
+        );
     }
 }

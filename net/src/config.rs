@@ -10,7 +10,8 @@ use std::path::PathBuf;
 /// added to the config's and the command line's.
 pub const ENVHUB_CONNECT: &str = "ENVHUB_CONNECT";
 
-/// `0` turns multicast scouting off (tests: they must talk only to loopback).
+/// `0` turns multicast scouting off, `1` on (a client on a trusted LAN; see
+/// [`crate::exposure`]).
 pub const ENVHUB_MULTICAST: &str = "ENVHUB_MULTICAST";
 
 /// Lease of this process's Zenoh links, in milliseconds. A peer that holds a liveliness token
@@ -30,7 +31,9 @@ pub struct NetConfig {
     /// A standard Zenoh JSON5 config (router, TLS, credentials); the other fields are applied
     /// on top of it.
     pub config: Option<PathBuf>,
-    /// Multicast scouting (default on; `ENVHUB_MULTICAST=0` turns it off).
+    /// Multicast scouting and gossip, to find hubs on the LAN (default: off without
+    /// credentials that check both ends, see [`crate::exposure`]; `ENVHUB_MULTICAST=1` turns
+    /// it on for a client on a network it trusts).
     pub multicast: Option<bool>,
     /// Link lease in milliseconds (default [`DEFAULT_LEASE_MS`]).
     pub lease_ms: Option<u64>,
@@ -120,16 +123,28 @@ fn json_list(items: &[String]) -> String {
     serde_json::to_string(items).expect("strings serialize")
 }
 
-/// Opens a hub's Zenoh session: listening on loopback only unless credentials are configured
-/// or the policy's `insecure_listen` allows it (see [`crate::exposure`]). Returns the warning to print when the
-/// hub is open to the network without credentials.
+/// A hub's Zenoh session and what its exposure rule decided.
+pub struct HubSession {
+    /// The session.
+    pub session: zenoh::Session,
+    /// What to print at start: the warning when the hub is open to the network without
+    /// credentials, or how to open it up when it was kept on loopback.
+    pub notice: Option<String>,
+    /// Its entry among this machine's hubs (loopback only), removed when dropped.
+    pub local: Option<crate::local::Published>,
+}
+
+/// Opens hub `name`'s Zenoh session: listening on loopback only (and found by this user's
+/// clients through [`crate::local`]) unless credentials are configured or the policy's
+/// `insecure_listen` allows it (see [`crate::exposure`]).
 pub fn open_hub(
+    name: &str,
     net: &NetConfig,
     policy: &crate::ServePolicy,
-) -> Result<(zenoh::Session, Option<String>), HubError> {
+) -> Result<HubSession, HubError> {
     use zenoh::Wait;
     let mut config = net.zenoh_config(true)?;
-    let warning = crate::exposure::guard(&mut config, policy.insecure_listen)?;
+    let exposure = crate::exposure::guard(&mut config, policy.insecure_listen, net.multicast)?;
     // Zenoh drops larger messages before they reach envhub.
     config
         .insert_json5(
@@ -140,10 +155,57 @@ pub fn open_hub(
             what: "zenoh config",
             reason: format!("`transport/link/rx/max_message_size`: {e}"),
         })?;
-    let session = zenoh::open(config)
-        .wait()
-        .map_err(|e| open_failed(net, e))?;
-    Ok((session, warning))
+    let default_listener = config.get_json("listen/endpoints").ok()
+        == Some(format!("[\"{}\"]", crate::LOOPBACK_LISTENER));
+    if !default_listener {
+        let session = zenoh::open(config)
+            .wait()
+            .map_err(|e| open_failed(net, e))?;
+        return Ok(HubSession {
+            session,
+            notice: exposure.notice,
+            local: None,
+        });
+    }
+    // Loopback on a port of its own choosing, so it can tell local clients which: a port
+    // taken between the choice and the listen is chosen again.
+    let mut tries = 0;
+    loop {
+        tries += 1;
+        let endpoint = format!(
+            "tcp/127.0.0.1:{}",
+            crate::local::free_port().map_err(|e| HubError::Network {
+                reason: format!("no free loopback port: {e}"),
+                hint: "check the machine's loopback interface".into(),
+            })?
+        );
+        let mut config = config.clone();
+        config
+            .insert_json5(
+                "listen/endpoints",
+                &json_list(std::slice::from_ref(&endpoint)),
+            )
+            .map_err(|e| HubError::InvalidConfig {
+                what: "zenoh config",
+                reason: format!("`listen/endpoints`: {e}"),
+            })?;
+        match zenoh::open(config).wait() {
+            Ok(session) => {
+                let local = crate::local::publish(name, &endpoint)
+                    .inspect_err(|e| {
+                        tracing::warn!("this machine's clients will not find this hub without `--connect {endpoint}`: {e}")
+                    })
+                    .ok();
+                return Ok(HubSession {
+                    session,
+                    notice: exposure.notice,
+                    local,
+                });
+            }
+            Err(e) if tries >= 3 => return Err(open_failed(net, e)),
+            Err(e) => tracing::debug!(%endpoint, error = %e, "loopback port taken: another"),
+        }
+    }
 }
 
 fn open_failed(net: &NetConfig, e: zenoh::Error) -> HubError {
@@ -156,11 +218,25 @@ fn open_failed(net: &NetConfig, e: zenoh::Error) -> HubError {
     }
 }
 
-/// Opens a Zenoh session, naming the endpoints on failure.
+/// Opens a client's Zenoh session (see [`crate::exposure::guard_client`]), naming the
+/// endpoints on failure.
 pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, HubError> {
     use zenoh::Wait;
-    let config = net.zenoh_config(listen_default)?;
+    let mut config = net.zenoh_config(listen_default)?;
+    crate::exposure::guard_client(&mut config, net.multicast)?;
     zenoh::open(config).wait().map_err(|e| open_failed(net, e))
+}
+
+impl NetConfig {
+    /// This config with this user's local hubs added as endpoints, when it names no
+    /// endpoint and no Zenoh config of its own ([`crate::local`]).
+    pub fn with_local_hubs(&self) -> NetConfig {
+        let mut net = self.clone();
+        if net.connect.is_empty() && net.config.is_none() {
+            net.connect = crate::local::endpoints();
+        }
+        net
+    }
 }
 
 #[cfg(test)]

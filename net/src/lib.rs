@@ -11,13 +11,17 @@ mod client;
 mod config;
 mod exposure;
 mod link;
+pub mod local;
 mod opener;
 mod policy;
 
-pub use bridge::{Sessions, dispatch, start};
+pub use bridge::{DROPPED, Sessions, Started, dispatch, start};
 pub use client::{DISCOVERY, Network, unknown_hub};
-pub use config::{DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, NetConfig, open, open_hub};
+pub use config::{
+    DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, HubSession, NetConfig, open, open_hub,
+};
 pub use exposure::LOOPBACK_LISTENER;
+pub use link::UNSEALED;
 pub use opener::ZenohSlices;
 pub use policy::{
     DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_ENVS, DEFAULT_MAX_REQUEST_BYTES,

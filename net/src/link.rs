@@ -6,8 +6,15 @@
 //! unanswered for [`RESEND`] is sent again with the same sequence number: the hub answers a
 //! repeat from its last answer without stepping twice, and answers to older requests are
 //! dropped here, so nothing is lost, repeated or reordered.
+//!
+//! Requests are sealed with the session's key and answers opened with it
+//! ([`envhub_protocol::seal`]) as they arrive, on Zenoh's thread: an answer that does not open
+//! (from a peer that is not the hub, or changed on the way) is dropped and counted, never
+//! filed, so it can neither fail the session nor crowd out the hub's answers; nor is a sealed
+//! answer to another request than the one in flight (a replay).
 
 use crate::client::{Inbox, Network};
+use envhub_protocol::seal::{Direction, SessionKey};
 use envhub_protocol::wire::{self, RemoteAnswer, RequestBody};
 use envhub_protocol::{HubError, keys};
 use envhub_shm::{BatchLayout, DataPlaneError, Layout, command};
@@ -17,6 +24,9 @@ use zenoh::Wait;
 
 /// Silence after which a request is sent again.
 pub(crate) const RESEND: Duration = Duration::from_secs(1);
+
+/// Answers this process dropped because they were not sealed with their session's key.
+pub static UNSEALED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// A remote hub's slice of a session.
 pub(crate) struct RemoteConn {
@@ -32,6 +42,9 @@ pub(crate) struct RemoteConn {
     /// What this connection's answers are filed under ([`Inbox::connection`]).
     connection: u64,
     layout: Layout,
+    key: Arc<SessionKey>,
+    /// The sequence number of the request in flight: the only answer filed.
+    awaited: Arc<std::sync::atomic::AtomicU64>,
     /// Layout of the hub's result rows (its envs only).
     pub rows_layout: BatchLayout,
     seq: u64,
@@ -42,8 +55,8 @@ pub(crate) struct RemoteConn {
 }
 
 impl RemoteConn {
-    /// Connects to session `session` on `hub`, whose `num_envs` envs have actions of
-    /// `act_bytes` and observations of `obs_bytes`.
+    /// Connects to session `session` on `hub`, sealed with `key`, whose `num_envs` envs have
+    /// actions of `act_bytes` and observations of `obs_bytes`.
     #[allow(clippy::too_many_arguments)] // one remote slice's identity, used in one place
     pub fn connect(
         network: Arc<Network>,
@@ -51,6 +64,7 @@ impl RemoteConn {
         link: usize,
         hub: &str,
         session: &str,
+        key: SessionKey,
         num_envs: usize,
         act_bytes: usize,
         rows_layout: BatchLayout,
@@ -61,11 +75,24 @@ impl RemoteConn {
         };
         let z = network.zenoh();
         let connection = Inbox::connection();
+        let key = Arc::new(key);
+        let awaited = Arc::new(std::sync::atomic::AtomicU64::new(0));
         let subscriber = {
-            let inbox = inbox.clone();
-            z.declare_subscriber(keys::responses(hub, session))
+            let (inbox, key, hub) = (inbox.clone(), key.clone(), hub.to_string());
+            let awaited = awaited.clone();
+            z.declare_subscriber(keys::responses(hub.as_str(), session))
                 .callback(move |sample| {
-                    inbox.post(link, connection, sample.payload().to_bytes().into_owned())
+                    let mut bytes = sample.payload().to_bytes().into_owned();
+                    match key.open(Direction::Response, &mut bytes) {
+                        Ok(seq) if seq == awaited.load(std::sync::atomic::Ordering::Acquire) => {
+                            inbox.post(link, connection, bytes)
+                        }
+                        Ok(seq) => tracing::debug!(hub = %hub, seq, "dropped an answer to an earlier request"),
+                        Err(why) => {
+                            UNSEALED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            tracing::debug!(hub = %hub, ?why, "dropped an answer not sealed with the session's key");
+                        }
+                    }
                 })
                 .wait()
                 .map_err(failed)?
@@ -90,6 +117,8 @@ impl RemoteConn {
             inbox,
             link,
             layout: Layout::new(num_envs, act_bytes),
+            key,
+            awaited,
             rows_layout,
             seq: 0,
             last_request: zenoh::bytes::ZBytes::default(),
@@ -106,8 +135,11 @@ impl RemoteConn {
         body: &RequestBody<'_>,
     ) -> Result<(), HubError> {
         self.seq += 1;
-        self.last_request =
-            wire::encode_request(&self.layout, self.seq, command, slot, body).into();
+        let mut request = wire::encode_request(&self.layout, self.seq, command, slot, body);
+        self.key.seal(Direction::Request, &mut request);
+        self.awaited
+            .store(self.seq, std::sync::atomic::Ordering::Release);
+        self.last_request = request.into();
         self.put()
     }
 

@@ -44,13 +44,14 @@ impl SliceOpener for ZenohSlices {
         let n = request.config.num_envs;
         // The hub's word on its spaces and session id is checked before any size is computed
         // from it.
-        let (layout, rows_layout) = check_open_reply(hub, &reply, n, with_final)?;
+        let (layout, rows_layout, key) = check_open_reply(hub, &reply, n, with_final)?;
         let conn = RemoteConn::connect(
             self.network.clone(),
             self.inbox.clone(),
             mailbox,
             hub,
             &reply.session,
+            key,
             n,
             layout.act_bytes,
             rows_layout,

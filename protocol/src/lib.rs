@@ -7,7 +7,8 @@
 //! blocks) are the data plane's, in `envhub-shm`; this crate frames them for the network.
 //!
 //! May depend on: `envhub-core`, `envhub-catalog` (its errors travel in [`HubError`]),
-//! `envhub-shm` (layouts only). Must not depend on: Zenoh, iceoryx2 services, processes.
+//! `envhub-shm` (layouts only), `ring` (the AEAD that seals session messages). Must not depend
+//! on: Zenoh, iceoryx2 services, processes.
 
 pub mod daemon;
 mod error;
@@ -17,6 +18,7 @@ pub mod info_columns;
 pub mod keys;
 mod messages;
 mod route;
+pub mod seal;
 pub mod untrusted;
 pub mod wire;
 

@@ -60,4 +60,7 @@ pub struct OpenReply {
     pub route: crate::Route,
     /// Worker processes it started for the session.
     pub workers: usize,
+    /// The session's secret key, 64 hex digits: every request and response of the session is
+    /// sealed with it ([`crate::seal`]). Only the client that asked gets this reply.
+    pub key: String,
 }

@@ -3,8 +3,129 @@
 //! out-of-bounds write, or an error kind that means something else here (`Interrupted` is
 //! raised as Python's `KeyboardInterrupt`).
 
+use crate::seal::SessionKey;
 use crate::{HubError, OpenReply};
-use envhub_shm::{BatchLayout, Layout};
+use envhub_shm::{BatchLayout, Layout, ReadySpec};
+
+/// Checks the spaces a worker (user code) announced, as [`check_open_reply`] does a hub's:
+/// every size with checked arithmetic and within [`Space::check`]'s limits, neither space
+/// empty (a value of no bytes), and a batch of `num_envs` that fits in memory. Returns the
+/// request layout, or what is wrong.
+///
+/// [`Space::check`]: envhub_core::Space::check
+pub fn check_worker_spaces(spec: &ReadySpec, num_envs: usize) -> Result<Layout, String> {
+    let obs = spec
+        .observation_space
+        .check()
+        .map_err(|e| format!("an observation space that is unusable: {e}"))?;
+    let act = spec
+        .action_space
+        .check()
+        .map_err(|e| format!("an action space that is unusable: {e}"))?;
+    if obs == 0 || act == 0 {
+        return Err(format!(
+            "spaces of which one takes no bytes (observation {obs}, action {act}): {} / {}",
+            spec.observation_space, spec.action_space
+        ));
+    }
+    match (
+        Layout::checked(num_envs, act),
+        BatchLayout::checked(num_envs, obs, true),
+    ) {
+        (Some(layout), Some(_)) => Ok(layout),
+        _ => Err(format!(
+            "spaces whose batch of {num_envs} envs ({obs} bytes per observation, {act} per action) does not fit in memory"
+        )),
+    }
+}
+
+/// The deepest nesting of a remote client's kwarg value.
+const MAX_KWARG_DEPTH: usize = 16;
+/// The most values (leaves and containers) in a remote client's kwargs.
+const MAX_KWARG_VALUES: usize = 10_000;
+/// The longest string in a remote client's kwargs.
+const MAX_KWARG_STRING: usize = 1024;
+
+/// Checks the kwargs a remote client asks a hub to pass to its env, against an allowlist:
+/// numbers, booleans, `null`, strings that cannot name a file, and lists and maps of those
+/// (bounded in depth, count and length). A string names a file when it holds a `/` or `\`,
+/// starts with `~` or `.`, or ends in an extension (`ant.xml`) — anything an adapter could
+/// open relative to its folder. Keys must be plain names. Returns the path of the first value
+/// refused (`kwargs.robot[2].model`) and why.
+pub fn check_remote_kwargs(
+    kwargs: &std::collections::BTreeMap<String, serde_json::Value>,
+) -> Result<(), String> {
+    let mut count = 0;
+    for (key, value) in kwargs {
+        check_kwarg(&format!("kwargs.{key}"), key, value, 0, &mut count)?;
+    }
+    Ok(())
+}
+
+fn check_kwarg(
+    at: &str,
+    key: &str,
+    value: &serde_json::Value,
+    depth: usize,
+    count: &mut usize,
+) -> Result<(), String> {
+    use serde_json::Value;
+    *count += 1;
+    if *count > MAX_KWARG_VALUES {
+        return Err(format!("more than {MAX_KWARG_VALUES} values in all"));
+    }
+    if depth > MAX_KWARG_DEPTH {
+        return Err(format!(
+            "`{at}` is nested deeper than {MAX_KWARG_DEPTH} levels"
+        ));
+    }
+    if key.is_empty()
+        || key.len() > 128
+        || !key
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    {
+        return Err(format!(
+            "`{at}`: the key `{}` is not a plain name (letters, digits, `_`, `-`)",
+            key.escape_debug()
+        ));
+    }
+    match value {
+        Value::Null | Value::Bool(_) | Value::Number(_) => Ok(()),
+        Value::String(text) => {
+            if text.len() > MAX_KWARG_STRING {
+                return Err(format!(
+                    "`{at}` is a string longer than {MAX_KWARG_STRING} bytes"
+                ));
+            }
+            if names_a_file(text) {
+                return Err(format!("`{at}` = {:?} may name a file on the hub", text));
+            }
+            Ok(())
+        }
+        Value::Array(items) => items
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, v)| check_kwarg(&format!("{at}[{i}]"), key, v, depth + 1, count)),
+        Value::Object(map) => map
+            .iter()
+            .try_for_each(|(k, v)| check_kwarg(&format!("{at}.{k}"), k, v, depth + 1, count)),
+    }
+}
+
+/// Whether a string could name a file or folder: a separator, a home or relative start, or
+/// a file extension (letters after the last dot; `1.5` and `v1.0` are not).
+fn names_a_file(text: &str) -> bool {
+    if text.contains(['/', '\\', '\0']) || text.starts_with(['~', '.']) {
+        return true;
+    }
+    text.rsplit_once('.').is_some_and(|(stem, ext)| {
+        !stem.is_empty()
+            && (1..=8).contains(&ext.len())
+            && ext.bytes().all(|b| b.is_ascii_alphanumeric())
+            && ext.bytes().any(|b| b.is_ascii_alphabetic())
+    })
+}
 
 /// An error a hub sent, as the client may take it: the kinds that describe the caller's
 /// request or the hub's envs pass as they are (`Refused` naming the hub that sent it); any
@@ -54,7 +175,7 @@ pub fn check_open_reply(
     reply: &OpenReply,
     num_envs: usize,
     with_final_obs: bool,
-) -> Result<(Layout, BatchLayout), HubError> {
+) -> Result<(Layout, BatchLayout, SessionKey), HubError> {
     let spec = &reply.spec;
     let obs = spec.observation_space.check().map_err(|e| {
         lying(
@@ -81,10 +202,25 @@ pub fn check_open_reply(
             ),
         ));
     }
+    if act == 0 || obs == 0 {
+        return Err(lying(
+            hub,
+            format_args!("spaces of which one takes no bytes (observation {obs}, action {act})"),
+        ));
+    }
+    let key = SessionKey::from_hex(&reply.key).ok_or_else(|| {
+        lying(
+            hub,
+            format_args!(
+                "a session key that is not {} hex digits",
+                2 * crate::seal::KEY_LEN
+            ),
+        )
+    })?;
     let requests = Layout::checked(num_envs, act);
     let rows = BatchLayout::checked(num_envs, obs, with_final_obs);
     match (requests, rows) {
-        (Some(requests), Some(rows)) => Ok((requests, rows)),
+        (Some(requests), Some(rows)) => Ok((requests, rows, key)),
         _ => Err(lying(
             hub,
             format_args!(
@@ -149,6 +285,7 @@ mod tests {
             },
             "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
             "workers": 1,
+            "key": "ab".repeat(32),
         }))
         .expect("an open reply")
     }
@@ -187,6 +324,87 @@ mod tests {
     }
 
     #[test]
+    fn remote_kwargs_pass_only_plain_values_that_name_no_file() {
+        let kwargs =
+            |v: serde_json::Value| -> std::collections::BTreeMap<String, serde_json::Value> {
+                serde_json::from_value(v).unwrap()
+            };
+        let fine = kwargs(json!({
+            "frame_skip": 5, "reset_noise_scale": 0.1, "render": false, "mode": "rgb_array",
+            "version": "v1.0", "ratio": "1.5", "none": null,
+            "nested": {"weights": [1, 2.5, {"name": "CartPole-v1"}]},
+        }));
+        assert_eq!(check_remote_kwargs(&fine), Ok(()));
+        for (bad, needle) in [
+            (json!({"xmlfile": "ant.xml"}), "kwargs.xmlfile"),
+            (json!({"folder": "/etc"}), "kwargs.folder"),
+            (
+                json!({"robot": {"model": "../secret"}}),
+                "kwargs.robot.model",
+            ),
+            (json!({"models": ["a", "b/c"]}), "kwargs.models[1]"),
+            (json!({"home": "~root"}), "kwargs.home"),
+            (json!({"win": "C:\\x"}), "kwargs.win"),
+            (json!({"hidden": ".ssh"}), "kwargs.hidden"),
+            (json!({"bad key": 1}), "not a plain name"),
+            (json!({"long": "x".repeat(2000)}), "longer than"),
+        ] {
+            let e = check_remote_kwargs(&kwargs(bad.clone())).expect_err("refused");
+            assert!(e.contains(needle), "{bad}: {e}");
+        }
+        let mut deep = json!(1);
+        for _ in 0..40 {
+            deep = json!([deep]);
+        }
+        let e = check_remote_kwargs(&kwargs(json!({"deep": deep}))).expect_err("too deep");
+        assert!(e.contains("deeper"), "{e}");
+        let many = json!({"many": vec![0; 20_000]});
+        assert!(check_remote_kwargs(&kwargs(many)).is_err());
+    }
+
+    #[test]
+    fn hostile_action_spaces_of_a_worker_are_refused_like_observation_spaces() {
+        let spec = |action: serde_json::Value| -> ReadySpec {
+            serde_json::from_value(json!({
+                "observation_space": {"type": "box", "dtype": "float32", "shape": [4],
+                    "low": [0.0, 0.0, 0.0, 0.0], "high": [1.0, 1.0, 1.0, 1.0]},
+                "action_space": action,
+                "max_episode_steps": null,
+                "pid": 1,
+            }))
+            .expect("a ready spec")
+        };
+        let huge = usize::MAX / 2;
+        for (action, needle) in [
+            (
+                json!({"type": "multi_binary", "shape": [huge, 4]}),
+                "action space",
+            ),
+            (
+                json!({"type": "multi_binary", "shape": [1usize << 40]}),
+                "action space",
+            ),
+            (json!({"type": "multi_binary", "shape": [0]}), "no bytes"),
+            (json!({"type": "dict", "spaces": []}), "no bytes"),
+            (
+                json!({"type": "discrete", "n": 0, "start": 0}),
+                "action space",
+            ),
+            (
+                json!({"type": "box", "dtype": "float32", "shape": [2], "low": [0.0], "high": [1.0]}),
+                "action space",
+            ),
+        ] {
+            let e = check_worker_spaces(&spec(action.clone()), 4).expect_err("refused");
+            assert!(e.contains(needle), "{action}: {e}");
+        }
+        let fine = spec(json!({"type": "multi_binary", "shape": [1 << 20]}));
+        assert_eq!(check_worker_spaces(&fine, 4).unwrap().act_bytes, 1 << 20);
+        let e = check_worker_spaces(&fine, usize::MAX / 8).expect_err("too many envs");
+        assert!(e.contains("does not fit"), "{e}");
+    }
+
+    #[test]
     fn hostile_spaces_in_an_open_reply_are_refused_naming_the_hub() {
         let huge = usize::MAX / 2;
         let cases = [
@@ -209,7 +427,8 @@ mod tests {
         let e = check_open_reply("box1", &reply(ok.clone(), "s1-2"), usize::MAX / 8, true)
             .expect_err("refused");
         assert!(e.to_string().contains("does not fit"), "{e}");
-        let (req, rows) = check_open_reply("box1", &reply(ok.clone(), "s1-2"), 4, true).unwrap();
+        let (req, rows, _key) =
+            check_open_reply("box1", &reply(ok.clone(), "s1-2"), 4, true).unwrap();
         assert_eq!((req.num_envs, rows.obs_bytes), (4, 1 << 20));
         // A session id that would change the key it is used in.
         for bad in ["", "a/b", "*", "s1/../x", "x?y"] {
@@ -217,5 +436,10 @@ mod tests {
                 check_open_reply("box1", &reply(ok.clone(), bad), 4, false).expect_err("refused");
             assert!(e.to_string().contains("session id"), "{bad}: {e}");
         }
+        // A reply without a usable key: the session could not be sealed.
+        let mut keyless = reply(ok, "s1-2");
+        keyless.key = "not a key".into();
+        let e = check_open_reply("box1", &keyless, 4, false).expect_err("refused");
+        assert!(e.to_string().contains("session key"), "{e}");
     }
 }

@@ -59,7 +59,7 @@ pub fn encode_request(
         options_len: body.options.len() as u32,
         slot,
     };
-    let mut out = vec![0u8; REQUEST_HEADER + layout.req_options + body.options.len()];
+    let mut out = with_room_for_the_tag(REQUEST_HEADER + layout.req_options + body.options.len());
     out[..REQUEST_HEADER].copy_from_slice(bytemuck::bytes_of(&header));
     let p = &mut out[REQUEST_HEADER..];
     if let Some(actions) = body.actions {
@@ -79,6 +79,23 @@ pub fn encode_request(
     }
     p[layout.req_options..].copy_from_slice(body.options);
     out
+}
+
+/// `len` zero bytes, with room for the seal's tag (so sealing does not copy the message).
+fn with_room_for_the_tag(len: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(len + crate::seal::TAG_LEN);
+    out.resize(len, 0);
+    out
+}
+
+/// The longest reset options a remote request may carry (JSON).
+pub const MAX_OPTIONS_BYTES: usize = 1 << 20;
+
+/// The sizes a sealed request of a session of `layout` may have: its fixed blocks, and at
+/// most [`MAX_OPTIONS_BYTES`] of options (checked before a request is queued).
+pub fn sealed_request_sizes(layout: &Layout) -> std::ops::RangeInclusive<usize> {
+    let fixed = REQUEST_HEADER + layout.req_options + crate::seal::TAG_LEN;
+    fixed..=fixed + MAX_OPTIONS_BYTES
 }
 
 /// A request as the hub reads it.
@@ -161,7 +178,8 @@ pub fn encode_response(
         info_len: info.len() as u32,
         reserved: rows.len() as u32,
     };
-    let mut out = Vec::with_capacity(RESPONSE_HEADER + rows.len() + info.len());
+    let mut out =
+        Vec::with_capacity(RESPONSE_HEADER + rows.len() + info.len() + crate::seal::TAG_LEN);
     out.extend_from_slice(bytemuck::bytes_of(&header));
     out.extend_from_slice(rows);
     out.extend_from_slice(info);

@@ -70,6 +70,7 @@ fn hubs_json(py: Python<'_>) -> PyResult<String> {
 #[pymodule]
 fn _envhub(m: &Bound<'_, PyModule>) -> PyResult<()> {
     envhub_core::init_logging();
+    m.add("WORKER_PROTOCOL", envhub_shm::WORKER_PROTOCOL)?;
     m.add_function(wrap_pyfunction!(set_worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(worker_binary, m)?)?;
     m.add_function(wrap_pyfunction!(adapters_json, m)?)?;

@@ -19,7 +19,8 @@
 
 use envhub_core::{EnvError, ResetOptions, Space};
 use envhub_shm::{
-    Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerJob, env_flag, frames_section,
+    Frame, ReadySpec, ResponseBlocksMut, ServedBatch, WorkerIdentity, WorkerJob, env_flag,
+    frames_section,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -365,6 +366,7 @@ fn parse_space(what: &str, json: &str) -> PyResult<Space> {
 
 /// The job and the spec a ready worker reports, from `serve_worker`'s arguments.
 fn job_and_spec(
+    py: Python<'_>,
     job_json: &str,
     observation_space: &str,
     action_space: &str,
@@ -379,8 +381,17 @@ fn job_and_spec(
         max_episode_steps,
         render_fps,
         pid: std::process::id(),
+        worker: Some(WorkerIdentity::current(package_folder(py)?)),
     };
     Ok((job, ready))
+}
+
+/// The folder of the `envhub` package this worker imported (what its ready line reports).
+fn package_folder(py: Python<'_>) -> PyResult<std::path::PathBuf> {
+    py.import("envhub")?
+        .getattr("__path__")?
+        .get_item(0)?
+        .extract::<std::path::PathBuf>()
 }
 
 /// Runs the serve loop for `batch`, with the GIL released while waiting for requests; the
@@ -433,6 +444,7 @@ pub(crate) fn serve_worker(
     render_fps: Option<f64>,
 ) -> PyResult<()> {
     let (job, ready) = job_and_spec(
+        py,
         job_json,
         observation_space,
         action_space,
@@ -469,6 +481,7 @@ pub(crate) fn serve_vector_worker(
     render_fps: Option<f64>,
 ) -> PyResult<()> {
     let (job, ready) = job_and_spec(
+        py,
         job_json,
         observation_space,
         action_space,

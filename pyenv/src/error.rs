@@ -18,7 +18,7 @@ pub enum PyEnvError {
     },
     /// The requested CPython version is not installed on this machine.
     #[error(
-        "python env `{name}` wants Python {requested}, which is not on this machine (present: {present})\nhint: install CPython {requested} (uv cannot download interpreters here), or change `python:` to a present version"
+        "python env `{name}` wants CPython {requested} (the default build: not free-threaded, not PyPy), which is not on this machine (present: {present}){tried}\nhint: `uv python install {requested}` installs it (or let envhub ask uv to: `python_install: true` in envhub.yaml, or ENVHUB_PYTHON_INSTALL=1), or change `python:` to a present version"
     )]
     PythonNotFound {
         /// The environment.
@@ -27,6 +27,8 @@ pub enum PyEnvError {
         requested: String,
         /// The versions found, with their paths.
         present: String,
+        /// What asking uv to install it said (empty: it was not asked).
+        tried: String,
     },
     /// The spec is not valid.
     #[error("python env `{name}`: {message}")]
@@ -75,6 +77,18 @@ pub enum PyEnvError {
         /// The OS error.
         #[source]
         source: std::io::Error,
+    },
+    /// Running workers hold the environment.
+    #[error(
+        "python env `{name}` is in use by running sessions' workers ({pids}): `{}`\nhint: close those sessions first, or add `--force` (their workers then fail, saying it was removed)", dir.display()
+    )]
+    InUse {
+        /// The environment.
+        name: String,
+        /// Its folder.
+        dir: PathBuf,
+        /// `pid 1234, 1240`.
+        pids: String,
     },
     /// No stored environment has this name.
     #[error("no python env `{name}` in `{}`{}\nhint: `envhub env list` shows them", root.display(), known_list(.known))]

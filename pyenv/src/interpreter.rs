@@ -1,8 +1,11 @@
 //! The CPython interpreters present on this machine, to base environments on.
 //!
-//! uv cannot download its managed Pythons here, so only installed ones count: those uv finds
-//! (on `PATH`, its own installs) and pyenv's (`pyenv versions`), whose shims uv cannot use
-//! for versions other than the selected one.
+//! Installed ones count: those uv finds (on `PATH`, its own installs) and pyenv's (`pyenv
+//! versions`), whose shims uv cannot use for versions other than the selected one. Only
+//! CPython with the GIL (the default build) qualifies: envhub's compiled module is built for
+//! CPython's stable ABI, which neither PyPy nor a free-threaded build (`python3.13t`) loads.
+//! Each candidate is asked what it is before it is used, whatever its name or uv says.
+//! Downloading a missing version is left to uv (`uv python install`), on the user's request.
 
 use envhub_catalog::parse_version;
 use std::path::{Path, PathBuf};
@@ -33,6 +36,55 @@ pub fn version_of(python: &Path) -> Option<String> {
         .filter(|v| parse_version(v).is_some())
 }
 
+/// Whether `python` is a CPython of the default (GIL) build at `version`, asked of it.
+pub(crate) fn qualifies(python: &Path, version: &str) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Probe {
+        implementation: String,
+        version: String,
+        gil_disabled: bool,
+    }
+    let out = Command::new(python)
+        .args([
+            "-I",
+            "-c",
+            "import json, sys, sysconfig; print(json.dumps({'implementation': sys.implementation.name, \
+             'version': '%d.%d.%d' % sys.version_info[:3], \
+             'gil_disabled': bool(sysconfig.get_config_var('Py_GIL_DISABLED'))}))",
+        ])
+        .output();
+    let Ok(out) = out else { return false };
+    let probe = serde_json::from_slice::<Probe>(&out.stdout);
+    let ok = out.status.success()
+        && probe.as_ref().is_ok_and(|p| {
+            p.implementation == "cpython" && !p.gil_disabled && p.version == version
+        });
+    if !ok {
+        tracing::debug!(python = %python.display(), "not a CPython {version} of the default build: {}", String::from_utf8_lossy(&out.stdout).trim());
+    }
+    ok
+}
+
+/// Asks uv to install CPython `requested` (a download), then where it is. `Err`: uv's message.
+pub(crate) fn install_with_uv(uv: &Path, requested: &str) -> Result<PathBuf, String> {
+    let mut install = Command::new(uv);
+    install
+        .args(["python", "install", requested])
+        .env("UV_PYTHON_DOWNLOADS", "automatic");
+    crate::uv::run(install, std::time::Duration::from_secs(10), |elapsed| {
+        eprintln!(
+            "envhub: uv is installing CPython {requested} ({} s)",
+            elapsed.as_secs()
+        )
+    })
+    .map_err(|crate::uv::Failed(m)| m)?;
+    let mut find = Command::new(uv);
+    find.args(["python", "find", "--managed-python", requested]);
+    let out = crate::uv::run(find, std::time::Duration::from_secs(10), |_| {})
+        .map_err(|crate::uv::Failed(m)| m)?;
+    Ok(PathBuf::from(out.trim()))
+}
+
 /// `lists` merged: one interpreter per version (the first list's wins), newest first.
 pub(crate) fn merged(lists: &[&[Interpreter]]) -> Vec<Interpreter> {
     let mut found: Vec<Interpreter> = Vec::new();
@@ -55,6 +107,10 @@ pub(crate) fn from_uv(uv: &Path) -> Vec<Interpreter> {
     struct Listed {
         version: String,
         path: Option<PathBuf>,
+        #[serde(default)]
+        implementation: Option<String>,
+        #[serde(default)]
+        variant: Option<String>,
     }
     let out = Command::new(uv)
         .args([
@@ -70,6 +126,10 @@ pub(crate) fn from_uv(uv: &Path) -> Vec<Interpreter> {
     serde_json::from_slice::<Vec<Listed>>(&out.stdout)
         .unwrap_or_default()
         .into_iter()
+        .filter(|l| {
+            l.implementation.as_deref().is_none_or(|i| i == "cpython")
+                && l.variant.as_deref().is_none_or(|v| v == "default")
+        })
         .filter_map(|l| {
             Some(Interpreter {
                 path: l.path?,

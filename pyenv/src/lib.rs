@@ -11,6 +11,7 @@
 //! and which package folders (envhub's own) to link into every venv.
 
 mod error;
+mod hold;
 mod interpreter;
 mod lock;
 mod store;
@@ -19,5 +20,5 @@ mod uv;
 pub use envhub_catalog::{PythonEnvSpec, package_name, valid_name};
 pub use error::PyEnvError;
 pub use interpreter::{Interpreter, version_of};
-pub use store::{Manifest, Plan, PythonEnv, Store, Stored};
+pub use store::{Manifest, Plan, PruneRule, Pruned, PythonEnv, Store, Stored};
 pub use uv::find_uv;

@@ -2,17 +2,19 @@
 //!
 //! Layout of `<root>`: `<name>-<key>/` a ready venv (its `envhub-env.json` manifest written
 //! before the folder got its name), `<name>-<key>.lock` its build lock, `.tmp-<name>-<key>-*`
-//! a build in progress or one that was interrupted (cleared by the next build of that key).
-//! A build happens in the temporary folder and is renamed into place only once everything
-//! succeeded, so nothing half-installed is ever found ready.
+//! a build in progress or one that was interrupted (cleared by the next build of that key),
+//! `.installs/<hash>/` one install's overlay (see [`Store::overlay`]). A build happens in
+//! the temporary folder and is renamed into place only once everything succeeded, so nothing
+//! half-installed is ever found ready.
 
 use crate::error::{PyEnvError, io};
+use crate::hold;
 use crate::interpreter::{self, Interpreter};
 use crate::lock;
 use crate::uv;
-use envhub_catalog::{PythonEnvSpec, parse_version, valid_name};
+use envhub_catalog::{PythonEnvSpec, fnv1a64, parse_version, valid_name};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -34,6 +36,10 @@ pub struct Manifest {
     /// Installed after them without their dependencies.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub no_deps: Vec<String>,
+    /// What everything resolved to (`uv pip freeze`: `name==version`, sorted): what an
+    /// unpinned requirement became on this machine, that day.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub resolved: Vec<String>,
     /// When it was built (seconds since the Unix epoch).
     pub created_unix: u64,
     /// How long building it took.
@@ -42,6 +48,31 @@ pub struct Manifest {
 
 const MANIFEST: &str = "envhub-env.json";
 const LAST_USE: &str = ".envhub-last-use";
+/// The folder of the installs' overlays in the cache folder.
+const INSTALLS: &str = ".installs";
+
+/// Which stored environments [`Store::prune`] removes: any that one of the rules selects.
+#[derive(Clone, Debug, Default)]
+pub struct PruneRule {
+    /// Those unused (no session, no build) for this long.
+    pub unused_for: Option<Duration>,
+    /// Those whose folder is not one of these (the folders the registries' environments
+    /// resolve to); `None`: not this rule.
+    pub named: Option<Vec<PathBuf>>,
+    /// Then the least recently used, until the cache uses at most this much disk.
+    pub max_bytes: Option<u64>,
+}
+
+/// What [`Store::prune`] did.
+#[derive(Clone, Debug, Default)]
+pub struct Pruned {
+    /// The folders removed (or to remove), with the disk each used.
+    pub removed: Vec<(PathBuf, u64)>,
+    /// The folders kept because running workers hold them, with their pids.
+    pub in_use: Vec<(PathBuf, Vec<u32>)>,
+    /// Disk the environments left use together.
+    pub left_bytes: u64,
+}
 
 /// An environment ready to run workers.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,6 +91,14 @@ pub struct PythonEnv {
     pub built: bool,
 }
 
+impl PythonEnv {
+    /// The file each of its running workers holds a shared `flock` on (its manifest), so
+    /// that [`Store::remove`] can tell it is in use.
+    pub fn hold(&self) -> PathBuf {
+        self.dir.join(MANIFEST)
+    }
+}
+
 /// An environment found in the cache folder.
 #[derive(Clone, Debug)]
 pub struct Stored {
@@ -69,7 +108,8 @@ pub struct Stored {
     pub dir: PathBuf,
     /// Its manifest, when it is ready.
     pub manifest: Option<Manifest>,
-    /// Bytes of its files (hard links into uv's cache counted in full).
+    /// Disk it uses: allocated blocks, each hard-linked file once (most are links into uv's
+    /// cache, which they share with it and with other venvs).
     pub size_bytes: u64,
     /// When a hub last used it (or it was built).
     pub last_use: Option<SystemTime>,
@@ -108,6 +148,9 @@ pub struct Store {
     from_uv: OnceLock<Vec<Interpreter>>,
     merged: OnceLock<Vec<Interpreter>>,
     default_version: OnceLock<Option<String>>,
+    overlay: OnceLock<PathBuf>,
+    python_install: bool,
+    qualified: std::sync::Mutex<std::collections::HashMap<PathBuf, bool>>,
 }
 
 impl Store {
@@ -126,6 +169,9 @@ impl Store {
             from_uv: OnceLock::new(),
             merged: OnceLock::new(),
             default_version: OnceLock::new(),
+            overlay: OnceLock::new(),
+            python_install: false,
+            qualified: Default::default(),
         }
     }
 
@@ -136,10 +182,17 @@ impl Store {
         self
     }
 
-    /// Python package folders (`.../envhub`) linked into every environment's
-    /// `site-packages`, and imported once after a build as its check.
+    /// Python package folders (`.../envhub`) every environment's workers import, through
+    /// this install's [`overlay`](Store::overlay) (and once after a build, as its check).
     pub fn with_packages(mut self, packages: Vec<PathBuf>) -> Store {
         self.packages = packages;
+        self
+    }
+
+    /// Whether a CPython version that no environment can be based on here is installed by
+    /// asking uv (`uv python install`, a download; default false).
+    pub fn with_python_install(mut self, install: bool) -> Store {
+        self.python_install = install;
         self
     }
 
@@ -188,20 +241,8 @@ impl Store {
         spec.validate().map_err(invalid)?;
         let (base, version) = match &spec.python {
             Some(requested) => {
-                let matching = |list: &[Interpreter]| {
-                    list.iter()
-                        .filter(|i| version_matches(&i.version, requested))
-                        .max_by_key(|i| parse_version(&i.version))
-                        .cloned()
-                };
-                let found = matching(self.pyenv_interpreters())
-                    .or_else(|| matching(self.uv_interpreters()))
-                    .ok_or_else(|| PyEnvError::PythonNotFound {
-                        name: name.to_string(),
-                        requested: requested.clone(),
-                        present: interpreter::describe(self.interpreters()),
-                    })?;
-                (found.path, requested.trim().to_string())
+                let path = self.find_python(name, requested)?;
+                (path, requested.trim().to_string())
             }
             None => {
                 let version = self
@@ -230,6 +271,62 @@ impl Store {
         })
     }
 
+    /// The newest CPython (default build) matching `requested`: pyenv's, then those uv
+    /// finds, each asked what it is; else, where allowed, one uv installs.
+    fn find_python(&self, name: &str, requested: &str) -> Result<PathBuf, PyEnvError> {
+        let matching = |list: &[Interpreter]| {
+            let mut found: Vec<Interpreter> = list
+                .iter()
+                .filter(|i| version_matches(&i.version, requested))
+                .cloned()
+                .collect();
+            found.sort_by_key(|i| std::cmp::Reverse(parse_version(&i.version)));
+            found.into_iter().find(|i| self.qualifies(i))
+        };
+        if let Some(found) =
+            matching(self.pyenv_interpreters()).or_else(|| matching(self.uv_interpreters()))
+        {
+            return Ok(found.path);
+        }
+        let not_found = |tried: String| PyEnvError::PythonNotFound {
+            name: name.to_string(),
+            requested: requested.trim().to_string(),
+            present: interpreter::describe(self.interpreters()),
+            tried,
+        };
+        if !self.python_install {
+            return Err(not_found(String::new()));
+        }
+        if self.progress {
+            eprintln!("envhub: python env `{name}`: asking uv to install CPython {requested}");
+        }
+        match interpreter::install_with_uv(&self.uv, requested.trim()) {
+            Ok(path)
+                if interpreter::version_of(&path).is_some_and(|v| {
+                    version_matches(&v, requested) && interpreter::qualifies(&path, &v)
+                }) =>
+            {
+                Ok(path)
+            }
+            Ok(path) => Err(not_found(format!(
+                "; uv installed `{}`, which is not a CPython {requested} of the default build",
+                path.display()
+            ))),
+            Err(message) => Err(not_found(format!(
+                "; `uv python install {requested}` failed: {}",
+                last_lines(&message, 4)
+            ))),
+        }
+    }
+
+    /// Whether `i` is what it says and envhub can use it (asked once per interpreter).
+    fn qualifies(&self, i: &Interpreter) -> bool {
+        let mut known = self.qualified.lock().unwrap_or_else(|e| e.into_inner());
+        *known
+            .entry(i.path.clone())
+            .or_insert_with(|| interpreter::qualifies(&i.path, &i.version))
+    }
+
     /// The environment of `plan` if it is ready (built completely, for these requirements).
     pub fn ready(&self, plan: &Plan) -> Option<PythonEnv> {
         let manifest = read_manifest(&plan.dir)?;
@@ -252,7 +349,7 @@ impl Store {
     pub fn ensure(&self, name: &str, spec: &PythonEnvSpec) -> Result<PythonEnv, PyEnvError> {
         let plan = self.plan(name, spec)?;
         if let Some(env) = self.ready(&plan) {
-            self.used(&env)?;
+            self.used(&env);
             return Ok(env);
         }
         std::fs::create_dir_all(&self.root).map_err(io(name, "create", &self.root))?;
@@ -272,13 +369,13 @@ impl Store {
             }
         })?;
         if let Some(env) = self.ready(&plan) {
-            self.used(&env)?;
+            self.used(&env);
             return Ok(env); // built by the process we waited for
         }
         self.clear_leftovers(&plan)?;
         let mut env = self.build(&plan)?;
         env.built = true;
-        self.used(&env)?;
+        self.used(&env);
         Ok(env)
     }
 
@@ -290,12 +387,13 @@ impl Store {
         let mut found: Vec<Stored> = read
             .flatten()
             .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+            .filter(|e| e.file_name() != INSTALLS)
             .map(|e| {
                 let dir = e.path();
                 Stored {
                     dir_name: e.file_name().to_string_lossy().into_owned(),
                     manifest: read_manifest(&dir),
-                    size_bytes: size_of(&dir),
+                    size_bytes: disk_usage(&dir, &mut HashSet::new()),
                     last_use: std::fs::metadata(dir.join(LAST_USE))
                         .and_then(|m| m.modified())
                         .ok(),
@@ -308,8 +406,10 @@ impl Store {
     }
 
     /// Removes every stored folder of the environment `name` (or the one folder named
-    /// `name`), builds in progress excepted; returns the folders removed.
-    pub fn remove(&self, name: &str) -> Result<Vec<PathBuf>, PyEnvError> {
+    /// `name`), builds in progress excepted; returns the folders removed. A folder that
+    /// running workers hold (see [`PythonEnv::hold`]) is refused with their pids, unless
+    /// `force`: then they lose it under them (a restart says it was removed).
+    pub fn remove(&self, name: &str, force: bool) -> Result<Vec<PathBuf>, PyEnvError> {
         let stored = self.list();
         let matching: Vec<&Stored> = stored
             .iter()
@@ -332,6 +432,13 @@ impl Store {
                 known,
             });
         }
+        if !force {
+            for s in &matching {
+                if let Some(pids) = self.held(s)? {
+                    return Err(in_use(name, &s.dir, &pids));
+                }
+            }
+        }
         let mut removed = Vec::new();
         for s in matching {
             // Not while it is being built: its builder holds the lock (`<name>-<key>.lock`).
@@ -344,27 +451,166 @@ impl Store {
             };
             let lock_path = self.root.join(format!("{stem}.lock"));
             let _lock = lock::acquire(name, &lock_path, Duration::ZERO, |_| {})?;
-            let trash = self.root.join(format!(
-                ".trash-{}-{}",
-                s.dir_name.trim_start_matches('.'),
-                std::process::id()
-            ));
-            std::fs::rename(&s.dir, &trash).map_err(io(name, "remove", &s.dir))?;
-            std::fs::remove_dir_all(&trash).map_err(io(name, "remove", &trash))?;
+            // Held while it goes: a worker starting meanwhile waits, then finds it gone.
+            let _hold = match hold::exclusive(&s.dir.join(MANIFEST)) {
+                Ok(Some(Ok(hold))) => Some(hold),
+                Ok(Some(Err(pids))) if !force => return Err(in_use(name, &s.dir, &pids)),
+                _ => None,
+            };
+            self.remove_dir(name, s)?;
             removed.push(s.dir.clone());
         }
         Ok(removed)
     }
 
-    fn used(&self, env: &PythonEnv) -> Result<(), PyEnvError> {
+    /// The pids of the running workers that hold `stored` (`Some(empty)`: held by processes
+    /// that cannot be told), or `None` when none does.
+    fn held(&self, stored: &Stored) -> Result<Option<Vec<u32>>, PyEnvError> {
+        let path = stored.dir.join(MANIFEST);
+        match hold::exclusive(&path) {
+            Ok(Some(Err(pids))) => Ok(Some(pids)),
+            Ok(_) => Ok(None),
+            Err(e) => Err(io(&stored.dir_name, "open", &path)(e)),
+        }
+    }
+
+    fn remove_dir(&self, name: &str, s: &Stored) -> Result<(), PyEnvError> {
+        let trash = self.root.join(format!(
+            ".trash-{}-{}",
+            s.dir_name.trim_start_matches('.'),
+            std::process::id()
+        ));
+        std::fs::rename(&s.dir, &trash).map_err(io(name, "remove", &s.dir))?;
+        std::fs::remove_dir_all(&trash).map_err(io(name, "remove", &trash))
+    }
+
+    /// Removes, of the stored environments, those `rule` selects — never one that running
+    /// workers hold — and says what it removed or would remove (`dry_run`).
+    pub fn prune(&self, rule: &PruneRule, dry_run: bool) -> Result<Pruned, PyEnvError> {
+        let stored: Vec<Stored> = self
+            .list()
+            .into_iter()
+            .filter(|s| !s.dir_name.starts_with('.'))
+            .collect();
+        let now = SystemTime::now();
+        let mut pruned = Pruned::default();
+        let mut left: Vec<&Stored> = Vec::new();
+        for s in &stored {
+            if let Some(pids) = self.held(s)? {
+                pruned.in_use.push((s.dir.clone(), pids));
+                continue;
+            }
+            let unused = rule.unused_for.is_some_and(|limit| {
+                s.last_use
+                    .and_then(|t| now.duration_since(t).ok())
+                    .is_none_or(|age| age >= limit)
+            });
+            let unnamed = rule
+                .named
+                .as_ref()
+                .is_some_and(|named| !named.contains(&s.dir));
+            if unused || unnamed {
+                pruned.removed.push((s.dir.clone(), s.size_bytes));
+            } else {
+                left.push(s);
+            }
+        }
+        if let Some(budget) = rule.max_bytes {
+            // The least recently used go first, until what is left fits.
+            left.sort_by_key(|s| s.last_use);
+            let kept_in_use: Vec<PathBuf> = pruned.in_use.iter().map(|(d, _)| d.clone()).collect();
+            while disk_usage_of(
+                left.iter()
+                    .map(|s| s.dir.as_path())
+                    .chain(kept_in_use.iter().map(PathBuf::as_path)),
+            ) > budget
+                && !left.is_empty()
+            {
+                let s = left.remove(0);
+                pruned.removed.push((s.dir.clone(), s.size_bytes));
+            }
+        }
+        if !dry_run {
+            for (dir, _) in &pruned.removed {
+                let s = stored.iter().find(|s| &s.dir == dir).expect("listed");
+                let name = s
+                    .manifest
+                    .as_ref()
+                    .map_or(s.dir_name.as_str(), |m| m.name.as_str());
+                let _hold = match hold::exclusive(&dir.join(MANIFEST)) {
+                    Ok(Some(Err(pids))) => return Err(in_use(name, dir, &pids)),
+                    Ok(Some(Ok(hold))) => Some(hold),
+                    _ => None,
+                };
+                self.remove_dir(name, s)?;
+            }
+        }
+        pruned.left_bytes = disk_usage_of(
+            stored
+                .iter()
+                .filter(|s| !pruned.removed.iter().any(|(d, _)| d == &s.dir))
+                .map(|s| s.dir.as_path()),
+        );
+        Ok(pruned)
+    }
+
+    /// Records that `env` was used, for `prune`. Best effort: a read-only cache (a CI image
+    /// built with `envhub env sync`) serves sessions all the same.
+    pub fn used(&self, env: &PythonEnv) {
         let now = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .unwrap_or_default()
             .as_secs();
         let path = env.dir.join(LAST_USE);
-        std::fs::write(&path, format!("{now}\n")).map_err(io(&env.name, "write", &path))?;
-        // Re-pointed where the packages moved (another checkout, a reinstalled wheel).
-        link_packages(&env.name, &env.dir, &self.packages)
+        if let Err(e) = std::fs::write(&path, format!("{now}\n")) {
+            tracing::debug!(path = %path.display(), "cannot record the last use: {e}");
+        }
+    }
+
+    /// The package folders every environment's workers import (envhub's own).
+    pub fn packages(&self) -> &[PathBuf] {
+        &self.packages
+    }
+
+    /// This install's overlay: the folder its workers put first on `sys.path`, holding one
+    /// link per package (`envhub` → this install's package folder) and nothing else. Keyed
+    /// by the packages' paths, so each install (a checkout, a wheel) has its own, and none
+    /// re-points a link another one's workers follow. In `<root>/.installs/`, or, where the
+    /// cache is read-only, in a folder only this user can write.
+    pub fn overlay(&self, name: &str) -> Result<PathBuf, PyEnvError> {
+        if let Some(dir) = self.overlay.get() {
+            return Ok(dir.clone());
+        }
+        let text: String = self
+            .packages
+            .iter()
+            .map(|p| format!("{}\n", p.display()))
+            .collect();
+        let key = format!("{:016x}", fnv1a64(text.as_bytes()));
+        let in_cache = self.root.join(INSTALLS).join(&key);
+        let dir = match fill_overlay(&in_cache, &self.packages) {
+            Ok(()) => in_cache,
+            Err(e) => {
+                let base = private_folder().map_err(io(
+                    name,
+                    "make a private folder for the overlay in",
+                    &std::env::temp_dir(),
+                ))?;
+                let elsewhere = base.join(&key);
+                tracing::debug!(
+                    "cannot make the overlay `{}` ({e}); using `{}`",
+                    in_cache.display(),
+                    elsewhere.display()
+                );
+                fill_overlay(&elsewhere, &self.packages).map_err(io(
+                    name,
+                    "make the overlay folder",
+                    &elsewhere,
+                ))?;
+                elsewhere
+            }
+        };
+        Ok(self.overlay.get_or_init(|| dir).clone())
     }
 
     fn clear_leftovers(&self, plan: &Plan) -> Result<(), PyEnvError> {
@@ -483,17 +729,20 @@ impl Store {
             uv::run(bare, every, progress("installing without dependencies"))
                 .map_err(|uv::Failed(m)| failed("`uv pip install --no-deps`", m))?;
         }
-        link_packages(name, tmp, &self.packages)?;
         if !self.packages.is_empty() {
+            let overlay = self.overlay(name)?;
             let modules: Vec<String> = self
                 .packages
                 .iter()
                 .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
                 .collect();
             let mut check = Command::new(&python);
-            check
-                .arg("-c")
-                .arg(format!("import {}", modules.join(", ")));
+            // As its workers will: through this install's overlay.
+            check.arg("-c").arg(format!(
+                "import sys; sys.path.insert(0, {:?}); import {}",
+                overlay.display().to_string(),
+                modules.join(", ")
+            ));
             uv::run(check, every, |_| {}).map_err(|uv::Failed(m)| {
                 failed(
                     "importing envhub's worker package in the new env",
@@ -501,6 +750,17 @@ impl Store {
                 )
             })?;
         }
+        let mut freeze = Command::new(&self.uv);
+        freeze.args(["pip", "freeze", "--python"]).arg(&python);
+        let frozen =
+            uv::run(freeze, every, |_| {}).map_err(|uv::Failed(m)| failed("`uv pip freeze`", m))?;
+        let mut resolved: Vec<String> = frozen
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty())
+            .map(String::from)
+            .collect();
+        resolved.sort();
         let manifest = Manifest {
             name: name.clone(),
             key: plan.key.clone(),
@@ -508,6 +768,7 @@ impl Store {
             base_interpreter: plan.base.clone(),
             requirements: plan.requirements.clone(),
             no_deps: plan.no_deps.clone(),
+            resolved,
             created_unix: SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .unwrap_or_default()
@@ -532,58 +793,114 @@ fn read_manifest(dir: &Path) -> Option<Manifest> {
     serde_json::from_str(&text).ok()
 }
 
-/// Links each package folder into the venv's `site-packages` (replacing a stale link
-/// atomically: a link beside it, renamed over it).
-fn link_packages(name: &str, venv: &Path, packages: &[PathBuf]) -> Result<(), PyEnvError> {
-    if packages.is_empty() {
-        return Ok(());
+/// A folder only this user can write, for overlays when the cache is read-only:
+/// `$XDG_RUNTIME_DIR/envhub-installs`, else `<tmp>/envhub-<uid>-installs` — made with mode
+/// 0700 and refused unless this user owns it and nobody else can write it (another user
+/// could otherwise point the worker's `envhub` at their code).
+fn private_folder() -> std::io::Result<PathBuf> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+    // SAFETY: `getuid` cannot fail and touches no memory.
+    let uid = unsafe { libc::getuid() };
+    let dir = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(runtime) => PathBuf::from(runtime).join("envhub-installs"),
+        None => std::env::temp_dir().join(format!("envhub-{uid}-installs")),
+    };
+    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(e),
     }
-    let lib = venv.join("lib");
-    let site = std::fs::read_dir(&lib)
-        .map_err(io(name, "read", &lib))?
-        .flatten()
-        .map(|e| e.path().join("site-packages"))
-        .find(|p| p.is_dir())
-        .ok_or_else(|| PyEnvError::Io {
-            name: name.to_string(),
-            what: "find site-packages in",
-            path: lib.clone(),
-            source: std::io::ErrorKind::NotFound.into(),
-        })?;
+    let meta = std::fs::symlink_metadata(&dir)?;
+    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o022 != 0 {
+        return Err(std::io::Error::other(format!(
+            "`{}` is not a folder of this user's that only it can write",
+            dir.display()
+        )));
+    }
+    Ok(dir)
+}
+
+/// Makes `dir` hold one link per package folder (`envhub` → the package), where it does
+/// not already; a link is replaced atomically (made beside it, renamed over it).
+fn fill_overlay(dir: &Path, packages: &[PathBuf]) -> std::io::Result<()> {
     for package in packages {
         let Some(file_name) = package.file_name() else {
             continue;
         };
-        let link = site.join(file_name);
+        let link = dir.join(file_name);
         if std::fs::read_link(&link).is_ok_and(|target| &target == package) {
             continue;
         }
-        let tmp = site.join(format!(
+        std::fs::create_dir_all(dir)?;
+        let tmp = dir.join(format!(
             ".{}-{}.link",
             file_name.to_string_lossy(),
             std::process::id()
         ));
         let _ = std::fs::remove_file(&tmp);
-        std::os::unix::fs::symlink(package, &tmp).map_err(io(name, "link", &tmp))?;
-        std::fs::rename(&tmp, &link).map_err(io(name, "link", &link))?;
+        std::os::unix::fs::symlink(package, &tmp)?;
+        std::fs::rename(&tmp, &link)?;
     }
     Ok(())
 }
 
-fn size_of(dir: &Path) -> u64 {
+/// Disk used by the files under `dir`: allocated blocks, each file once however many hard
+/// links lead to it (`seen`: the files already counted, by device and inode).
+fn disk_usage(dir: &Path, seen: &mut HashSet<(u64, u64)>) -> u64 {
+    use std::os::unix::fs::MetadataExt;
     let Ok(read) = std::fs::read_dir(dir) else {
         return 0;
     };
     read.flatten()
-        .map(|e| match e.file_type() {
-            Ok(t) if t.is_dir() => size_of(&e.path()),
-            Ok(t) if t.is_file() => e.metadata().map(|m| m.len()).unwrap_or(0),
+        .map(|e| match e.metadata() {
+            Ok(m) if m.is_dir() => disk_usage(&e.path(), seen),
+            Ok(m) if seen.insert((m.dev(), m.ino())) => m.blocks() * 512,
             _ => 0,
         })
         .sum()
 }
 
+/// Disk used by all of `dirs` together (a file linked into several counted once).
+fn disk_usage_of<'a>(dirs: impl Iterator<Item = &'a Path>) -> u64 {
+    let mut seen = HashSet::new();
+    dirs.map(|d| disk_usage(d, &mut seen)).sum()
+}
+
+fn in_use(name: &str, dir: &Path, pids: &[u32]) -> PyEnvError {
+    PyEnvError::InUse {
+        name: name.to_string(),
+        dir: dir.to_path_buf(),
+        pids: if pids.is_empty() {
+            "pids unknown".into()
+        } else {
+            let list: Vec<String> = pids.iter().map(u32::to_string).collect();
+            format!("pid {}", list.join(", "))
+        },
+    }
+}
+
 fn last_lines(text: &str, n: usize) -> String {
     let lines: Vec<&str> = text.lines().collect();
     lines[lines.len().saturating_sub(n)..].join("\n")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn disk_usage_counts_a_hard_linked_file_once() {
+        let dir = std::env::temp_dir().join(format!("envhub-du-test-{}", std::process::id()));
+        let (a, b) = (dir.join("a"), dir.join("b"));
+        std::fs::create_dir_all(&a).unwrap();
+        std::fs::create_dir_all(&b).unwrap();
+        std::fs::write(a.join("data"), vec![1u8; 1 << 20]).unwrap();
+        std::fs::hard_link(a.join("data"), a.join("again")).unwrap();
+        std::fs::hard_link(a.join("data"), b.join("data")).unwrap();
+        let one = disk_usage(&a, &mut HashSet::new());
+        assert!((1 << 20..(1 << 20) + 65_536).contains(&one), "{one}");
+        assert_eq!(disk_usage_of([a.as_path(), b.as_path()].into_iter()), one);
+        assert_eq!(disk_usage(&b, &mut HashSet::new()), one);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -56,9 +56,14 @@ pub(crate) fn run(
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
-        // uv-managed downloads cannot be reached here; a missing version must fail, not hang.
-        .env("UV_PYTHON_DOWNLOADS", "never")
         .env("UV_NO_PROGRESS", "1");
+    // A missing version fails rather than being downloaded, unless the caller asked for one.
+    if !command
+        .get_envs()
+        .any(|(k, _)| k == std::ffi::OsStr::new("UV_PYTHON_DOWNLOADS"))
+    {
+        command.env("UV_PYTHON_DOWNLOADS", "never");
+    }
     // SAFETY: `prctl` is async-signal-safe and allocates nothing.
     unsafe {
         command.pre_exec(|| {

@@ -114,10 +114,39 @@ fn an_env_is_built_once_then_found_ready_listed_and_removed() {
     // Another pin is another venv; the first stays.
     let other = store.ensure("tiny", &spec(&["packaging==24.1"])).unwrap();
     assert_ne!(other.dir, env.dir);
-    let removed = store.remove("tiny").unwrap();
+    // In use (a process holds it, as a session's worker does): refused, naming the pid.
+    let mut holder = Command::new(python())
+        .args([
+            "-c",
+            "import fcntl, os, sys, time\n\
+             fd = os.open(sys.argv[1], os.O_RDONLY)\n\
+             fcntl.flock(fd, fcntl.LOCK_SH)\n\
+             print('held', flush=True)\n\
+             time.sleep(60)\n",
+        ])
+        .arg(env.hold())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(holder.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let err = store.remove("tiny", false).unwrap_err();
+    assert!(matches!(err, PyEnvError::InUse { .. }), "{err}");
+    assert!(
+        err.to_string().contains("pid ") && err.to_string().contains("--force"),
+        "{err}"
+    );
+    assert!(env.dir.exists() && other.dir.exists());
+    let removed = store.remove("tiny", true).unwrap();
+    holder.kill().unwrap();
+    holder.wait().unwrap();
     assert_eq!(removed.len(), 2);
     assert!(!env.dir.exists() && store.list().is_empty());
-    let err = store.remove("tiny").unwrap_err();
+    let err = store.remove("tiny", false).unwrap_err();
     assert!(matches!(err, PyEnvError::NotStored { .. }), "{err}");
     let _ = std::fs::remove_dir_all(store.root());
 }

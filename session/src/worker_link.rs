@@ -7,7 +7,7 @@ use crate::remote::RemoteSlice;
 use envhub_protocol::HubError;
 use envhub_protocol::wire::{RemoteAnswer, RequestBody};
 use envhub_shm::{
-    Bell, ClientChannel, DataPlaneError, Layout, ProcessWatch, ReadySpec, Response, ResponseHeader,
+    Bell, ClientChannel, DataPlaneError, ProcessWatch, ReadySpec, Response, ResponseHeader,
     WaitPolicy, WorkerJob, command, status,
 };
 use std::sync::Arc;
@@ -127,13 +127,25 @@ impl WorkerLink {
             other => other,
         })?;
         let pid = process.pid();
+        // The spaces are the word of user code: checked before a size is computed from them.
+        let mut process = process;
+        let layout = match envhub_protocol::untrusted::check_worker_spaces(&spec, job.num_envs) {
+            Ok(layout) => layout,
+            Err(e) => {
+                process.kill_now();
+                return Err(HubError::InvalidState(format!(
+                    "worker {index} (pid {pid}, envs {}) announced {e}",
+                    env_range(&job)
+                )));
+            }
+        };
         let watch = ProcessWatch::new(pid).map_err(|e| HubError::WorkerDied {
             worker: index,
             envs: env_range(&job),
             pid,
             why: format!("vanished right after starting: {e}"),
         })?;
-        channel.set_layout(Layout::new(job.num_envs, spec.action_space.byte_len()))?;
+        channel.set_layout(layout)?;
         tracing::debug!(worker = index, pid, envs = %env_range(&job), "worker ready");
         Ok(WorkerLink::new(
             index,

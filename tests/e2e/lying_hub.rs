@@ -5,6 +5,7 @@
 //! go on where its other envs can.
 
 use envhub::{EnvConfig, Hub, HubError, NetConfig, Registry, SessionOptions};
+use envhub_protocol::seal::{Direction, SessionKey};
 use envhub_shm::BatchLayout;
 use serde_json::json;
 use std::sync::{Arc, Mutex};
@@ -41,7 +42,15 @@ fn cartpole_reply(observation_space: serde_json::Value) -> serde_json::Value {
         },
         "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
         "workers": 1,
+        "key": KEY,
     }})
+}
+
+/// The session key the liar gives (a hub that lies still seals: it is the session's hub).
+const KEY: &str = "abababababababababababababababababababababababababababababababab";
+
+fn seal() -> SessionKey {
+    SessionKey::from_hex(KEY).unwrap()
 }
 
 fn response(seq: u64, status: u32, n: u32, rows: &[u8], info: &[u8]) -> Vec<u8> {
@@ -98,7 +107,10 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
         session
             .declare_subscriber(format!("envhub/session/{name}/*/req"))
             .callback(move |sample| {
-                let req = sample.payload().to_bytes();
+                let mut req = sample.payload().to_bytes().into_owned();
+                if seal().open(Direction::Request, &mut req).is_err() {
+                    return;
+                }
                 let seq = u64::from_le_bytes(req[..8].try_into().unwrap());
                 let n = u32::from_le_bytes(req[12..16].try_into().unwrap());
                 let command = u32::from_le_bytes(req[8..12].try_into().unwrap());
@@ -118,6 +130,8 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
                     _ => response(seq, 0, n, &rows, b""),
                 };
                 let key = sample.key_expr().as_str().replace("/req", "/rep");
+                let mut answer = answer;
+                seal().seal(Direction::Response, &mut answer);
                 let _ = z.put(key, answer).wait();
             })
             .wait()

@@ -8,6 +8,7 @@ mod cli;
 mod concurrency;
 mod daemon;
 mod failures;
+mod lan_peer;
 mod lying_hub;
 mod python_worker;
 mod rapier_rollouts;

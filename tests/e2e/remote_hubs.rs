@@ -244,12 +244,54 @@ fn a_dead_client_s_sessions_end_on_their_hubs() {
     );
 }
 
-#[test]
-fn garbage_on_session_keys_is_answered_and_the_session_goes_on() {
+/// What an observer of a session's traffic forges, each time it sees an answer.
+/// The fake answers it sends go to `fakes` first (the observer does not forge from its own).
+fn forge_on_answer(
+    spy: &zenoh::Session,
+    answer_key: &str,
+    answer: &[u8],
+    request_len: usize,
+    fakes: &std::sync::Mutex<std::collections::HashSet<Vec<u8>>>,
+) {
     use zenoh::Wait;
+    let seq = u64::from_le_bytes(answer[..8].try_into().unwrap());
+    let request_key = answer_key.replace("/rep", "/req");
+    // The session's next request, as the observer can write it: the next sequence number, a
+    // CLOSE (then a STEP, then a RESET), the right size, and a tag of its own invention.
+    for command in [
+        envhub_shm::command::CLOSE,
+        envhub_shm::command::STEP,
+        envhub_shm::command::RESET,
+    ] {
+        let mut forged = vec![0u8; request_len];
+        forged[..8].copy_from_slice(&(seq + 1).to_le_bytes());
+        forged[8..12].copy_from_slice(&command.to_le_bytes());
+        forged[12..16].copy_from_slice(&2u32.to_le_bytes());
+        let _ = spy.put(&request_key, forged).wait();
+    }
+    // The answer the client waits for next, and garbage, on the answers' key.
+    let mut fake = answer.to_vec();
+    fake[..8].copy_from_slice(&(seq + 1).to_le_bytes());
+    fake[8..12].copy_from_slice(&envhub_shm::status::CLOSED.to_le_bytes());
+    fakes.lock().unwrap().insert(fake.clone());
+    let _ = spy.put(answer_key, fake).wait();
+    let _ = spy.put(answer_key, vec![0xffu8; 5]).wait();
+    let _ = spy
+        .put(answer_key, answer[..answer.len() - 1].to_vec())
+        .wait();
+}
+
+/// An observer on the session's Zenoh network (the client connects to it, so it sees every
+/// request and answer and can put on the session's keys) learns the session's keys and
+/// sequence numbers from the traffic and forges the next request (close, step, reset),
+/// the next answer, garbage, and replays of old requests and answers. None of it is taken:
+/// the victim's rollout is bit for bit the one of a session nobody attacked.
+#[test]
+fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
+    use std::sync::{Arc, Mutex};
+    use zenoh::Wait;
+    const STEPS: usize = 100;
     let a = RemoteHub::start("ga", &[], &[]);
-    // Another peer on the network: the client connects to it too, so it sees the session's
-    // requests (peers do not route for each other) and can put its own on the session's key.
     let spy_endpoint = format!("tcp/127.0.0.1:{}", envhub_e2e::remote::free_port());
     let mut spy_net = net_to(&[&a]);
     spy_net.listen = vec![spy_endpoint.clone()];
@@ -259,71 +301,135 @@ fn garbage_on_session_keys_is_answered_and_the_session_goes_on() {
     let mut net = net_to(&[&a]);
     net.connect.push(spy_endpoint);
     let hub = Hub::new(envhub::Registry::builtin()).with_network(net);
-    let (tx, rx) = std::sync::mpsc::channel();
-    let _requests = spy
-        .declare_subscriber("envhub/session/ga/*/req")
-        .callback(move |s| {
-            let _ = tx.send(s.key_expr().as_str().to_string());
-        })
-        .wait()
+    let rollout = |env: &mut envhub::VecEnv| -> Vec<Vec<u8>> {
+        let mut out = vec![env.reset(Some(1)).unwrap().obs.to_vec()];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        for _ in 0..STEPS {
+            let actions = env.sample_actions(&mut rng);
+            let b = env.step(&actions).unwrap();
+            let mut row = b.obs.to_vec();
+            row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
+            row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
+            out.push(row);
+        }
+        out
+    };
+    // The session nobody attacks.
+    let mut quiet = hub
+        .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &hubs(&[&a]))
         .unwrap();
-    let (atx, arx) = std::sync::mpsc::channel();
-    let _answers = spy
-        .declare_subscriber("envhub/session/ga/*/rep")
-        .callback(move |s| {
-            let _ = atx.send(s.payload().to_bytes().into_owned());
-        })
-        .wait()
-        .unwrap();
-    let mut env = hub
+    let expected = rollout(&mut quiet);
+    quiet.close();
+    // The observer: every request and answer it sees, kept for replays; on every answer, a
+    // forged next request and next answer.
+    /// Messages seen: (key, bytes).
+    type Seen = Arc<Mutex<Vec<(String, Vec<u8>)>>>;
+    let requests: Seen = Arc::default();
+    let answers: Seen = Arc::default();
+    let _requests = {
+        let requests = requests.clone();
+        spy.declare_subscriber("envhub/session/ga/*/req")
+            .callback(move |s| {
+                requests.lock().unwrap().push((
+                    s.key_expr().as_str().to_string(),
+                    s.payload().to_bytes().into_owned(),
+                ));
+            })
+            .wait()
+            .unwrap()
+    };
+    let forged = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let fakes: Arc<Mutex<std::collections::HashSet<Vec<u8>>>> = Arc::default();
+    let _answers = {
+        let (answers, requests, spy2, forged, fakes) = (
+            answers.clone(),
+            requests.clone(),
+            spy.clone(),
+            forged.clone(),
+            fakes.clone(),
+        );
+        spy.declare_subscriber("envhub/session/ga/*/rep")
+            .callback(move |s| {
+                thread_local! {
+                    // The spy's own puts come back to it on this thread: not worked from.
+                    static FORGING: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+                }
+                if FORGING.with(|f| f.get()) {
+                    return;
+                }
+                let key = s.key_expr().as_str().to_string();
+                let bytes = s.payload().to_bytes().into_owned();
+                // Only what the hub sent (24 bytes of header at least) is worked from.
+                if bytes.len() < 40 || fakes.lock().unwrap().contains(&bytes) {
+                    return;
+                }
+                let request_len = requests.lock().unwrap().last().map(|(_, r)| r.len());
+                if let Some(len) = request_len
+                    && forged.load(std::sync::atomic::Ordering::Relaxed) < 10_000
+                {
+                    FORGING.with(|f| f.set(true));
+                    forge_on_answer(&spy2, &key, &bytes, len, &fakes);
+                    FORGING.with(|f| f.set(false));
+                    forged.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                answers.lock().unwrap().push((key, bytes));
+            })
+            .wait()
+            .unwrap()
+    };
+    let unsealed_before = envhub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed);
+    let mut victim = hub
         .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &hubs(&[&a]))
         .unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    env.reset(Some(1)).unwrap();
-    for _ in 0..10 {
-        env.step(&[0u8; 16]).unwrap();
-    }
-    // One message per hub and round trip: the reset and ten steps.
-    let keys: Vec<String> = rx.try_iter().collect();
-    assert_eq!(keys.len(), 11, "requests seen: {keys:?}");
-    let session_key = keys[0].clone();
-    let _ = arx.try_iter().count();
-    // Random bytes, a header with a wrong size, an unknown session: each answered with an
-    // error, none stepping anything.
-    let mut junk: Vec<Vec<u8>> = vec![vec![7u8; 5], vec![0xff; 100]];
-    let mut header = vec![0u8; 24];
-    header[0] = 200; // seq
-    header[8] = 2; // step
-    header[12] = 9; // 9 envs (the session has 2)
-    junk.push(header);
-    for bytes in &junk {
-        spy.put(&session_key, bytes.clone()).wait().unwrap();
-    }
-    spy.put("envhub/session/ga/nosuchsession/req", vec![1u8; 40])
-        .wait()
-        .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(5);
-    let mut errors = 0;
-    while errors < junk.len() + 1 && Instant::now() < deadline {
-        if let Ok(answer) = arx.recv_timeout(Duration::from_millis(100)) {
-            let status = u32::from_le_bytes(answer[8..12].try_into().unwrap());
-            assert_eq!(
-                status,
-                envhub_shm::status::ERROR,
-                "garbage answered with {status}"
-            );
-            errors += 1;
+    let mut got = vec![victim.reset(Some(1)).unwrap().obs.to_vec()];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    for t in 0..STEPS {
+        // Replays of every request and answer seen so far but the newest two, then the step.
+        if t % 10 == 5 {
+            let old: Vec<(String, Vec<u8>)> = {
+                let r = requests.lock().unwrap();
+                r.iter().rev().skip(2).cloned().collect()
+            };
+            for (key, bytes) in old {
+                spy.put(key, bytes).wait().unwrap();
+            }
+            let old: Vec<(String, Vec<u8>)> = {
+                let r = answers.lock().unwrap();
+                r.iter().rev().skip(2).take(20).cloned().collect()
+            };
+            for (key, bytes) in old {
+                spy.put(key, bytes).wait().unwrap();
+            }
         }
+        let actions = victim.sample_actions(&mut rng);
+        let b = victim.step(&actions).unwrap();
+        let mut row = b.obs.to_vec();
+        row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
+        row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
+        got.push(row);
     }
-    assert_eq!(errors, junk.len() + 1, "every piece of garbage is answered");
+    let forged = forged.load(std::sync::atomic::Ordering::Relaxed);
+    assert!(
+        forged >= STEPS,
+        "the observer saw {forged} answers: it did not see the session's traffic"
+    );
+    assert!(
+        got == expected,
+        "the attacked rollout differs from the quiet one"
+    );
+    let unsealed = envhub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed) - unsealed_before;
+    assert!(
+        unsealed >= forged as u64,
+        "{forged} forged answers were sent, {unsealed} were dropped as unsealed"
+    );
     // The session and the hub go on.
-    for _ in 0..10 {
-        env.step(bytemuck::cast_slice(&[1i64, 1])).unwrap();
-    }
+    victim.step(&[0u8; 16]).unwrap();
     let mut other = hub
         .make_vec_on("gym-cartpole", 1, &EnvConfig::default(), &hubs(&[&a]))
         .unwrap();
     other.reset(None).unwrap();
+    eprintln!("{forged} rounds of forgeries, {unsealed} answers dropped as unsealed");
 }
 
 fn expect_refused(result: Result<envhub::VecEnv, HubError>, needle: &str) {

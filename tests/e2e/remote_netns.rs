@@ -225,6 +225,11 @@ impl TwoHosts {
         for var in SCRUBBED {
             cmd.env_remove(var);
         }
+        if side == 1 {
+            // The clients' host finds hub `a` across the veth by multicast: a client scouts
+            // the LAN only when told to (it trusts this one).
+            cmd.env(envhub::ENVHUB_MULTICAST, "1");
+        }
         cmd.envs(vars.iter().copied());
         // `ip netns exec`, `unshare` and `sh` each exec the next: the child is envhub itself
         // (its workers are its children, its namespaces are the hub's).
@@ -310,7 +315,7 @@ impl TwoHosts {
             .unwrap_or_else(|e| panic!("cannot set the link {state}: {e}"));
     }
 
-    /// `envhub hubs --json` on host 1 (multicast on, no endpoint): the names it lists, and
+    /// `envhub hubs --json` on host 1 (multicast turned on, no endpoint): the names it lists, and
     /// what it said on stderr.
     fn hubs_seen_from_b(&self, tag: &str) -> (Vec<String>, String) {
         let (_, out, err) = self.envhub(1, tag, &["hubs", "--json"]).finish(20);

@@ -4,11 +4,15 @@ The `envhub` tests need the compiled package (`make py-install` builds it into `
 `make py-test` does that first). Without it they are skipped, unless `ENVHUB_PY_REQUIRED`
 is set (as `make py-test` does), when a missing package is an error.
 
-Every test process gets its own iceoryx2 namespace, so parallel runs never share files.
+Every test process gets its own iceoryx2 namespace, so parallel runs never share files:
+`pytest{pid}_`, and under pytest-xdist (`-n N`) the controller's prefix plus the worker's
+name (`pytest{pid}_gw0_`), so the controller's clean-up at the end also covers its workers'.
+The rules that let tests run side by side under `-n N` are in README.md beside this file.
 """
 
 from __future__ import annotations
 
+import fcntl
 import glob
 import os
 import textwrap
@@ -16,8 +20,15 @@ from pathlib import Path
 
 import pytest
 
-NAMESPACE = f"pytest{os.getpid()}_"
-os.environ.setdefault("ENVHUB_NAMESPACE", NAMESPACE)
+# An xdist worker inherits its controller's environment, and with it the controller's
+# namespace: each worker takes its own inside it, never the shared one.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER")
+if _WORKER and os.environ.get("ENVHUB_NAMESPACE"):
+    NAMESPACE = f"{os.environ['ENVHUB_NAMESPACE']}{_WORKER}_"
+    os.environ["ENVHUB_NAMESPACE"] = NAMESPACE
+else:
+    NAMESPACE = f"pytest{os.getpid()}_"
+    os.environ.setdefault("ENVHUB_NAMESPACE", NAMESPACE)
 # The tests must not pick up a developer's own registry or daemon.
 os.environ.pop("ENVHUB_REGISTRY", None)
 os.environ.pop("ENVHUB_HUB", None)
@@ -63,6 +74,66 @@ def mujoco_or_skip(envhub) -> None:
     if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
         pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
     pytest.skip(message)
+
+
+def pytest_configure(config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "serial: the test runs while no other test does (under pytest-xdist): it times how fast "
+        "something happens, and tests on the other workers would take the cores it is timed on",
+    )
+    config.addinivalue_line(
+        "markers",
+        "slow: the test takes over a minute on a two-core machine (a `# slow: <why>` comment "
+        "says why); pytest-xdist hands these out first",
+    )
+    # Registered by pytest-xdist too; here so that a run without xdist does not warn.
+    config.addinivalue_line("markers", "xdist_group(name): under `--dist loadgroup`, one worker runs the group")
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Under pytest-xdist, the order in which tests are handed out:
+    - the `serial` tests last: each waits for the tests running beside it, and at the end
+      those are few and short;
+    - with `--dist loadgroup` (a test at a time to whichever worker is free), the `slow`
+      tests first, so that the short tests fill in around them: a slow test handed out last
+      keeps one worker busy while the others sit idle. (`--dist load` hands out long runs
+      of consecutive tests at first, which would put the slow ones on one worker.)
+    Every worker sorts alike, as xdist requires. Alone, the tests keep the files' order."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    slow_first = bool(getattr(config.option, "loadgroup", False))  # a worker's `--dist loadgroup`
+
+    def rank(item) -> int:
+        if item.get_closest_marker("serial"):
+            return 2
+        return 0 if slow_first and item.get_closest_marker("slow") else 1
+
+    items.sort(key=rank)
+
+
+@pytest.fixture(autouse=True)
+def _serial_tests_run_alone(request, tmp_path_factory):
+    """Under pytest-xdist, a `serial` test holds a lock file exclusively and every other test
+    holds it shared, so a serial test waits for the running tests and runs alone. A turnstile
+    lock in front makes the tests that come after a waiting serial test wait behind it.
+    Without xdist (one test at a time) this does nothing."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        yield
+        return
+    # Each worker's base temporary folder lies in the controller's: one folder per run.
+    shared = tmp_path_factory.getbasetemp().parent
+    serial = request.node.get_closest_marker("serial") is not None
+    with open(shared / "serial.turnstile", "a") as turnstile, open(shared / "serial.lock", "a") as lock:
+        fcntl.flock(turnstile, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX if serial else fcntl.LOCK_SH)
+        finally:
+            fcntl.flock(turnstile, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 @pytest.fixture

@@ -6,11 +6,14 @@ errors a drop-in can meet (a factory that raises or cannot be pickled, a custom 
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import textwrap
 import threading
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -304,7 +307,20 @@ def test_options_that_cannot_apply_are_refused():
         envhub.AsyncVectorEnv([])
 
 
-def test_temporary_files_are_removed(tmp_path, monkeypatch):
+@pytest.fixture
+def short_tmp_path() -> Iterator[Path]:
+    """A temporary folder with a short path: the workers' call sockets go in a folder inside
+    it, and a Unix socket's path has at most 107 bytes, which a pytest-xdist `tmp_path`
+    (`/tmp/pytest-of-USER/pytest-N/popen-gwN/test_...0/`) leaves no room for."""
+    folder = Path(tempfile.mkdtemp(prefix="eh-", dir="/tmp"))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def test_temporary_files_are_removed(short_tmp_path, monkeypatch):
+    tmp_path = short_tmp_path
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # this test's own temporary folder
     envs = envhub.AsyncVectorEnv(
         _counter_fns(2), shared_memory=False, copy=False, daemon=False, step_timeout=STEP_TIMEOUT

@@ -49,7 +49,20 @@ UPSTREAM_CHECK_FAILURES = {
 }
 
 
-@pytest.mark.parametrize("entry_id", REGISTRY.list_ids())
+#: Frameworks whose envs take over a minute through `check_env` on two cores.
+SLOW_FRAMEWORKS = {"robosuite", "libero"}
+
+
+# slow (robosuite and LIBERO entries): `check_env` resets the env several times (seeding and
+# determinism checks), and each reset of these suites rebuilds the MuJoCo scene in Python;
+# the worker's start imports the suite (robosuite, LIBERO's assets) in its own interpreter.
+@pytest.mark.parametrize(
+    "entry_id",
+    [
+        pytest.param(i, marks=pytest.mark.slow) if REGISTRY.get(i).framework in SLOW_FRAMEWORKS else i
+        for i in REGISTRY.list_ids()
+    ],
+)
 def test_check_env(entry_id):
     env = _runnable_or_skip(entry_id)
     known = UPSTREAM_CHECK_FAILURES.get(REGISTRY.get(entry_id).framework)

@@ -74,6 +74,8 @@ def _kill_within(envs_or_env, step, seconds: float = 1.0) -> float:
     return took
 
 
+# serial: times how fast a crash is noticed (bound of 1 s); a loaded core would stretch it
+@pytest.mark.serial
 def test_worker_killed_between_steps():
     envs = envhub.make_vec("gym-cartpole", 4, num_workers=2)
     try:
@@ -85,6 +87,8 @@ def test_worker_killed_between_steps():
         envs.close()
 
 
+# serial: times how fast a crash is noticed (bound of 1.3 s); a loaded core would stretch it
+@pytest.mark.serial
 def test_worker_killed_during_a_step(null_registry):
     """The step waits on a slow env (GIL released); a kill -9 ends it with an error fast."""
     env = envhub.make("null-env", registry=null_registry, sleep_ms=5000)
@@ -119,6 +123,8 @@ def test_worker_exit_and_env_error(null_registry):
         env.close()
 
 
+# serial: times how fast a crash is noticed (bound of 2 s); a loaded core would stretch it
+@pytest.mark.serial
 def test_hung_worker_times_out(null_registry):
     env = envhub.make("null-env", registry=null_registry, sleep_ms=10_000, step_timeout=0.5)
     try:

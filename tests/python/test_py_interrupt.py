@@ -13,6 +13,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import pytest
 from conftest import import_envhub
 
 envhub = import_envhub()
@@ -51,6 +52,8 @@ def alive(pid: int) -> bool:
         return False
 
 
+# serial: times the interrupt (100 ms); a loaded core would stretch it
+@pytest.mark.serial
 def test_ctrl_c_interrupts_a_long_step_within_100_ms(null_registry, tmp_path):
     namespace = f"pyint{os.getpid()}_"
     script = tmp_path / "client.py"

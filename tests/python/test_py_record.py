@@ -170,6 +170,9 @@ def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[d
 # Native, Python-hosted, Dict with a camera -------------------------------------------------
 
 
+# slow: 60 steps of three Hoppers, each step rendered (MuJoCo offscreen through Mesa's software
+# EGL here); the 60 steps give the six episodes of different lengths the test checks.
+@pytest.mark.slow
 def test_native_mujoco_with_render_frames(tmp_path):
     """A native MuJoCo env (Hopper, three envs, `next_step` autoreset) with `rgb_array`
     frames: episodes of different lengths, states and actions bit for bit, the video within
@@ -444,7 +447,7 @@ def _slow_writer_env():
 
 def test_full_queue_waits_and_says_so(tmp_path):
     env = _slow_writer_env()
-    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_size=1, when_full="wait", codec="libaom-av1")
+    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_bytes=1, when_full="wait", codec="libaom-av1")
     try:
         with pytest.warns(envhub.recording.QueueFullWarning, match="steps wait for the writer"):
             expected = drive(rec, 45, lambda obs: np.zeros((2, 1), np.float32), seed=0)
@@ -460,7 +463,7 @@ def test_full_queue_waits_and_says_so(tmp_path):
 
 def test_full_queue_drops_whole_episodes_and_says_so(tmp_path):
     env = _slow_writer_env()
-    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_size=1, when_full="drop", codec="libaom-av1")
+    rec = envhub.RecordEpisodes(env, str(tmp_path / "d"), queue_bytes=1, when_full="drop", codec="libaom-av1")
     try:
         with pytest.warns(envhub.recording.QueueFullWarning, match="a step is dropped"):
             expected = drive(rec, 100, lambda obs: np.zeros((2, 1), np.float32), seed=0)

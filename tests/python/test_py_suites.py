@@ -138,6 +138,11 @@ def native_run(c: dict[str, Any], tmp_path: Path) -> dict[str, Any]:
 
 # The suites' own ids ------------------------------------------------------------------------
 
+#: The environment of a suite's interpreter run directly, with this envhub importable as its
+#: workers have it (a venv holds the suite only; workers reach envhub through their install's
+#: overlay).
+WITH_ENVHUB = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
+
 # In the suite's interpreter, with `entries` defined: prints the ids of entries it lacks.
 CHECK_IDS = {
     "metaworld": "import metaworld; names = set(metaworld.ALL_V3_ENVIRONMENTS); "
@@ -173,7 +178,7 @@ def test_entries_name_ids_the_suite_has(framework):
     python = suite_python(SUITES[framework])
     entries = [e for e in ENTRIES.values() if e["framework"] == framework]
     code = f"import json; entries = json.loads({json.dumps(json.dumps(entries))}); {CHECK_IDS[framework]}"
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S, env=WITH_ENVHUB)
     assert done.returncode == 0, done.stderr[-3000:]
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []
 
@@ -185,7 +190,7 @@ def test_suite_runs_on_the_python_it_names(framework):
     env = SUITES[framework]
     python = suite_python(env)
     code = "import sys, envhub._envhub; print('%d.%d' % sys.version_info[:2])"
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S)
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=RUN_TIMEOUT_S, env=WITH_ENVHUB)
     assert done.returncode == 0, done.stderr[-3000:]
     want = REGISTRY["python_envs"][env].get("python")
     if want:
@@ -232,7 +237,15 @@ if LIBERO_ENV:
     CASES += [libero_case("libero-spatial", 5, 40), libero_case("libero-goal", 2, 40)]
 
 
-@pytest.mark.parametrize("c", CASES, ids=[c["entry"] for c in CASES])
+# slow (robosuite and LIBERO cases): each runs twice, in the suite's interpreter and through
+# envhub, and each run builds the scene (robosuite's model compiled from XML, LIBERO's assets,
+# cameras rendered offscreen); the step counts are the ones the comparisons need (resets
+# and limits crossed, see CASES).
+@pytest.mark.parametrize(
+    "c",
+    [pytest.param(c, marks=pytest.mark.slow) if c["framework"] in ("robosuite", "libero") else c for c in CASES],
+    ids=[c["entry"] for c in CASES],
+)
 def test_entry_runs_bit_for_bit_like_the_suite(c, tmp_path):
     ref = native_run(c, tmp_path)
     got = suite_runs.envhub_run(c)
@@ -260,6 +273,9 @@ def test_nested_infos_arrive_with_their_dtypes():
 # One client, many interpreters -------------------------------------------------------------
 
 
+# slow: five (six with LIBERO) workers in five interpreters start, each importing its suite;
+# the 40 steps are few next to that.
+@pytest.mark.slow
 def test_one_client_opens_every_suite_and_a_native_env_at_once():
     """Meta-World, MyoSuite, dm_control, robosuite (and LIBERO, where the catalog has its
     environment) tasks and a native MuJoCo env, open together in this process, whose

@@ -110,3 +110,22 @@ def test_flat_infos_of_json_values_are_make_vecs(seed):
     assert got is not None
     assert_identical(got, want)
     assert_identical(got, gymnasium_infos(infos, n))
+
+
+@pytest.mark.parametrize(
+    "infos",
+    [
+        [{"names": ["a", "bb"]}, {"names": ["a", "much longer"]}],  # text lists: never truncated
+        [{"ragged": [1, 2, 3]}, {"ragged": [1]}],  # lists of different lengths: no crash
+        [{"flag": np.bool_(True)}, {"flag": np.bool_(False)}],  # an object array in Gymnasium
+        [{"label": "x"}, None, {"label": "a longer label"}],
+        [{"pair": (1, 2)}, {"pair": (3, 4)}],
+    ],
+)
+def test_values_as_json_are_batched_as_gymnasium_batches_them(infos):
+    n = len(infos)
+    got: dict[str, Any] = {}
+    for k, info in enumerate(infos):
+        if info:
+            got = _add_info(got, info, k, n)
+    assert_identical(got, gymnasium_infos(infos, n))

@@ -57,6 +57,11 @@ pub const ENVHUB_ADAPTERS: &str = "ENVHUB_ADAPTERS";
 /// users' sight, and only `envhub bench` and tests that name them directly use them.
 pub const ENVHUB_TEST_ADAPTERS: &str = "ENVHUB_TEST_ADAPTERS";
 
+/// Seconds a worker may take to create its envs and report ready before its session fails
+/// (default 120: a suite such as LIBERO or robosuite imports and builds scenes for tens of
+/// seconds, more on a loaded machine). A session's own `start_timeout` option wins.
+pub const ENVHUB_START_TIMEOUT: &str = "ENVHUB_START_TIMEOUT";
+
 /// Seconds that asking a worker what it hosts (`envhub-worker describe`,
 /// `python -m envhub.worker describe`) may take before it is killed and reported as hung
 /// (default 30): an adapter module that blocks at import cannot stall the hub.
@@ -79,6 +84,15 @@ pub const ENVHUB_UV: &str = "ENVHUB_UV";
 /// fails with that hint. A hub serving remote clients builds for them only with
 /// `envhub serve --allow-provision`, whatever this says.
 pub const ENVHUB_PROVISION: &str = "ENVHUB_PROVISION";
+
+/// The worker protocol version of the hub that starts a Python worker (set by the hub): a
+/// worker of another version refuses to start, naming both (see `envhub_shm::WORKER_PROTOCOL`).
+pub const ENVHUB_WORKER_PROTOCOL: &str = "ENVHUB_WORKER_PROTOCOL";
+
+/// `1` lets envhub ask uv to install (download) a CPython version that a suite's Python
+/// environment names and this machine lacks (`uv python install 3.X`); the config's
+/// `python_install: true` does too. Unset, a missing version is an error naming that command.
+pub const ENVHUB_PYTHON_INSTALL: &str = "ENVHUB_PYTHON_INSTALL";
 
 /// Seconds a process waits for another one's build of the same Python environment before
 /// giving up (default 900).

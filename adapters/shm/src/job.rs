@@ -61,6 +61,45 @@ pub struct WorkerPython {
     /// Variables its workers run with (`MUJOCO_GL=egl`).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub env: std::collections::BTreeMap<String, String>,
+    /// Folders put first on the worker's `sys.path`: the starting install's own overlay,
+    /// through which the venv imports that install's `envhub` package.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sys_path: Vec<std::path::PathBuf>,
+    /// The `envhub` package folder the worker must run (the starting install's), checked
+    /// against what its ready line reports.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub package: Option<std::path::PathBuf>,
+    /// A file in the venv each worker holds a shared `flock` on while it runs (its
+    /// manifest), so that `envhub env remove` can tell the environment is in use.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hold: Option<std::path::PathBuf>,
+}
+
+/// The version of what the hub and its workers say to each other (the job, the ready line,
+/// the data plane). The hub passes its own to Python workers (`ENVHUB_WORKER_PROTOCOL`),
+/// which refuse another, and every worker reports its own in its ready line.
+pub const WORKER_PROTOCOL: u32 = 1;
+
+/// Who a started worker is: the protocol it speaks and where its code comes from.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WorkerIdentity {
+    /// Its [`WORKER_PROTOCOL`].
+    pub protocol: u32,
+    /// The `envhub` package folder it imported (a Python worker), or its executable.
+    pub module: std::path::PathBuf,
+    /// The envhub version it was built as.
+    pub version: String,
+}
+
+impl WorkerIdentity {
+    /// This build's identity, with `module` for where its code is.
+    pub fn current(module: std::path::PathBuf) -> WorkerIdentity {
+        WorkerIdentity {
+            protocol: WORKER_PROTOCOL,
+            module,
+            version: env!("CARGO_PKG_VERSION").to_string(),
+        }
+    }
 }
 
 /// The spec a ready worker reports.
@@ -78,11 +117,18 @@ pub struct ReadySpec {
     pub render_fps: Option<f64>,
     /// The worker's pid.
     pub pid: u32,
+    /// Its protocol version and code. Absent from the lines of workers that predate it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worker: Option<WorkerIdentity>,
 }
 
 /// The one line a worker prints on stdout when it has started, or failed to.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one reply per worker start, read once: boxing would save nothing"
+)]
 pub enum WorkerReply {
     /// Envs created, channel open.
     Ready(ReadySpec),
@@ -102,6 +148,7 @@ mod tests {
             max_episode_steps: Some(500),
             render_fps: Some(50.0),
             pid: 7,
+            worker: None,
         };
         let line = serde_json::to_string(&WorkerReply::Ready(spec.clone())).unwrap();
         assert!(line.contains(r#""render_fps":50.0"#), "{line}");

@@ -24,7 +24,7 @@ mod wait;
 
 pub use batch::{EnvBatch, Frame, frames_section};
 pub use channel::{ClientChannel, NO_SLOT, Reply, Request, Response, WorkerChannel, wait_any};
-pub use job::{ReadySpec, WorkerJob, WorkerPython, WorkerReply};
+pub use job::{ReadySpec, WORKER_PROTOCOL, WorkerIdentity, WorkerJob, WorkerPython, WorkerReply};
 pub use layout::{
     BLOCK_ALIGN, BatchLayout, Layout, RequestHeader, ResponseBlocks, ResponseBlocksMut,
     ResponseHeader, command, env_flag, status,

@@ -324,6 +324,7 @@ mod tests {
             max_episode_steps: None,
             render_fps: None,
             pid: std::process::id(),
+            worker: None,
         }
     }
 

@@ -41,6 +41,9 @@ pub(crate) fn make_envs(job: &WorkerJob) -> Result<(EnvBatch, ReadySpec), String
         max_episode_steps: limit,
         render_fps: envs.first().and_then(|env| env.render_fps()),
         pid: std::process::id(),
+        worker: std::env::current_exe()
+            .ok()
+            .map(envhub_shm::WorkerIdentity::current),
     };
     Ok((EnvBatch::new(envs, job.config.autoreset_mode), ready))
 }

@@ -1,4 +1,4 @@
-//! `envhub env list|sync|remove`: the Python environments suites run in.
+//! `envhub env list|sync|remove|prune`: the Python environments suites run in.
 
 use super::{Outcome, table};
 use anyhow::Context;
@@ -26,12 +26,56 @@ enum Command {
         /// Names (`python_envs:` of the registry); none: every one.
         names: Vec<String>,
     },
-    /// Delete the built environments of these names (every version of each).
+    /// Delete the built environments of these names (every version of each); refused while
+    /// running sessions' workers use one, naming their pids.
     Remove {
         /// Names, or folder names as `envhub env list` shows them.
         #[arg(required = true)]
         names: Vec<String>,
+        /// Remove it even while sessions use it (their workers then fail, saying so).
+        #[arg(long)]
+        force: bool,
     },
+    /// Delete the built environments that the rules select (any of them); never one that
+    /// running sessions use.
+    #[command(arg_required_else_help = true)]
+    Prune {
+        /// Those unused (no session, no build) for this many days.
+        #[arg(long, value_name = "DAYS")]
+        unused_days: Option<f64>,
+        /// Those the catalog's registries do not name (old keys, other registries' ones).
+        #[arg(long)]
+        unnamed: bool,
+        /// Then the least recently used, until the cache uses at most this much disk
+        /// (`500M`, `20G`; files hard-linked several times counted once).
+        #[arg(long, value_name = "SIZE", value_parser = parse_size)]
+        max_size: Option<u64>,
+        /// Say what would be removed, and remove nothing.
+        #[arg(long)]
+        dry_run: bool,
+    },
+}
+
+/// `500M`, `20G`, `1.5T`, `1000` (bytes; K, M, G, T are powers of 1000).
+fn parse_size(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let (number, scale) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let scale = match c.to_ascii_uppercase() {
+                'K' => 1e3,
+                'M' => 1e6,
+                'G' => 1e9,
+                'T' => 1e12,
+                _ => return Err(format!("`{text}`: unknown unit `{c}`; use K, M, G or T")),
+            };
+            (&t[..i], scale)
+        }
+        _ => (t, 1.0),
+    };
+    match number.trim().parse::<f64>() {
+        Ok(n) if n.is_finite() && n >= 0.0 => Ok((n * scale) as u64),
+        _ => Err(format!("`{text}` is not a size such as `500M` or `20G`")),
+    }
 }
 
 pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
@@ -39,15 +83,80 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
     match &args.command {
         Command::List { json } => list(registry, store, *json),
         Command::Sync { names } => sync(registry, store, names),
-        Command::Remove { names } => {
+        Command::Remove { names, force } => {
             for name in names {
-                for dir in store.remove(name)? {
+                for dir in store.remove(name, *force)? {
                     println!("removed {}", dir.display());
                 }
             }
             Ok(Outcome::Done)
         }
+        Command::Prune {
+            unused_days,
+            unnamed,
+            max_size,
+            dry_run,
+        } => prune(registry, store, *unused_days, *unnamed, *max_size, *dry_run),
     }
+}
+
+fn prune(
+    registry: &Registry,
+    store: &envhub_pyenv::Store,
+    unused_days: Option<f64>,
+    unnamed: bool,
+    max_size: Option<u64>,
+    dry_run: bool,
+) -> anyhow::Result<Outcome> {
+    let unused_for = unused_days
+        .map(|d| {
+            anyhow::ensure!(
+                d.is_finite() && d >= 0.0,
+                "`--unused-days {d}` is not a number of days"
+            );
+            Ok(std::time::Duration::from_secs_f64(d * 86_400.0))
+        })
+        .transpose()?;
+    let named = unnamed.then(|| {
+        registry
+            .python_envs()
+            .all()
+            .iter()
+            .filter_map(|(name, spec)| store.plan(name, spec).ok().map(|p| p.dir))
+            .collect()
+    });
+    let rule = envhub_pyenv::PruneRule {
+        unused_for,
+        named,
+        max_bytes: max_size,
+    };
+    let pruned = store.prune(&rule, dry_run)?;
+    let verb = if dry_run { "would remove" } else { "removed" };
+    for (dir, bytes) in &pruned.removed {
+        println!("{verb} {} ({})", dir.display(), megabytes(*bytes));
+    }
+    for (dir, pids) in &pruned.in_use {
+        let pids: Vec<String> = pids.iter().map(u32::to_string).collect();
+        println!(
+            "kept {} (in use by pid {})",
+            dir.display(),
+            if pids.is_empty() {
+                "unknown".into()
+            } else {
+                pids.join(", ")
+            }
+        );
+    }
+    println!(
+        "{} environment(s) {verb}; the cache's environments use {}",
+        pruned.removed.len(),
+        megabytes(pruned.left_bytes)
+    );
+    Ok(Outcome::Done)
+}
+
+fn megabytes(bytes: u64) -> String {
+    format!("{:.0} MB", bytes as f64 / 1e6)
 }
 
 fn sync(
@@ -102,6 +211,9 @@ struct Row {
     size_bytes: Option<u64>,
     last_use_unix: Option<u64>,
     requirements: Vec<String>,
+    /// What they resolved to when it was built (`name==version`; empty: not built, or
+    /// built by an envhub that did not record it).
+    resolved: Vec<String>,
 }
 
 fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow::Result<Outcome> {
@@ -129,6 +241,9 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                     size_bytes: found.map(|s| s.size_bytes),
                     last_use_unix: found.and_then(|s| unix(s.last_use)),
                     requirements: plan.requirements,
+                    resolved: found
+                        .and_then(|s| s.manifest.as_ref().map(|m| m.resolved.clone()))
+                        .unwrap_or_default(),
                 });
             }
             Err(e) => eprintln!("warning: {e}"),
@@ -154,6 +269,11 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                 .manifest
                 .as_ref()
                 .map(|m| m.requirements.clone())
+                .unwrap_or_default(),
+            resolved: s
+                .manifest
+                .as_ref()
+                .map(|m| m.resolved.clone())
                 .unwrap_or_default(),
         });
     }

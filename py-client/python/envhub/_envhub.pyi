@@ -8,6 +8,9 @@ import numpy.typing as npt
 
 __version__: str
 
+#: The version of what the hub and its workers say to each other.
+WORKER_PROTOCOL: int
+
 def set_worker_binary(path: str | PathLike[str]) -> bool: ...
 def worker_binary() -> str: ...
 def adapters_json() -> str: ...

@@ -18,7 +18,6 @@ import tempfile
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import gymnasium
 import numpy as np
 from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
@@ -31,6 +30,7 @@ from ..wire.errors import InvalidConfigError, InvalidStateError, MakeError
 from ..wire.pickled import decode_info, wrap
 from .infos import flat_infos
 from .vector import VectorEnv
+from .vector import _GymnasiumBatch as _Batch
 
 __all__ = ["AsyncVectorEnv"]
 
@@ -54,16 +54,6 @@ def _pickle_factories(env_fns: Sequence[Callable[[], Any]]) -> bytes:
         raise InvalidConfigError(
             f"the env factories cannot be pickled with cloudpickle: {type(e).__name__}: {e}"
         ) from e
-
-
-class _Batch:
-    """What Gymnasium's `VectorEnv._add_info` reads of `self`, for a batch of `n` envs
-    (a `recv` returns fewer envs than the session has)."""
-
-    _add_info = gymnasium.vector.VectorEnv._add_info
-
-    def __init__(self, n: int) -> None:
-        self.num_envs = n
 
 
 class AsyncVectorEnv(VectorEnv):

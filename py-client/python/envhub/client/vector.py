@@ -25,36 +25,20 @@ __all__ = ["VectorEnv"]
 
 
 def _add_info(infos: dict[str, Any], env_info: dict[str, Any], k: int, n: int) -> dict[str, Any]:
-    """Gymnasium's vector info layout: every key an array over the `n` envs, with a boolean
-    mask `_key` saying which envs reported it (nested dicts recursively; `final_obs` an
-    object array)."""
-    for key, value in env_info.items():
-        if key == "final_obs":
-            # One observation object per env (None where no episode ended), as Gymnasium has it.
-            array: Any = infos.get(key)
-            if array is None:
-                array = np.full(n, fill_value=None, dtype=object)
-            array[k] = value
-        elif isinstance(value, dict):
-            array = _add_info(infos.get(key, {}), value, k, n)
-        else:
-            if isinstance(value, list):
-                value = np.asarray(value)
-            array = infos.get(key)
-            if array is None:
-                if isinstance(value, bool | int | float | np.number | np.bool_):
-                    array = np.zeros(n, dtype=type(value))
-                elif isinstance(value, np.ndarray):
-                    array = np.zeros((n, *value.shape), dtype=value.dtype)
-                else:
-                    array = np.full(n, fill_value=None, dtype=object)
-            array[k] = value
-        mask = infos.get(f"_{key}")
-        if mask is None:
-            mask = np.zeros(n, dtype=np.bool_)
-        mask[k] = True
-        infos[key], infos[f"_{key}"] = array, mask
-    return infos
+    """Gymnasium's vector info layout of env `k`'s info added to `infos`: Gymnasium's own
+    `VectorEnv._add_info` (nested dicts recursively, `final_obs` an object array, `np.bool_`,
+    text and lists in object arrays, ragged values kept as they are), so a step's infos are
+    batched as `SyncVectorEnv` batches them, whatever Gymnasium version runs here."""
+    return _GymnasiumBatch(n)._add_info(infos, env_info, k)
+
+
+class _GymnasiumBatch:
+    """What Gymnasium's `VectorEnv._add_info` reads of `self`: the batch's size."""
+
+    _add_info = gymnasium.vector.VectorEnv._add_info
+
+    def __init__(self, n: int) -> None:
+        self.num_envs = n
 
 
 class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):

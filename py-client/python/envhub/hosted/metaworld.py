@@ -3,22 +3,37 @@ Meta-World registers in Gymnasium (`Meta-World/MT1`, ...)."""
 
 from __future__ import annotations
 
+import functools
+import warnings
 from typing import Any
+
+import gymnasium as gym
 
 from .suites import SuiteAdapter, gym_make, unknown_id
 
 #: The Meta-World id an entry names by its task alone (`reach-v3`).
 MT1 = "Meta-World/MT1"
+#: Meta-World's multi-task benchmarks whose train goals an env may take (`benchmark` option).
+GOAL_SETS = ("MT1", "MT10", "MT25", "MT50")
+#: Reset options the adapter reads (the others go to Meta-World, which ignores them).
+GOAL = "goal"
 
 
 class MetaWorldAdapter(SuiteAdapter):
     """Meta-World tasks: the env id is a Meta-World Gymnasium id (`Meta-World/MT1`, with the
     task in the option `env_name`, e.g. `reach-v3`) or a task name alone (`reach-v3`, for
-    MT1). Meta-World draws its set of goal positions (tasks) and seeds the env when it is
-    made, from the option `seed`, and ignores reset seeds; envhub makes env `i` of a session
-    with `seed` = the option (else the session's seed, else 0) + `i`, so every env is
-    reproducible. The other options go to Meta-World (`reward_function_version`,
-    `terminate_on_success`, `task_select`, `width`, `height`, `camera_name`, ...)."""
+    MT1). Meta-World draws its 50 train goal positions (tasks) when the env is made, from
+    the option `seed` (else the session's seed, else 0): every env of a session gets the same
+    goal set, and env `i` draws its goals on reset from a generator seeded with `seed + i`, so
+    the envs of a vector session differ and each is reproducible. `benchmark: MT10` (or
+    `MT25`, `MT50`) takes the goal set Meta-World's benchmark of that seed gives the task
+    (they differ from MT1's: one generator draws every task's goals in turn), as
+    `gym.make_vec("Meta-World/MT10", seed=...)` builds its envs. `reset(options={"goal": g})`
+    starts the episode from train goal `g` (0..49) rather than a drawn one. Meta-World ignores
+    reset seeds; envhub says so once. `goal_seed_per_env: true` restores envhub's first
+    behaviour (env `i` made with `seed + i`: its own goal set). The other options go to
+    Meta-World (`reward_function_version`, `terminate_on_success`, `task_select`, `width`,
+    `height`, `camera_name`, ...)."""
 
     name = "metaworld"
     frameworks = ["metaworld", "meta_world"]
@@ -29,10 +44,13 @@ class MetaWorldAdapter(SuiteAdapter):
     python_env = "metaworld"
 
     def make(self, env_id: str, config: Any) -> Any:
-        import gymnasium as gym
         import metaworld
 
         kwargs = dict(config.extra)
+        benchmark = kwargs.pop("benchmark", "MT1")
+        per_env = kwargs.pop("goal_seed_per_env", False)
+        if benchmark not in GOAL_SETS:
+            raise unknown_id("Meta-World benchmark", str(benchmark), list(GOAL_SETS), f"one of {', '.join(GOAL_SETS)}")
         if not env_id.startswith("Meta-World/"):
             if env_id not in metaworld.ALL_V3_ENVIRONMENTS:
                 raise unknown_id(
@@ -62,5 +80,113 @@ class MetaWorldAdapter(SuiteAdapter):
         base = kwargs.get("seed", config.seed if config.seed is not None else 0)
         if isinstance(base, bool) or not isinstance(base, int):
             raise TypeError(f"Meta-World option `seed` must be an integer, not {base!r}")
-        kwargs["seed"] = base + int(config.env_index or 0)
-        return gym_make(env_id, config, kwargs)
+        index = int(config.env_index or 0)
+        if per_env:
+            kwargs["seed"] = base + index
+            return MetaWorldGoals(gym_make(env_id, config, kwargs))
+        kwargs["seed"] = base
+        if benchmark == "MT1" or env_id != MT1:
+            env = gym_make(env_id, config, kwargs)
+        else:
+            env = _benchmark_env(benchmark, base, config, kwargs)
+        if index:
+            # Same goal set, another generator for the goals drawn on reset (Meta-World's `seed`).
+            env.unwrapped.seed(base + index)
+        return MetaWorldGoals(env)
+
+
+@functools.lru_cache(maxsize=4)
+def _goal_set(benchmark: str, seed: int) -> tuple[Any, list[Any]]:
+    """(task classes, train goals) of Meta-World's benchmark of that seed. Drawing them makes
+    every task's env and resets it 50 times (MT10: about 13 s here), so every worker of
+    every session would pay it: they are kept in a file per user, benchmark, seed and
+    Meta-World version (written whole, then renamed into place)."""
+    import os
+    import pickle
+    import tempfile
+    from importlib import metadata
+
+    import metaworld
+    from metaworld import env_dict
+
+    classes = getattr(env_dict, f"{benchmark}_V3")
+    folder = os.path.join(tempfile.gettempdir(), f"envhub-{os.getuid()}-metaworld")
+    path = os.path.join(folder, f"{benchmark}-seed{seed}-{metadata.version('metaworld')}.pkl")
+    try:
+        with open(path, "rb") as f:
+            return classes, pickle.load(f)
+    except (OSError, pickle.UnpicklingError, EOFError):
+        pass
+    tasks = getattr(metaworld, benchmark)(seed=seed).train_tasks
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=folder)
+    with os.fdopen(fd, "wb") as f:
+        pickle.dump(tasks, f)
+    os.replace(tmp, path)
+    return classes, tasks
+
+
+def _benchmark_env(benchmark: str, seed: int, config: Any, kwargs: dict[str, Any]) -> Any:
+    """One task's env as Meta-World's `make_mt_envs` builds it for `Meta-World/<benchmark>`
+    (its class, the benchmark's train goals of that task, seeded with `seed`)."""
+    import metaworld
+
+    kwargs = dict(kwargs)
+    name = kwargs.pop("env_name")
+    kwargs.pop("seed")
+    classes, goals = _goal_set(benchmark, seed)
+    if name not in classes:
+        raise unknown_id(f"Meta-World {benchmark}", name, sorted(classes), f"{benchmark}'s tasks")
+    tasks = [t for t in goals if t.env_name == name]
+    return metaworld._init_each_env(
+        env_cls=classes[name],
+        tasks=tasks,
+        seed=seed,
+        env_id=list(classes).index(name),
+        num_tasks=len(classes),
+        max_episode_steps=config.max_episode_steps or None,
+        render_mode=config.render_mode,
+        **kwargs,
+    )
+
+
+_SEED_WARNED = False
+
+
+class MetaWorldGoals(gym.Wrapper):
+    """Meta-World's env with the reset option `goal` (a train goal by index) and a warning,
+    once per process, that a reset seed changes nothing in Meta-World."""
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        global _SEED_WARNED
+        if seed is not None and not _SEED_WARNED:
+            _SEED_WARNED = True
+            warnings.warn(
+                "Meta-World ignores reset seeds: its goals come from the option `seed` when the env is made "
+                "(and `reset(options={'goal': g})` picks train goal g)",
+                stacklevel=2,
+            )
+        options = dict(options or {})
+        if GOAL not in options:
+            return self.env.reset(seed=seed, options=options or None)
+        goal = options.pop(GOAL)
+        select = _task_selector(self.env)
+        n = len(select.tasks)
+        if isinstance(goal, bool) or not isinstance(goal, int) or not 0 <= goal < n:
+            raise ValueError(f"invalid Meta-World `goal` {goal!r}\nhint: an index 0..{n - 1} into the task's train goals")
+        self.env.unwrapped.set_task(select.tasks[goal])
+        sampling = select.sample_tasks_on_reset
+        select.toggle_sample_tasks_on_reset(False)
+        try:
+            return self.env.reset(seed=seed, options=options or None)
+        finally:
+            select.toggle_sample_tasks_on_reset(sampling)
+
+
+def _task_selector(env: Any) -> Any:
+    """The wrapper of Meta-World's that holds the task's train goals (`tasks`)."""
+    while env is not None:
+        if hasattr(env, "tasks") and hasattr(env, "toggle_sample_tasks_on_reset"):
+            return env
+        env = getattr(env, "env", None)
+    raise ValueError("this Meta-World env holds no train goals (option `task_select`?)")

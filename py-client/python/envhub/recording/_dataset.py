@@ -1,32 +1,31 @@
 """A LeRobot dataset (v3.0 layout) on disk, appended to in commits, written with pyarrow.
 
-The layout, as LeRobot's loader reads it:
+The layout, as LeRobot's writer makes it and its loader reads it:
 
-    meta/info.json                          fps, features, totals, path templates
+    meta/info.json                          fps, features, totals, path templates, file sizes
     meta/tasks.parquet                      task text -> task_index
     meta/stats.json                         per-feature statistics over every frame
     meta/episodes/chunk-C/file-F.parquet    one row per episode: length, its data and video
-                                            files, its rows in the dataset, its statistics
-    data/chunk-C/file-F.parquet             one row per frame
-    videos/KEY/chunk-C/file-F.mp4           frames of a camera
+                                            files, its rows in the dataset, its time range in
+                                            each video file, its statistics
+    data/chunk-C/file-F.parquet             one row per frame, many episodes per file
+    videos/KEY/chunk-C/file-F.mp4           a camera's frames, many episodes per file
 
-Crash safety: a commit writes new files only (never rewrites data or videos), each under a
-temporary name in `.envhub/` and renamed into place, and `meta/info.json`, whose totals say
-which episodes exist, is renamed into place last. Opening the folder again removes files a
-crash left that `info.json` does not count. LeRobot's loader reads every data file it finds,
-so between the first rename of a commit and the last (a few renames, microseconds) a crash
-leaves files it would read too; the next recording into the folder removes them.
-
-Each commit writes one data file and one episodes file holding every episode it commits, and
-one MP4 per episode and camera (LeRobot's writer concatenates episodes into larger MP4s; that
-would mean rewriting files, which this writer never does).
+A commit appends its episodes to the last data, episodes and video files (or starts the next
+ones when a file would reach `data_files_size_in_mb` / `video_files_size_in_mb`): each such
+file is written anew in the private folder `.envhub/`, the committed rows or frames first,
+and renamed into place; then the new `meta/` is swapped in whole (`_durable.py`). A crash
+before the swap leaves `meta/` describing the last commit, over files that hold it first; the
+next open cuts what was appended past it and removes files no committed episode refers to.
 """
 
 from __future__ import annotations
 
 import fcntl
+import glob
 import json
 import os
+import re
 import shutil
 import warnings
 from dataclasses import dataclass, field
@@ -35,10 +34,16 @@ from typing import Any
 
 import numpy as np
 
+from ._durable import Commit, fsync_dir, fsync_file
+from ._stats import NAMES, aggregate, column_stats
+from ._video import concatenate, count_frames
 from .errors import DatasetLayoutError, RecordingError
 
 CODEBASE_VERSION = "v3.0"
 CHUNKS_SIZE = 1000
+#: LeRobot's defaults: a data (and episodes) file, a video file is rolled past this size.
+DATA_FILES_SIZE_IN_MB = 100
+VIDEO_FILES_SIZE_IN_MB = 200
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
@@ -61,34 +66,28 @@ class Episode:
     success: bool | None = None
 
 
+@dataclass
+class _Open:
+    """The last file of a kind: where it is, and its committed rows (or frames)."""
+
+    at: tuple[int, int]
+    count: int
+
+
 def _next(chunk: int, file: int) -> tuple[int, int]:
     return (chunk + 1, 0) if file == CHUNKS_SIZE - 1 else (chunk, file + 1)
 
 
+def _ours(rel: str, template: str) -> bool:
+    """Whether `rel` is a name `template` makes (`chunk-000/file-000`, ...)."""
+    pattern = re.escape(template)
+    for field_ in ("chunk_index", "file_index"):
+        pattern = pattern.replace(re.escape("{" + field_ + ":03d}"), r"\d{3,}")
+    return re.fullmatch(pattern, rel) is not None
+
+
 def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
     return template.format(chunk_index=at[0], file_index=at[1], **kw)
-
-
-def _stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
-    """LeRobot's statistics of a column (`(frames,)` or `(frames, dims)`) per episode (rows
-    `starts[e]` on, `lengths[e]` of them) and over all of it: min, max, mean, std (of shape
-    `(dims,)`, `(1,)` for scalars) and count. Quantiles, which LeRobot's newer writer adds, are
-    left out (its `augment_dataset_quantile_stats` adds them to a dataset)."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.ndim == 1:
-        v = v[:, None]
-    n = lengths[:, None].astype(np.float64)
-    mean = np.add.reduceat(v, starts, axis=0) / n
-    centred = v - np.repeat(mean, lengths, axis=0)
-    per_episode = {
-        "min": np.minimum.reduceat(v, starts, axis=0),
-        "max": np.maximum.reduceat(v, starts, axis=0),
-        "mean": mean,
-        "std": np.sqrt(np.add.reduceat(centred * centred, starts, axis=0) / n),
-        "count": lengths[:, None].astype(np.int64),
-    }
-    whole = {"min": v.min(0), "max": v.max(0), "mean": v.mean(0), "std": v.std(0), "count": np.array([len(v)])}
-    return per_episode, whole
 
 
 def _nested(values: np.ndarray, leaf: Any) -> Any:
@@ -101,24 +100,6 @@ def _nested(values: np.ndarray, leaf: Any) -> Any:
         offsets = np.arange(0, len(array) + 1, size, dtype=np.int32)
         array = pa.ListArray.from_arrays(pa.array(offsets), array)
     return array
-
-
-def aggregate(a: dict[str, np.ndarray] | None, b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Statistics over the frames of both (LeRobot's `aggregate_feature_stats`: exact mean and
-    std)."""
-    if a is None:
-        return {k: np.asarray(v) for k, v in b.items()}
-    na, nb = float(a["count"][0]), float(b["count"][0])
-    n = na + nb
-    mean = (a["mean"] * na + b["mean"] * nb) / n
-    var = ((a["std"] ** 2 + (a["mean"] - mean) ** 2) * na + (b["std"] ** 2 + (b["mean"] - mean) ** 2) * nb) / n
-    return {
-        "min": np.minimum(a["min"], b["min"]),
-        "max": np.maximum(a["max"], b["max"]),
-        "mean": mean,
-        "std": np.sqrt(var),
-        "count": np.array([int(n)]),
-    }
 
 
 def _layout_problems(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
@@ -173,15 +154,18 @@ class Dataset:
     `info.json`. An existing dataset must have the same version, fps and features (dtype and
     shape), else `DatasetLayoutError` names each difference."""
 
-    def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
+    def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None,
+                 data_files_size_in_mb: float | None = None, video_files_size_in_mb: float | None = None) -> None:
         import pyarrow  # noqa: F401  (fails early, before any file is touched)
 
         self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
         private = self.root / PRIVATE
-        self._ours = private.exists()  # an envhub recording was here (maybe cut short)
+        self._ours = private.is_dir()  # an envhub recording was here (maybe cut short)
+        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
+        self._check_folder(wanted)  # before anything is created: a refusal touches nothing
+        self.root.mkdir(parents=True, exist_ok=True)
         private.mkdir(exist_ok=True)
-        self._lock = open(private / "lock", "w")  # held until close
+        self._lock = open(private / "lock", "a")  # held until close
         try:
             fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -191,17 +175,20 @@ class Dataset:
                 "hint: record into another folder, or wait for that recording to end"
             ) from None
         try:
-            self._open(fps, features, robot_type)
+            self._open(fps, features, robot_type,
+                       {"data_files_size_in_mb": data_files_size_in_mb,
+                        "video_files_size_in_mb": video_files_size_in_mb})
         except BaseException:
             self._lock.close()
             raise
 
-    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None) -> None:
-        self.staging = self.root / PRIVATE / "staging"
-        shutil.rmtree(self.staging, ignore_errors=True)
-        self.staging.mkdir()
+    def _check_folder(self, wanted: dict[str, Any], locked: bool = False) -> dict[str, Any] | None:
+        """The dataset's `info.json` if it holds one of this layout, `None` for a new or empty
+        folder (or one where an envhub recording crashed before its first commit); else
+        `DatasetLayoutError`. Reads only."""
+        if self.root.exists() and not self.root.is_dir():
+            raise DatasetLayoutError(f"`{self.root}` is a file\nhint: record into a new or empty folder")
         info_path = self.root / "meta" / "info.json"
-        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
         if info_path.exists():
             try:
                 info = json.loads(info_path.read_text())
@@ -217,18 +204,31 @@ class Dataset:
                     + "\nhint: record into a new folder, or record the same env with the same "
                     "observation, action, frames and fps to append to this one"
                 )
+            return info
+        if not self.root.exists():
+            return None
+        # Without `info.json`, `data/`, `meta/` and `videos/` are what a crash in the first
+        # commit left, if envhub was recording here; anything else is not ours.
+        ours = (PRIVATE, "data", "meta", "videos") if self._ours else (PRIVATE,) if locked else ()
+        others = [p.name for p in self.root.iterdir() if p.name not in ours]
+        if others:
+            raise DatasetLayoutError(
+                f"`{self.root}` is not empty and holds no LeRobot dataset (no `meta/info.json`; "
+                f"it has {', '.join(f'`{n}`' for n in sorted(others)[:5])})\n"
+                "hint: record into a new or empty folder"
+            )
+        return None
+
+    def _open(self, fps: int, features: dict[str, dict], robot_type: str | None,
+              sizes: dict[str, float | None]) -> None:
+        wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
+        info = self._check_folder(wanted, locked=True)  # again, under the lock
+        self.staging = self.root / PRIVATE / "staging"
+        shutil.rmtree(self.staging, ignore_errors=True)
+        self.staging.mkdir()
+        if info is not None:
             self.info = info
         else:
-            # Without `info.json`, `data/`, `meta/` and `videos/` are what a crash in the first
-            # commit left, if envhub was recording here; anything else is not ours to remove.
-            ours = (PRIVATE, "data", "meta", "videos") if self._ours else (PRIVATE,)
-            others = [p.name for p in self.root.iterdir() if p.name not in ours]
-            if others:
-                raise DatasetLayoutError(
-                    f"`{self.root}` is not empty and holds no LeRobot dataset (no `meta/info.json`; "
-                    f"it has {', '.join(f'`{n}`' for n in sorted(others)[:5])})\n"
-                    "hint: record into a new or empty folder"
-                )
             self.info = {
                 "codebase_version": CODEBASE_VERSION,
                 "robot_type": robot_type,
@@ -236,8 +236,8 @@ class Dataset:
                 "total_frames": 0,
                 "total_tasks": 0,
                 "chunks_size": CHUNKS_SIZE,
-                "data_files_size_in_mb": 100,
-                "video_files_size_in_mb": 200,
+                "data_files_size_in_mb": DATA_FILES_SIZE_IN_MB,
+                "video_files_size_in_mb": VIDEO_FILES_SIZE_IN_MB,
                 "fps": fps,
                 "splits": {},
                 "data_path": DATA_PATH,
@@ -246,11 +246,15 @@ class Dataset:
             }
         self.features = self.info["features"]
         self.video_keys = [k for k, f in self.features.items() if f["dtype"] == "video"]
+        for key, value in sizes.items():
+            if value is not None:
+                self.info[key] = value
         rows = self._committed_episode_rows()
         self._remove_uncommitted(rows)
-        self._next_data = self._after(rows, "data")
-        self._next_meta = self._after(rows, "meta/episodes")
-        self._next_video = {k: self._after(rows, f"videos/{k}") for k in self.video_keys}
+        self._data = self._last_file(rows, "data")
+        self._meta = self._last_file(rows, "meta/episodes")
+        self._videos = {k: self._last_file(rows, f"videos/{k}") for k in self.video_keys}
+        self._trim(rows)
         self.tasks = self._read_tasks()
         self.stats = self._read_stats()
         self._schemas = self._existing_schemas()
@@ -265,15 +269,16 @@ class Dataset:
         import pyarrow.parquet as pq
 
         total = self.info["total_episodes"]
-        keep = ["episode_index", "data/chunk_index", "data/file_index", "meta/episodes/chunk_index",
-                "meta/episodes/file_index"]
+        keep = ["episode_index", "length", "dataset_from_index", "dataset_to_index", "data/chunk_index",
+                "data/file_index", "meta/episodes/chunk_index", "meta/episodes/file_index"]
         for k in self.video_keys:
-            keep += [f"videos/{k}/chunk_index", f"videos/{k}/file_index"]
+            keep += [f"videos/{k}/chunk_index", f"videos/{k}/file_index", f"videos/{k}/to_timestamp"]
         rows: list[dict[str, Any]] = []
         for path in self._episode_files():
             names = pq.read_schema(path).names
             table = pq.read_table(path, columns=[c for c in keep if c in names])
             rows += [r for r in table.to_pylist() if r["episode_index"] < total]
+        rows.sort(key=lambda r: r["episode_index"])
         if len(rows) != total:
             raise DatasetLayoutError(
                 f"the dataset at `{self.root}` counts {total} episodes in `meta/info.json` but "
@@ -291,10 +296,14 @@ class Dataset:
             used |= {Path(_fmt(VIDEO_PATH, (r[f"videos/{k}/chunk_index"], r[f"videos/{k}/file_index"]),
                                video_key=k)) for r in rows}
         removed = []
-        for pattern in ("data/*/*.parquet", "meta/episodes/*/*.parquet", "videos/*/*/*.mp4"):
+        # Only names this recorder writes: other files are the user's, left alone.
+        patterns = [("data/*/*.parquet", DATA_PATH), ("meta/episodes/*/*.parquet", EPISODES_PATH)]
+        patterns += [(f"videos/{glob.escape(k)}/*/*.mp4", VIDEO_PATH.replace("{video_key}", k))
+                     for k in self.video_keys]
+        for pattern, template in patterns:
             for path in self.root.glob(pattern):
                 rel = path.relative_to(self.root)
-                if rel not in used:
+                if rel not in used and _ours(str(rel), template):
                     path.unlink()
                     removed.append(str(rel))
         if removed:
@@ -304,11 +313,52 @@ class Dataset:
                 stacklevel=4,
             )
 
-    @staticmethod
-    def _after(rows: list[dict[str, Any]], prefix: str) -> tuple[int, int]:
-        used = [(r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) for r in rows
-                if r.get(f"{prefix}/chunk_index") is not None]
-        return _next(*max(used)) if used else (0, 0)
+    def _last_file(self, rows: list[dict[str, Any]], prefix: str) -> _Open | None:
+        """The file of `prefix` (`data`, `meta/episodes`, `videos/<key>`) that the last
+        committed episode is in, and how much of it is committed: rows for Parquet files
+        (episodes may span several commits), frames for videos."""
+        if not rows or rows[-1].get(f"{prefix}/chunk_index") is None:
+            return None
+        last = rows[-1]
+        at = (int(last[f"{prefix}/chunk_index"]), int(last[f"{prefix}/file_index"]))
+        same = [r for r in rows if (r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) == at]
+        if prefix == "data":
+            count = int(last["dataset_to_index"]) - min(int(r["dataset_from_index"]) for r in same)
+        elif prefix == "meta/episodes":
+            count = len(same)
+        else:
+            count = round(float(last[f"{prefix}/to_timestamp"]) * self.info["fps"])
+        return _Open(at, count)
+
+    def _trim(self, rows: list[dict[str, Any]]) -> None:
+        """Cuts what a crash left appended to the last data and video files (rows and frames
+        past the last commit), so the files hold exactly what `meta/` describes."""
+        import pyarrow.parquet as pq
+
+        cut = []
+        if self._data is not None:
+            path = self.root / _fmt(DATA_PATH, self._data.at)
+            if pq.read_metadata(path).num_rows > self._data.count:
+                tmp = self.staging / "trim.parquet"
+                self._write_table(pq.read_table(path).slice(0, self._data.count), tmp)
+                cut.append((tmp, path))
+        for key, last in self._videos.items():
+            if last is None:
+                continue
+            path = self.root / _fmt(VIDEO_PATH, last.at, video_key=key)
+            if count_frames(path) > last.count:
+                tmp = self.staging / f"trim-{len(cut)}.mp4"
+                concatenate([(path, last.count)], tmp, self.info["fps"])
+                cut.append((tmp, path))
+        for tmp, path in cut:
+            fsync_file(tmp)
+            os.replace(tmp, path)
+            fsync_dir(path.parent)
+        if cut:
+            warnings.warn(
+                f"cut what a crash left past the last commit from {len(cut)} file(s) of `{self.root}`",
+                stacklevel=4,
+            )
 
     def _read_tasks(self) -> dict[str, int]:
         import pyarrow.parquet as pq
@@ -348,27 +398,28 @@ class Dataset:
         """A path in the private folder, for a file not committed yet."""
         return self.staging / name
 
-    def _place(self, tmp: Path, rel: str) -> None:
-        final = self.root / rel
-        final.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(tmp, final)
-
-    def _write_table(self, table: Any, rel: str) -> None:
+    @staticmethod
+    def _write_table(table: Any, path: Path) -> None:
         import pyarrow.parquet as pq
 
-        tmp = self.staged(Path(rel).name + ".tmp")
-        pq.write_table(table, tmp, compression="snappy")
-        self._place(tmp, rel)
+        pq.write_table(table, path, compression="snappy")
 
-    def _write_json(self, data: dict[str, Any], rel: str) -> None:
-        tmp = self.staged(Path(rel).name + ".tmp")
-        with open(tmp, "w") as f:
+    @staticmethod
+    def _write_json(data: dict[str, Any], path: Path) -> None:
+        with open(path, "w") as f:
             json.dump(data, f, indent=4, ensure_ascii=False)
-            f.flush()
-            os.fsync(f.fileno())
-        self._place(tmp, rel)
 
     def commit(self, episodes: list[Episode]) -> list[int]:
+        """Writes `episodes` into the dataset in one commit; returns their episode indices.
+        On an error nothing is committed and the dataset's state here is as before."""
+        tasks, stats = dict(self.tasks), dict(self.stats)
+        try:
+            return self._commit(episodes)
+        except BaseException:
+            self.tasks, self.stats = tasks, stats
+            raise
+
+    def _commit(self, episodes: list[Episode]) -> list[int]:
         """Writes `episodes` into the dataset (see the module's doc for the order); returns
         their episode indices. Statistics are computed over all of them at once (one
         `reduceat` per column and statistic), since commits of many episodes are common."""
@@ -378,8 +429,8 @@ class Dataset:
         new_tasks = [e.task for e in episodes if e.task not in self.tasks]
         for task in dict.fromkeys(new_tasks):
             self.tasks[task] = len(self.tasks)
-        data_at, meta_at = self._next_data, self._next_meta
         fps = self.info["fps"]
+        commit = Commit(self.root, self.staging)
         count = len(episodes)
         lengths = np.array([ep.length for ep in episodes], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
@@ -396,52 +447,100 @@ class Dataset:
         columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
         columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
 
+        # Data: appended to the last file, or a new one if that would reach the size.
+        data_table = self._data_table(columns)
+        data_last = self._grow(self._data, DATA_PATH, self.info["data_files_size_in_mb"], new=total)
+        if data_last.count:
+            data_table = self._prepend(data_table, _fmt(DATA_PATH, data_last.at), data_last.count)
+        data = commit.staged("data.parquet")
+        self._write_table(data_table, data)
+        commit.place(data, _fmt(DATA_PATH, data_last.at))
         meta: dict[str, Any] = {
             "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
             "tasks": [[ep.task] for ep in episodes],
             "length": lengths,
-            "data/chunk_index": np.full(count, data_at[0]),
-            "data/file_index": np.full(count, data_at[1]),
+            "data/chunk_index": np.full(count, data_last.at[0]),
+            "data/file_index": np.full(count, data_last.at[1]),
             "dataset_from_index": first_frame + starts,
             "dataset_to_index": first_frame + starts + lengths,
         }
+        # Videos: every episode's MP4 appended (packets copied, not encoded again) to the last
+        # file of its camera, or to a new one; an episode is a time range of its file.
+        videos: dict[str, _Open] = {}
         for key in self.video_keys:
-            at = []
-            for ep in episodes:
-                at.append(self._next_video[key])
-                self._next_video[key] = _next(*at[-1])
-                self._place(ep.videos[key], _fmt(VIDEO_PATH, at[-1], video_key=key))
-            meta[f"videos/{key}/chunk_index"] = np.array([a[0] for a in at], dtype=np.int64)
-            meta[f"videos/{key}/file_index"] = np.array([a[1] for a in at], dtype=np.int64)
-            meta[f"videos/{key}/from_timestamp"] = np.zeros(count)
-            meta[f"videos/{key}/to_timestamp"] = lengths / fps
-        meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
-        meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
+            size = sum(os.path.getsize(ep.videos[key]) for ep in episodes)
+            last = self._grow(self._videos[key], VIDEO_PATH, self.info["video_files_size_in_mb"], adding=size, key=key)
+            rel = _fmt(VIDEO_PATH, last.at, video_key=key)
+            parts = [(self.root / rel, last.count)] if last.count else []
+            parts += [(ep.videos[key], ep.length) for ep in episodes]
+            video = commit.staged("video.mp4")
+            concatenate(parts, video, fps)
+            commit.place(video, rel)
+            meta[f"videos/{key}/chunk_index"] = np.full(count, last.at[0])
+            meta[f"videos/{key}/file_index"] = np.full(count, last.at[1])
+            meta[f"videos/{key}/from_timestamp"] = (last.count + starts) / fps
+            meta[f"videos/{key}/to_timestamp"] = (last.count + starts + lengths) / fps
+            videos[key] = _Open(last.at, last.count + total)
+        meta_last = self._grow(self._meta, EPISODES_PATH, self.info["data_files_size_in_mb"], new=count)
+        meta["meta/episodes/chunk_index"] = np.full(count, meta_last.at[0])
+        meta["meta/episodes/file_index"] = np.full(count, meta_last.at[1])
         for key, values in columns.items():
-            per_episode, whole = _stats(values, starts, lengths)
+            per_episode, whole = column_stats(values, starts, lengths)
             self.stats[key] = aggregate(self.stats.get(key), whole)
             for name, value in per_episode.items():
                 meta[f"stats/{key}/{name}"] = value
         for key in self.video_keys:
             for ep in episodes:
                 self.stats[key] = aggregate(self.stats.get(key), ep.video_stats[key])
-            for name in ("min", "max", "mean", "std", "count"):
+            for name in NAMES:
                 meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
         meta["success"] = [ep.success for ep in episodes]
 
-        self._write_table(self._data_table(columns), _fmt(DATA_PATH, data_at))
-        self._write_table(self._episodes_table(meta), _fmt(EPISODES_PATH, meta_at))
-        self._next_data, self._next_meta = _next(*data_at), _next(*meta_at)
+        meta_table = self._episodes_table(meta)
+        if meta_last.count:
+            meta_table = self._prepend(meta_table, _fmt(EPISODES_PATH, meta_last.at), meta_last.count)
+        self._write_table(meta_table, commit.meta_file(_fmt(EPISODES_PATH, meta_last.at)[len("meta/"):]))
         if new_tasks:
-            self._write_tasks()
+            self._write_tasks(commit.meta_file("tasks.parquet"))
         self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
-                         "meta/stats.json")
-        self.info["total_episodes"] = first_ep + count
-        self.info["total_frames"] = first_frame + total
-        self.info["total_tasks"] = len(self.tasks)
-        self.info["splits"] = {"train": f"0:{self.info['total_episodes']}"}
-        self._write_json(self.info, "meta/info.json")  # the commit point
+                         commit.meta_file("stats.json"))
+        info = dict(self.info)
+        info["total_episodes"] = first_ep + count
+        info["total_frames"] = first_frame + total
+        info["total_tasks"] = len(self.tasks)
+        info["splits"] = {"train": f"0:{info['total_episodes']}"}
+        self._write_json(info, commit.meta_file("info.json"))
+        commit.apply()  # the commit point: `meta/` swapped in whole
+        self.info = info
+        self._data = _Open(data_last.at, data_last.count + total)
+        self._meta = _Open(meta_last.at, meta_last.count + count)
+        self._videos.update(videos)
+        for ep in episodes:  # now copied into the dataset's files
+            for path in ep.videos.values():
+                path.unlink(missing_ok=True)
         return list(range(first_ep, first_ep + count))
+
+    def _grow(self, last: _Open | None, template: str, limit_mb: float, *, new: int = 0,
+              adding: int | None = None, key: str = "") -> _Open:
+        """Where this commit's part goes: the last file (`count` of it committed) unless its
+        size plus `adding` bytes (by default `new` rows at the file's bytes per row) would
+        reach `limit_mb` (LeRobot's rule), else the next file (nothing of it committed)."""
+        if last is None:
+            return _Open((0, 0), 0)
+        size = os.path.getsize(self.root / _fmt(template, last.at, video_key=key))
+        if adding is None:
+            adding = size * new // max(last.count, 1)
+        if last.count == 0 or (size + adding) / 2**20 < limit_mb:
+            return last
+        return _Open(_next(*last.at), 0)
+
+    def _prepend(self, table: Any, rel: str, count: int) -> Any:
+        """`table` after the first `count` rows of the committed file `rel`."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        old = pq.read_table(self.root / rel).slice(0, count)
+        return pa.concat_tables([old, table.cast(old.schema)])
 
     def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
         import pyarrow as pa
@@ -498,14 +597,14 @@ class Dataset:
                 columns.append(pa.nulls(len(table), type=f.type))
         return pa.Table.from_arrays(columns, schema=schema)
 
-    def _write_tasks(self) -> None:
+    def _write_tasks(self, path: Path) -> None:
         import pyarrow as pa
 
         order = sorted(self.tasks, key=self.tasks.__getitem__)
         table = pa.table({"task_index": pa.array([self.tasks[t] for t in order], pa.int64()),
                           "task": pa.array(order, pa.string())})
         table = table.replace_schema_metadata({b"pandas": _pandas_tasks_metadata("task")})
-        self._write_table(table, "meta/tasks.parquet")
+        self._write_table(table, path)
 
     def close(self) -> None:
         """Releases the folder (removing the private folder's files not committed)."""

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ._stats import level_quantiles
+
 #: Encoder settings per codec: `crf` (quality, lower is better) where the encoder has one.
 CODECS: dict[str, dict[str, str]] = {
     "libx264": {"preset": "veryfast", "tune": "zerolatency"},
@@ -67,6 +69,9 @@ class EpisodeVideo:
             stream.width, stream.height = width, height
             stream.pix_fmt = pix_fmt(width, height)
             stream.codec_context.time_base = Fraction(1, fps)
+            # One thread per encoder (FFmpeg's default is one per core each): the recorder
+            # bounds the threads that encode by calling encoders from `encode_threads` threads.
+            stream.codec_context.thread_count = 1
             self._stream = stream
         except BaseException:
             self._container.close()
@@ -106,34 +111,76 @@ class EpisodeVideo:
             pass
 
 
+def count_frames(path: Path) -> int:
+    """The video packets (frames) of an MP4, read without decoding."""
+    import av
+
+    with av.open(str(path)) as src:
+        return sum(1 for p in src.demux(src.streams.video[0]) if p.size)
+
+
+def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
+    """Writes the first `frames` frames of each `(mp4, frames)` of `parts`, one after another,
+    into the MP4 `out`: packets are copied (no encoding again) with their times moved on by
+    the frames before them, so part `k` starts at the sum of the earlier parts' frames over
+    `fps`. Parts come from `EpisodeVideo`s (or earlier concatenations) of one camera: the same
+    encoder and settings, no reordered frames, a keyframe first."""
+    import av
+
+    with av.open(str(out), mode="w", format="mp4") as dst:
+        stream = None
+        offset = 0  # frames before this part
+        for path, frames in parts:
+            with av.open(str(path)) as src:
+                s = src.streams.video[0]
+                if stream is None:
+                    stream = dst.add_stream_from_template(s, opaque=True)  # no encoder: AV1 decodes with dav1d
+                tb = s.time_base
+                taken = 0
+                for packet in src.demux(s):
+                    if not packet.size or packet.pts is None:
+                        continue
+                    if round(packet.pts * tb * fps) >= frames:
+                        continue
+                    shift = int(round(Fraction(offset, fps) / tb))
+                    packet.pts += shift
+                    packet.dts = packet.pts if packet.dts is None else packet.dts + shift
+                    packet.stream = stream
+                    dst.mux(packet)
+                    taken += 1
+                if taken != frames:
+                    raise ValueError(f"`{path}` holds {taken} frames, {frames} expected")
+            offset += frames
+
+
 class _ChannelStats:
-    """Per-channel min, max, mean and std of an episode's frames in [0, 1], as LeRobot keeps
-    for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels a side."""
+    """Per-channel min, max, mean, std and quantiles of an episode's frames in [0, 1], as
+    LeRobot keeps for cameras (shape `(3, 1, 1)`), over frames subsampled to about 150 pixels
+    a side (LeRobot samples frames and shrinks them likewise)."""
 
     def __init__(self) -> None:
-        self.n = 0
-        self.lo = np.full(3, np.inf)
-        self.hi = np.full(3, -np.inf)
-        self.sum = np.zeros(3)
-        self.sumsq = np.zeros(3)
+        self.counts = np.zeros((3, 256), dtype=np.int64)  # pixels by channel and level
 
     def add(self, frame: np.ndarray) -> None:
         step = max(1, max(frame.shape[:2]) // 150)
-        px = frame[::step, ::step].reshape(-1, 3).astype(np.float64) / 255.0
-        self.n += len(px)
-        self.lo = np.minimum(self.lo, px.min(0))
-        self.hi = np.maximum(self.hi, px.max(0))
-        self.sum += px.sum(0)
-        self.sumsq += np.square(px).sum(0)
+        px = frame[::step, ::step].reshape(-1, 3)
+        for c in range(3):
+            self.counts[c] += np.bincount(px[:, c], minlength=256)
 
     def result(self, frames: int) -> dict[str, Any]:
-        mean = self.sum / max(self.n, 1)
-        std = np.sqrt(np.maximum(self.sumsq / max(self.n, 1) - mean**2, 0.0))
+        levels = np.arange(256) / 255.0
+        n = np.maximum(self.counts.sum(1), 1)
+        mean = (self.counts * levels).sum(1) / n
+        std = np.sqrt(np.maximum((self.counts * levels**2).sum(1) / n - mean**2, 0.0))
+        seen = self.counts > 0
+        lo = np.array([levels[np.flatnonzero(s)[0]] if s.any() else 0.0 for s in seen])
+        hi = np.array([levels[np.flatnonzero(s)[-1]] if s.any() else 0.0 for s in seen])
         shape = (3, 1, 1)
         return {
-            "min": self.lo.reshape(shape),
-            "max": self.hi.reshape(shape),
+            "min": lo.reshape(shape),
+            "max": hi.reshape(shape),
             "mean": mean.reshape(shape),
             "std": std.reshape(shape),
             "count": np.array([frames]),
+            **level_quantiles(self.counts, frames),
         }

@@ -9,7 +9,6 @@ envhub's are views of shared memory) and puts it on a bounded queue; the writer 
 from __future__ import annotations
 
 import os
-import queue
 import time
 import warnings
 import weakref
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
+from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
 from ._features import INDEX_FEATURES, RENDER_KEY, STEP_COLUMNS, action_column, observation_columns
 from ._video import DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, check_codec, pix_fmt
@@ -70,19 +70,27 @@ class RecordEpisodes(VectorWrapper):
     `render()` frames become the video `observation.images.render`. The task text is `task`,
     else the catalog entry's description (envhub envs), else the env's id.
 
+    The files are LeRobot v3's: episodes appended into data, episodes-metadata and video
+    files, each rolled to the next file when it would reach `data_files_size_in_mb` (100,
+    LeRobot's default; the episodes files too) or `video_files_size_in_mb` (200); a value given
+    is written into the dataset's `info.json`.
+
     Episodes are written when they end, `keep="success"` keeping only those whose last
     `success` / `is_success` info is true; an episode a `reset()` cuts short is not written.
-    Ended episodes reach the disk within `commit_every` seconds, so a crash loses at most the
-    episodes in flight and those, and never leaves a dataset that does not load.
+    Ended episodes reach the disk within `commit_every` seconds (or four times as long as the
+    last commit took, if longer), so a crash loses at most the episodes in flight and those,
+    and never leaves a dataset that does not load.
 
-    Stepping is not blocked by the disk or the encoder: steps go through a queue of
-    `queue_size` to a writer thread. If it is full, `when_full="wait"` makes the step wait and
-    `"drop"` drops the step, and with it the episodes in flight (each env records again from
-    its next episode); either way a `QueueFullWarning` says so, and `stats` counts it.
+    Stepping is not blocked by the disk or the encoder: steps go through a queue of at most
+    `queue_bytes` (512 MiB by default; counting the step being written) to a writer thread.
+    If it is full, `when_full="wait"` makes the step wait and `"drop"` drops the step, and
+    with it the episodes in flight (each env records again from its next episode); either way
+    a `QueueFullWarning` says so, and `stats` counts it.
 
     `max_episodes` stops keeping episodes once that many are kept (later ones are counted in
     `stats["episodes_beyond"]`). Frames are encoded on `encode_threads` threads (default: up to
-    4, one per core), the envs shared among them.
+    4, one per core), the envs shared among them; each encoder runs on its caller's thread, so
+    these are all the threads encoding takes.
 
     The dataset folder is opened (checked and locked) at the first `reset()`; a folder that
     holds a dataset of another layout raises `DatasetLayoutError` naming the differences.
@@ -100,12 +108,14 @@ class RecordEpisodes(VectorWrapper):
         codec: str | None = None,
         crf: int = DEFAULT_CRF,
         gop: int = DEFAULT_GOP,
-        queue_size: int = 64,
+        queue_bytes: int = DEFAULT_QUEUE_BYTES,
         when_full: str = "wait",
         commit_every: float = 1.0,
         max_episodes: int | None = None,
         encode_threads: int | None = None,
         robot_type: str | None = None,
+        data_files_size_in_mb: float | None = None,
+        video_files_size_in_mb: float | None = None,
     ) -> None:
         super().__init__(env)
         require()
@@ -113,8 +123,15 @@ class RecordEpisodes(VectorWrapper):
             raise ValueError(f"unknown `keep={keep!r}`\nhint: use `keep=\"all\"` or `keep=\"success\"`")
         if when_full not in ("wait", "drop"):
             raise ValueError(f"unknown `when_full={when_full!r}`\nhint: use `when_full=\"wait\"` or `\"drop\"`")
-        if queue_size < 1:
-            raise ValueError(f"`queue_size={queue_size}` must be at least 1")
+        if queue_bytes < 1:
+            raise ValueError(f"`queue_bytes={queue_bytes}` must be at least 1 (a byte budget; default 512 MiB)")
+        if encode_threads is not None and encode_threads < 1:
+            raise ValueError(f"`encode_threads={encode_threads}` must be at least 1")
+        for name, size in (("data_files_size_in_mb", data_files_size_in_mb),
+                           ("video_files_size_in_mb", video_files_size_in_mb)):
+            if size is not None and not size > 0:
+                raise ValueError(f"`{name}={size}` must be a positive number of MB (LeRobot's default: "
+                                 f"{100 if name.startswith('data') else 200})")
         if codec is not None:
             check_codec(codec)
         self.root = str(root)
@@ -126,7 +143,8 @@ class RecordEpisodes(VectorWrapper):
         self._action = action_column(env.single_action_space)
         self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
         self._codec, self._crf, self._gop = codec, int(crf), int(gop)
-        self._queue_size, self._commit_every, self._robot_type = queue_size, float(commit_every), robot_type
+        self._queue_bytes, self._commit_every, self._robot_type = int(queue_bytes), float(commit_every), robot_type
+        self._sizes = (data_files_size_in_mb, video_files_size_in_mb)
         self._max_episodes = max_episodes
         self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
         self.stats: dict[str, Any] = {
@@ -140,11 +158,13 @@ class RecordEpisodes(VectorWrapper):
             "steps_dropped": 0,
             "steps_waited": 0,
             "seconds_waited": 0.0,
+            "queue_bytes_peak": 0,  # the most bytes the queue held (with the step being written)
         }
         self._writer: Writer | None = None
         self._dataset: Dataset | None = None
         self._prev: tuple[dict[str, np.ndarray], list[np.ndarray] | None] | None = None
         self._fresh = np.ones(self.num_envs, dtype=bool)  # envs whose next step is not recorded
+        self._failed = np.zeros(self.num_envs, dtype=bool)  # envs that failed, until reset
         self._gap = False
         self._warned = False
         self._closed = False
@@ -201,7 +221,7 @@ class RecordEpisodes(VectorWrapper):
                 },
             }
         features |= INDEX_FEATURES
-        dataset = Dataset(self.root, self.fps, features, self._robot_type)
+        dataset = Dataset(self.root, self.fps, features, self._robot_type, *self._sizes)
         try:
             codec = self._dataset_codec(dataset, codec)
             check_codec(codec)
@@ -213,7 +233,7 @@ class RecordEpisodes(VectorWrapper):
         videos = [c.name for c in self._obs_columns if c.video]
         self._writer = Writer(
             dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
-            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_size, self.stats,
+            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_bytes, self.stats,
             self._max_episodes, self._encode_threads,
         )
         self._finalizer = weakref.finalize(self, _stop_writer, self._writer, dataset)
@@ -248,9 +268,11 @@ class RecordEpisodes(VectorWrapper):
 
     def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self._check()
-        obs, info = self.env.reset(seed=seed, options=options)
+        # Read before the env is called: Gymnasium's vector envs pop `reset_mask` from the
+        # caller's options.
         mask = (options or {}).get("reset_mask")
-        mask = None if mask is None else np.array(mask, dtype=bool, copy=True)
+        mask = None if mask is None else np.array(mask, dtype=bool, copy=True).reshape(self.num_envs)
+        obs, info = self.env.reset(seed=seed, options=options)
         frames = self._frames()
         if self._writer is None:
             self._open(frames)
@@ -258,24 +280,40 @@ class RecordEpisodes(VectorWrapper):
         self._prev = (self._observe(obs), frames)
         if mask is None:
             self._fresh[:] = False
+            self._failed[:] = False
         else:
             self._fresh[mask] = False
+            self._failed[mask] = False
         return obs, info
 
     def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
         self._check()
         if self._prev is None:
             raise RecordingError("`step` before `reset`\nhint: call `reset()` first, as Gymnasium requires")
-        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        failed = None
+        try:
+            obs, rewards, terminated, truncated, info = self.env.step(actions)
+        except Exception as e:
+            partial = self._failed_envs(e)
+            if partial is None:
+                # Which envs stepped is unknown (Gymnasium's vector envs raise with no
+                # results): every episode in flight is dropped.
+                self._gap = True
+                raise
+            error = e
+            failed, (obs, rewards, terminated, truncated, info) = partial
         terminated_ = np.array(terminated, dtype=bool, copy=True)
         truncated_ = np.array(truncated, dtype=bool, copy=True)
+        if failed is not None:  # the failed envs' rows are not meaningful
+            terminated_[failed] = truncated_[failed] = False
+            self._failed |= failed
         done = terminated_ | truncated_
-        valid = ~self._fresh
+        valid = ~self._fresh & ~self._failed
         success = None
         if done.any():
             same_step = self._mode == AutoresetMode.SAME_STEP
             success = [_success(info, i, same_step) if done[i] else None for i in range(self.num_envs)]
-            if self.keep == "success":
+            if self.keep == "success" and failed is None:  # (a failed step's info is lost)
                 unknown = [i for i in np.flatnonzero(done & valid) if success[i] is None]
                 if unknown:
                     raise RecordingError(
@@ -295,43 +333,61 @@ class RecordEpisodes(VectorWrapper):
                 valid=valid,
                 success=success,
                 task=self.task,
+                failed=failed,
             )
         )
-        self._prev = (self._observe(obs), self._frames())
         if self._mode == AutoresetMode.NEXT_STEP:
             self._fresh = done
         elif self._mode == AutoresetMode.DISABLED:
             self._fresh = self._fresh | done
+        if failed is not None:
+            # The failed envs must be reset; the others go on from these results.
+            try:
+                frames = self._frames()
+            except Exception:  # no frames to go on with: the episodes in flight are dropped
+                frames, self._gap = None, True
+            self._prev = (self._observe(obs), frames)
+            raise error
+        self._prev = (self._observe(obs), self._frames())
         return obs, rewards, terminated, truncated, info
+
+    def _failed_envs(self, e: Exception) -> tuple[np.ndarray, tuple] | None:
+        """The envs that failed in a step that raised and the others' results, where the env
+        says which (envhub's `EnvFailedError`: `env_ids`, and `results`: Gymnasium's five, or
+        the session's raw ones, decoded here); else `None`."""
+        ids, results = getattr(e, "env_ids", None), getattr(e, "results", None)
+        if ids is None or not isinstance(results, tuple):
+            return None
+        if len(results) != 5:
+            codec = getattr(self.env.unwrapped, "_codec", None)  # envhub's VectorEnv
+            if codec is None or len(results) < 4:
+                return None
+            results = (codec.obs(results[0]), results[1], results[2], results[3], {})
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[np.asarray(list(ids), dtype=np.int64)] = True
+        return mask, results
 
     def _put(self, item: Step | Reset) -> None:
         assert self._writer is not None
         q = self._writer.queue
         item.gap = self._gap
-        try:
-            q.put_nowait(item)
+        nbytes = _nbytes(item)
+        if q.put(item, nbytes, timeout=0):
             self._gap = False
             return
-        except queue.Full:
-            pass
         if self.when_full == "drop" and isinstance(item, Step):
             self.stats["steps_dropped"] += 1
             self._gap = True
             self._warn(
-                f"the recorder's queue ({self._queue_size} steps) is full: a step is dropped, and "
+                f"the recorder's queue ({_mib(self._queue_bytes)}) is full: a step is dropped, and "
                 "with it the episodes in flight (each env records again from its next episode)"
             )
             return
         self.stats["steps_waited"] += 1
-        self._warn(f"the recorder's queue ({self._queue_size} steps) is full: steps wait for the writer")
+        self._warn(f"the recorder's queue ({_mib(self._queue_bytes)}) is full: steps wait for the writer")
         start = time.monotonic()
-        while True:
+        while not q.put(item, nbytes, timeout=0.5):
             self._check()
-            try:
-                q.put(item, timeout=0.5)
-                break
-            except queue.Full:
-                continue
         self.stats["seconds_waited"] += time.monotonic() - start
         self._gap = False
 
@@ -339,7 +395,7 @@ class RecordEpisodes(VectorWrapper):
         if not self._warned:
             self._warned = True
             warnings.warn(
-                f"{message}\nhint: a larger `queue_size`, fewer envs or cameras, or `video=False`; "
+                f"{message}\nhint: a larger `queue_bytes`, fewer envs or cameras, or `video=False`; "
                 "`stats` counts every wait and drop",
                 QueueFullWarning,
                 stacklevel=4,
@@ -368,6 +424,8 @@ class RecordEpisodes(VectorWrapper):
                 if self._finalizer is not None:
                     self._finalizer()
             finally:
+                if self._writer is not None:
+                    self.stats["queue_bytes_peak"] = self._writer.queue.peak
                 if self.stats["steps_dropped"] or self.stats["steps_waited"]:
                     s = self.stats
                     warnings.warn(
@@ -389,15 +447,25 @@ def _stop_writer(writer: Writer, dataset: Dataset) -> None:
     """Lets the writer commit what ended and stop, then releases the dataset."""
     try:
         if writer.thread.is_alive():
-            while writer.thread.is_alive():
-                try:
-                    writer.queue.put(STOP, timeout=0.5)
-                    break
-                except queue.Full:
-                    continue
+            while writer.thread.is_alive() and not writer.queue.put(STOP, 0, timeout=0.5):
+                pass
             writer.thread.join()
     finally:
         dataset.close()
+
+
+def _nbytes(item: Step | Reset) -> int:
+    """The bytes a queued item holds (its arrays)."""
+    if isinstance(item, Reset):
+        return 0 if item.mask is None else item.mask.nbytes
+    total = sum(a.nbytes for a in item.obs.values()) + item.action.nbytes + 3 * item.reward.nbytes
+    if item.frames is not None:
+        total += sum(np.asarray(f).nbytes for f in item.frames if f is not None)
+    return int(total)
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.4g} MiB"
 
 
 def _task_of(env: VectorEnv) -> str:

@@ -4,7 +4,8 @@ It keeps every column time-major (`(steps, envs, ...)`, one copy per step, whate
 number of envs) from the oldest step of an episode in flight, encodes each env's camera frames
 into that episode's MP4 as they arrive, and when an env's episode ends cuts its rows out with
 one slice per column. Ended episodes are committed together, at most every `commit_every`
-seconds and when the recorder closes.
+seconds (or four times as long as the last commit took, if longer) and when the recorder
+closes.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ._budget import ByteQueue
 from ._dataset import Dataset, Episode
 from ._video import EpisodeVideo
 
@@ -37,6 +39,7 @@ class Step:
     valid: np.ndarray
     success: list[bool | None] | None
     task: str
+    failed: np.ndarray | None = None  # envs that failed in this step: their episodes are dropped
     gap: bool = False  # steps before this one were dropped (queue full)
 
 
@@ -100,7 +103,7 @@ class Writer:
         gop: int,
         keep: str,
         commit_every: float,
-        queue_size: int,
+        queue_bytes: int,
         stats: dict[str, Any],
         max_episodes: int | None = None,
         encode_threads: int = 1,
@@ -116,7 +119,7 @@ class Writer:
         self.max_episodes = max_episodes
         self.commit_every = commit_every
         self.stats = stats
-        self.queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self.queue = ByteQueue(queue_bytes)
         self.error: BaseException | None = None
         self._rows = _Rows()
         self._t = 0  # global index of the next row
@@ -131,6 +134,7 @@ class Writer:
         self._threads = threads
         self._pending: list[Episode] = []
         self._last_commit = time.monotonic()
+        self._interval = commit_every  # until a commit: `commit_every`, or 4x the last commit's time
         self._serial = 0
         self.thread = threading.Thread(target=self._run, name="envhub-recorder", daemon=True)
         self.thread.start()
@@ -140,31 +144,37 @@ class Writer:
     def _run(self) -> None:
         try:
             while True:
-                wait = max(0.0, self.commit_every - (time.monotonic() - self._last_commit))
+                wait = max(0.0, self._interval - (time.monotonic() - self._last_commit))
                 try:
-                    item = self.queue.get(timeout=wait if self._pending else None)
+                    item, nbytes = self.queue.get(timeout=wait if self._pending else None)
                 except queue.Empty:
                     self._commit()
                     continue
                 if item is STOP:
                     break
-                if item.gap:
-                    self._gap()
-                if isinstance(item, Reset):
-                    self._reset(item.mask)
-                else:
-                    self._step(item)
-                if self._pending and time.monotonic() - self._last_commit >= self.commit_every:
+                try:
+                    if item.gap:
+                        self._gap()
+                    if isinstance(item, Reset):
+                        self._reset(item.mask)
+                    else:
+                        self._step(item)
+                finally:
+                    del item  # its arrays, before the budget says they are gone
+                    self.queue.done(nbytes)
+                if self._pending and time.monotonic() - self._last_commit >= self._interval:
                     self._commit()
             self._commit()
         except BaseException as e:  # reported by the recorder on its next call
             self.error = e
             while True:  # let the recorder's blocked `put`s through until it sees the error
                 try:
-                    if self.queue.get(timeout=1.0) is STOP:
-                        break
+                    item, nbytes = self.queue.get(timeout=1.0)
                 except queue.Empty:
                     continue
+                self.queue.done(nbytes)
+                if item is STOP:
+                    break
         finally:
             for i in range(self.n):
                 self._abandon(i)
@@ -209,9 +219,15 @@ class Writer:
             self._end(i, t, s.success[i] if s.success is not None else None)
         # After an autoreset step, or the end of an episode (recorded or not, after a drop),
         # the env's next episode starts with the next row.
+        if s.failed is not None:  # their episodes are dropped; recorded again from their reset
+            for i in np.flatnonzero(s.failed & self._live):
+                self._abandon(i)
+                self.stats["episodes_dropped"] += 1
         restart = ~s.valid | done
         self._live[restart] = True
         self._start[restart] = t + 1
+        if s.failed is not None:
+            self._live[s.failed] = False
 
     def _encode(self, envs: np.ndarray, s: Step) -> None:
         jobs: list[list[tuple[EpisodeVideo, np.ndarray]]] = [[] for _ in range(self._threads)]
@@ -267,11 +283,15 @@ class Writer:
         self.stats["episodes_kept"] += 1
 
     def _commit(self) -> None:
+        start = time.monotonic()
         if self._pending:
             pending, self._pending = self._pending, []
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
         self._last_commit = time.monotonic()
+        # A commit writes the last files anew (up to their size): spacing commits by four
+        # times that keeps committing under a fifth of the writer's time as files grow.
+        self._interval = max(self.commit_every, 4 * (self._last_commit - start))
 
 
 def _encode_frames(job: list[tuple[EpisodeVideo, np.ndarray]]) -> None:

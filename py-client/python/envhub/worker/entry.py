@@ -190,6 +190,20 @@ def serve(job_json: str) -> int:
     return 0
 
 
+def refusal(hub_protocol: str | None) -> str | None:
+    """Why this worker must not serve the hub that started it (which passes its worker protocol
+    in `ENVHUB_WORKER_PROTOCOL`): they speak different versions. None when they agree."""
+    own = getattr(_envhub, "WORKER_PROTOCOL", None)
+    if hub_protocol is None or hub_protocol == str(own):
+        return None
+    here = os.path.dirname(os.path.abspath(_envhub.__file__ or ""))
+    return (
+        f"this worker speaks envhub worker protocol {own} (envhub {_envhub.__version__} at `{here}`, "
+        f"interpreter `{sys.executable}`), the hub that started it speaks {hub_protocol}; "
+        "hint: start hub and worker from one envhub install (a `PYTHONPATH` may lead to another)"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m envhub.worker", description="envhub Python worker")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -197,6 +211,13 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("serve", help="serve a job (JSON) over shared memory")
     s.add_argument("--job", required=True)
     args = parser.parse_args(argv)
+    refused = refusal(os.environ.get("ENVHUB_WORKER_PROTOCOL"))
+    if refused is not None:
+        if args.command == "describe":
+            print(f"error: {refused}", file=sys.stderr)
+            return 2
+        print(json.dumps({"error": refused}), flush=True)
+        return 0
     if args.command == "describe":
         print(json.dumps(describe()))
         return 0

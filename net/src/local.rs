@@ -1,0 +1,186 @@
+//! This machine's hubs, for this user's clients: how a client finds a hub that listens on
+//! loopback only, without multicast (loopback carries none, and scouting on a real interface
+//! would reach the LAN).
+//!
+//! A hub that listens on loopback only writes its endpoint to a file in a folder only its user
+//! can enter (`$XDG_RUNTIME_DIR/envhub-hubs`, else `<tmp>/envhub-<uid>/hubs`, mode 0700, as the
+//! daemon's socket folder), and removes it when it leaves. A client given no endpoint and no
+//! Zenoh config connects to the loopback endpoints listed there (of hubs whose process is
+//! alive).
+
+use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+
+/// The folder of this user's local hubs (tests: a folder of their own).
+pub const ENVHUB_LOCAL_HUBS: &str = "ENVHUB_LOCAL_HUBS";
+
+fn uid() -> u32 {
+    // SAFETY: getuid has no preconditions.
+    unsafe { libc::getuid() }
+}
+
+/// The folder where this user's local hubs say where they listen.
+pub fn dir() -> PathBuf {
+    if let Some(d) = std::env::var_os(ENVHUB_LOCAL_HUBS).filter(|d| !d.is_empty()) {
+        return PathBuf::from(d);
+    }
+    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
+        Some(run) => PathBuf::from(run).join("envhub-hubs"),
+        None => std::env::temp_dir()
+            .join(format!("envhub-{}", uid()))
+            .join("hubs"),
+    }
+}
+
+/// Whether `dir` is a folder (not a link) of this user that no one else may enter.
+fn private(dir: &Path) -> Result<(), String> {
+    let meta = std::fs::symlink_metadata(dir)
+        .map_err(|e| format!("cannot inspect `{}`: {e}", dir.display()))?;
+    if !meta.is_dir() || meta.uid() != uid() || meta.mode() & 0o077 != 0 {
+        return Err(format!(
+            "`{}` is not a folder of this user closed to others (uid {}, mode {:o})",
+            dir.display(),
+            meta.uid(),
+            meta.mode() & 0o777
+        ));
+    }
+    Ok(())
+}
+
+/// Creates `dir` (and its parent, the daemon's folder, when missing) with mode 0700.
+fn ensure(dir: &Path) -> Result<(), String> {
+    for d in [dir.parent(), Some(dir)].into_iter().flatten() {
+        if d.exists() || d == Path::new("/") {
+            continue;
+        }
+        match std::fs::create_dir(d) {
+            Ok(()) => std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o700))
+                .map_err(|e| format!("cannot make `{}` private: {e}", d.display()))?,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(format!("cannot create `{}`: {e}", d.display())),
+        }
+    }
+    private(dir)
+}
+
+/// A hub's entry in the folder; removed when dropped.
+#[derive(Debug)]
+pub struct Published(PathBuf);
+
+impl Drop for Published {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+/// Writes that hub `name` listens on `endpoint` (mode 0600, in the private folder).
+pub fn publish(name: &str, endpoint: &str) -> Result<Published, String> {
+    let dir = dir();
+    ensure(&dir)?;
+    let pid = std::process::id();
+    let path = dir.join(format!("{pid}.json"));
+    let tmp = dir.join(format!(".{pid}.tmp"));
+    let body = serde_json::json!({ "name": name, "endpoint": endpoint, "pid": pid }).to_string();
+    let write = || -> std::io::Result<()> {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .mode(0o600)
+            .open(&tmp)?;
+        f.write_all(body.as_bytes())?;
+        std::fs::rename(&tmp, &path)
+    };
+    write().map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
+    Ok(Published(path))
+}
+
+fn alive(pid: i32) -> bool {
+    // SAFETY: signal 0 only checks that the process exists.
+    pid > 0
+        && (unsafe { libc::kill(pid, 0) } == 0
+            || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM))
+}
+
+/// The loopback endpoints of this user's live local hubs, sorted. A folder that is not this
+/// user's alone is ignored (with a warning): another user could list endpoints in it.
+pub fn endpoints() -> Vec<String> {
+    let dir = dir();
+    if !dir.exists() {
+        return Vec::new();
+    }
+    if let Err(e) = private(&dir) {
+        tracing::warn!("local hubs ignored: {e}");
+        return Vec::new();
+    }
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Vec::new();
+    };
+    let mut found: Vec<String> = entries
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".json"))
+        .filter_map(|e| {
+            let meta = e.metadata().ok()?;
+            if meta.uid() != uid() || meta.len() > 4096 {
+                return None;
+            }
+            let v: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(e.path()).ok()?).ok()?;
+            let pid = i32::try_from(v["pid"].as_u64()?).ok()?;
+            if !alive(pid) {
+                let _ = std::fs::remove_file(e.path());
+                return None;
+            }
+            let endpoint = v["endpoint"].as_str()?.to_string();
+            crate::exposure::is_loopback(&endpoint).then_some(endpoint)
+        })
+        .collect();
+    found.sort();
+    found.dedup();
+    found
+}
+
+/// A free loopback TCP port (for a hub's listener, so it can say which it is).
+pub(crate) fn free_port() -> std::io::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_published_hub_is_listed_until_it_is_dropped_and_only_loopback_counts() {
+        let dir = std::env::temp_dir().join(format!("envhub-local-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        // SAFETY: this test alone reads the variable in this process.
+        unsafe { std::env::set_var(ENVHUB_LOCAL_HUBS, &dir) };
+        let hub = publish("a", "tcp/127.0.0.1:17001").unwrap();
+        assert_eq!(endpoints(), vec!["tcp/127.0.0.1:17001".to_string()]);
+        let mode = std::fs::metadata(&dir).unwrap().mode() & 0o777;
+        assert_eq!(mode, 0o700);
+        // A dead process's entry and a non-loopback endpoint are not listed.
+        std::fs::write(
+            dir.join("999999999.json"),
+            r#"{"name":"x","endpoint":"tcp/127.0.0.1:1","pid":999999999}"#,
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("1.json"),
+            r#"{"name":"y","endpoint":"tcp/192.0.2.7:7447","pid":1}"#,
+        )
+        .unwrap();
+        assert_eq!(endpoints(), vec!["tcp/127.0.0.1:17001".to_string()]);
+        drop(hub);
+        assert!(endpoints().is_empty());
+        // A folder others may enter is not believed.
+        let _again = publish("a", "tcp/127.0.0.1:17001").unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+        assert!(endpoints().is_empty());
+        unsafe { std::env::remove_var(ENVHUB_LOCAL_HUBS) };
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

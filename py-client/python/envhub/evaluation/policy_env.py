@@ -1,0 +1,135 @@
+"""A callable policy run in a catalog Python environment (`--policy-env NAME`): a child
+process of that environment's interpreter loads the policy, and the two speak a small pipe
+protocol: pickled `(command, args)` messages on the child's stdin, pickled replies on its
+stdout (the child's prints go to stderr). Observations travel pickled over the pipe (a copy
+per batch; shared memory is a later step).
+
+    python -m envhub.evaluation.policy_env SPEC [--per-task]   # the child, run by EnvPolicy
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import re
+import subprocess
+import sys
+from typing import Any, Sequence
+
+import numpy as np
+
+from .policy import Episode, PolicyError, Request
+
+__all__ = ["EnvPolicy", "env_python"]
+
+
+def env_python(name: str) -> str:
+    """The interpreter of the catalog's Python environment `name`, built first where it is
+    not (`envhub env sync NAME`)."""
+    from .._cli import BINARY
+
+    done = subprocess.run([str(BINARY), "env", "sync", name], capture_output=True, text=True, timeout=1800)
+    found = re.search(rf"^{re.escape(name)}: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
+    if done.returncode != 0 or not found:
+        raise PolicyError(
+            f"the policy's Python environment `{name}` is not available: "
+            f"{(done.stderr or done.stdout).strip()[-1500:]}\nhint: `envhub env list` names the catalog's environments"
+        )
+    return os.path.join(found.group(1), "bin", "python")
+
+
+class EnvPolicy:
+    """A `Policy` whose callable (`module:function`) runs in another interpreter."""
+
+    def __init__(self, spec: str, python: str, per_task: bool = False, env_name: str | None = None) -> None:
+        self.spec, self.env_name = spec, env_name
+        args = [python, "-m", "envhub.evaluation.policy_env", spec] + (["--per-task"] if per_task else [])
+        path = os.pathsep.join(p for p in [os.getcwd(), os.environ.get("PYTHONPATH", "")] if p)
+        self.proc = subprocess.Popen(
+            args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": path}
+        )
+        self.info: dict[str, Any] = self._call("describe")
+
+    def _call(self, command: str, *args: Any) -> Any:
+        try:
+            pickle.dump((command, args), self.proc.stdin, protocol=5)  # type: ignore[arg-type]
+            self.proc.stdin.flush()  # type: ignore[union-attr]
+            ok, value = pickle.load(self.proc.stdout)  # type: ignore[arg-type]
+        except (EOFError, BrokenPipeError, OSError) as e:
+            code = self.proc.poll()
+            raise PolicyError(
+                f"the policy process ({self.spec} in `{self.env_name}`) is gone (exit {code}): {type(e).__name__}"
+                "\nhint: its error is on stderr above"
+            ) from None
+        if not ok:
+            raise PolicyError(value)
+        return value
+
+    def start(self, slot: int, episode: Episode) -> None:
+        self._call("start", slot, episode)
+
+    def act(self, requests: Sequence[Request]) -> list[np.ndarray]:
+        return self._call("act", list(requests))
+
+    def end(self, slot: int, episode: Episode, result: dict[str, Any]) -> None:
+        self._call("end", slot, episode, result)
+
+    def describe(self) -> dict[str, Any]:
+        return {**self.info, "python_env": self.env_name}
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self._call("close")
+            except PolicyError:
+                pass
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def child(spec: str, per_task: bool) -> int:
+    reply = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    requests = sys.stdin.buffer
+    from .callable import CallablePolicy, PerTask, load
+
+    try:
+        target = load(spec)
+        policy = CallablePolicy(PerTask(target) if per_task else target, name=spec)
+    except Exception as e:
+        pickle.dump((False, f"cannot load the policy `{spec}`: {type(e).__name__}: {e}"), reply)
+        reply.flush()
+        return 1
+    while True:
+        try:
+            command, args = pickle.load(requests)
+        except EOFError:
+            return 0
+        try:
+            if command == "describe":
+                value: Any = policy.describe()
+            elif command == "act":
+                value = [np.asarray(a) for a in policy.act(args[0])]
+            elif command == "start":
+                value = policy.start(*args)
+            elif command == "end":
+                value = policy.end(*args)
+            elif command == "close":
+                policy.close()
+                pickle.dump((True, None), reply)
+                reply.flush()
+                return 0
+            else:
+                raise ValueError(f"unknown command {command!r}")
+            pickle.dump((True, value), reply, protocol=5)
+        except Exception as e:
+            pickle.dump((False, f"{type(e).__name__}: {e}"), reply)
+        reply.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(child(sys.argv[1], "--per-task" in sys.argv[2:]))

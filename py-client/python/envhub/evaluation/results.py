@@ -1,0 +1,216 @@
+"""Episode results, durable as they come: one JSON line per episode appended to
+`episodes.jsonl` and fsynced, so a killed evaluation resumes (`--resume`) with no episode
+lost or counted twice; then `results.json` (schema in docs/eval.md), `results.csv` and a
+markdown table."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import sys
+import time
+from typing import Any
+
+__all__ = ["EpisodeLog", "ResumeError", "Progress", "summarize", "markdown", "write_outputs"]
+
+SCHEMA = "envhub.eval/1"
+LOG = "episodes.jsonl"
+RUN = "run.json"
+
+
+class ResumeError(ValueError):
+    """`--resume` on a folder that holds another evaluation."""
+
+
+class EpisodeLog:
+    """`episodes.jsonl` in the output folder, with the protocol it was written under
+    (`run.json`): resuming under another protocol is refused."""
+
+    def __init__(self, folder: str, header: dict[str, Any], resume: bool) -> None:
+        os.makedirs(folder, exist_ok=True)
+        self.path = os.path.join(folder, LOG)
+        run = os.path.join(folder, RUN)
+        self.records: dict[str, dict[str, Any]] = {}
+        if resume and os.path.exists(run):
+            with open(run, encoding="utf-8") as f:
+                before = json.load(f)
+            if before != header:
+                changed = sorted(k for k in set(before) | set(header) if before.get(k) != header.get(k))
+                raise ResumeError(
+                    f"--resume: {folder} holds an evaluation of another protocol (differs in {', '.join(changed)})\n"
+                    "hint: resume with the same benchmark, tasks, episodes and policy, or use another --out"
+                )
+            self.records = read_log(self.path)
+            _drop_torn_tail(self.path)
+        elif not resume and os.path.exists(self.path) and os.path.getsize(self.path):
+            raise FileExistsError(f"{folder} already holds an evaluation\nhint: --resume to go on with it, or another --out")
+        _write_json(run, header)
+        if not resume and os.path.exists(self.path):
+            os.remove(self.path)
+        self._file = open(self.path, "a", encoding="utf-8")
+
+    def done(self) -> set[str]:
+        """Episodes finished without an error (an errored one runs again on resume)."""
+        return {k for k, r in self.records.items() if r.get("error") is None}
+
+    def add(self, record: dict[str, Any]) -> None:
+        self._file.write(json.dumps(record, allow_nan=False) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self.records[f"{record['task']}#{record['index']}"] = record
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read_log(path: str) -> dict[str, dict[str, Any]]:
+    """The last record of each episode in a log; a torn last line (a kill mid-write) is skipped."""
+    out: dict[str, dict[str, Any]] = {}
+    if not os.path.exists(path):
+        return out
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            try:
+                r = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            out[f"{r['task']}#{r['index']}"] = r
+    return out
+
+
+def _drop_torn_tail(path: str) -> None:
+    """Cuts a last line a kill left half-written, so the next record starts a line."""
+    if not os.path.exists(path):
+        return
+    with open(path, "rb+") as f:
+        data = f.read()
+        if data and not data.endswith(b"\n"):
+            f.truncate(data.rfind(b"\n") + 1)
+
+
+def _write_json(path: str, data: Any) -> None:
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1, allow_nan=False)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _rate(records: list[dict[str, Any]], rule: str) -> dict[str, Any]:
+    n = len(records)
+    errors = sum(1 for r in records if r.get("error") is not None)
+    successes = sum(1 for r in records if r.get("success"))
+    returns = [r["return"] for r in records if r.get("return") is not None]
+    lengths = [r["length"] for r in records if r.get("length") is not None]
+    out: dict[str, Any] = {"episodes": n, "successes": successes, "errors": errors}
+    if rule == "none" or n == 0:
+        out["success_rate"] = out["stderr"] = None
+    else:
+        p = successes / n  # an errored episode counts as a failure
+        out["success_rate"] = p
+        out["stderr"] = math.sqrt(p * (1 - p) / n)
+    out["mean_return"] = sum(returns) / len(returns) if returns else None
+    out["mean_length"] = sum(lengths) / len(lengths) if lengths else None
+    return out
+
+
+def summarize(records: list[dict[str, Any]], tasks: list[dict[str, Any]], rule: str, total: int) -> tuple[dict, list]:
+    """(overall, per task) success rates with standard errors, returns and lengths."""
+    overall = _rate(records, rule)
+    overall["done"] = len(records)
+    overall["episodes"] = total
+    per_task = []
+    for t in tasks:
+        mine = [r for r in records if r["task"] == t["id"]]
+        per_task.append({"task": t["id"], "text": t["text"], **_rate(mine, rule)})
+    return overall, per_task
+
+
+def markdown(results: dict[str, Any]) -> str:
+    """The per-task table and the overall line, as markdown."""
+    rule = results["protocol"]["success"]["rule"]
+    lines = [f"### {results['benchmark']}: {results['policy'].get('name', results['policy'].get('kind', ''))}", ""]
+    if rule == "none":
+        lines += ["| task | episodes | errors | mean return | mean length |", "|---|---:|---:|---:|---:|"]
+    else:
+        lines += ["| task | episodes | success | ± s.e. | errors | mean return |", "|---|---:|---:|---:|---:|---:|"]
+
+    def num(x: Any, fmt: str) -> str:
+        return "–" if x is None else format(x, fmt)
+
+    rows = results["per_task"] + [{"task": "**all**", **results["summary"]}]
+    for r in rows:
+        if rule == "none":
+            lines.append(
+                f"| {r['task']} | {r['episodes']} | {r['errors']} | {num(r['mean_return'], '.3f')} | {num(r['mean_length'], '.1f')} |"
+            )
+        else:
+            lines.append(
+                f"| {r['task']} | {r['episodes']} | {num(r['success_rate'], '.3f')} | {num(r['stderr'], '.3f')} "
+                f"| {r['errors']} | {num(r['mean_return'], '.3f')} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+CSV_FIELDS = ["task", "index", "init", "success", "return", "length", "seconds", "error", "video"]
+
+
+def write_outputs(folder: str, results: dict[str, Any]) -> None:
+    """`results.json` and `results.csv` (one row per episode) in `folder`."""
+    _write_json(os.path.join(folder, "results.json"), results)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_FIELDS)
+    w.writeheader()
+    for e in results["episodes"]:
+        w.writerow({**{k: e.get(k) for k in CSV_FIELDS}, "init": json.dumps(e.get("init"))})
+    with open(os.path.join(folder, "results.csv"), "w", encoding="utf-8", newline="") as f:
+        f.write(buf.getvalue())
+
+
+class Progress:
+    """One line on stderr as episodes finish: done/total, success so far, episodes per
+    minute, ETA (rewritten in place on a terminal, a new line at most every few seconds
+    otherwise)."""
+
+    def __init__(self, total: int, already: int, rule: str, stream: Any = None, quiet: bool = False) -> None:
+        self.total, self.already, self.rule = total, already, rule
+        self.stream = stream or sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.quiet = quiet
+        self.t0 = time.monotonic()
+        self.last = 0.0
+        self.done = self.successes = 0
+
+    def episode(self, success: bool | None) -> None:
+        self.done += 1
+        self.successes += bool(success)
+        now = time.monotonic()
+        if self.quiet or (not self.tty and now - self.last < 5 and self.already + self.done < self.total):
+            return
+        self.last = now
+        elapsed = max(now - self.t0, 1e-9)
+        per_min = self.done / elapsed * 60
+        left = self.total - self.already - self.done
+        eta = left / (self.done / elapsed) if self.done else float("inf")
+        rate = "" if self.rule == "none" else f" success {self.successes / self.done:.3f}"
+        line = (
+            f"[{self.already + self.done}/{self.total}]{rate} | {per_min:.1f} episodes/min | "
+            f"ETA {_duration(eta)}"
+        )
+        self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty and not self.quiet:
+            self.stream.write("\n")
+
+
+def _duration(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = int(s)
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"

@@ -1,0 +1,457 @@
+"""The episode loop: a benchmark's episodes over sessions of envs, batched policy calls.
+
+A task runs in a session of its entry (the task is a make option, so one session holds one
+task); sessions of several tasks run at once while the env budget (`num_envs`) allows: a
+task with fewer episodes left than free envs leaves the rest to the next tasks. Every env
+(slot, numbered across sessions) runs one episode at a time: a reset with the episode's
+initial condition, the settling steps with the protocol's fixed action, then policy steps
+(an action chunk is executed one action per step before the slot asks again) until success
+(when the rule stops there), the env's own end, or the horizon. One policy call per step
+gathers every slot whose turn it is, whatever its task. Only envs with an episode are stepped
+(`send` to those ids, `recv` until all are back), so an env never runs past its episode. An
+episode's result depends on its initial condition and the policy's answers alone: the same
+with 1 env or 16, local or remote.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import traceback
+from collections import deque
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from .benchmarks import Benchmark, TaskSpec
+from .policy import Episode, Policy, PolicyError, Request, Task
+from .protocol import ActionError, Observer, check_actions
+
+__all__ = ["Runner", "EvaluationStopped"]
+
+# Sessions of a task that break without finishing an episode before its episodes are failed.
+MAX_BROKEN = 2
+
+
+class EvaluationStopped(RuntimeError):
+    """`fail_fast`: an episode failed, and the evaluation stopped there."""
+
+
+@dataclass
+class _Slot:
+    episode: Episode | None = None
+    settle_left: int = 0
+    t: int = 0
+    ret: float = 0.0
+    success: bool | None = None
+    chunk: np.ndarray | None = None
+    pos: int = 0
+    t0: float = 0.0
+    obs: Any = None
+    ended: bool = False
+    frames: bool = False
+
+    @property
+    def running(self) -> bool:
+        return self.episode is not None and not self.ended
+
+
+class _Session:
+    """One task's session: its envs, their slots (global ids `ids[i]` for env `i`), and the
+    task's episodes not started yet."""
+
+    def __init__(self, spec: TaskSpec, envs: Any, ids: list[int], queue: deque[int], bench: Benchmark) -> None:
+        self.spec, self.envs, self.ids, self.queue = spec, envs, ids, queue
+        self.space = envs.single_action_space
+        self.observer = Observer(bench.observation, envs.single_observation_space)
+        self.slots = [_Slot() for _ in ids]
+        self.started: set[int] = set()
+        self.finished = 0  # episodes that ended without an error
+        self.first = True
+
+
+def _row(obs: Any, j: int) -> Any:
+    if isinstance(obs, dict):
+        return {k: _row(v, j) for k, v in obs.items()}
+    return obs[j]
+
+
+def _flag(info: dict[str, Any], key: str, j: int) -> bool | None:
+    """The env `j`'s value of info `key` (Gymnasium's vector layout), or None if absent."""
+    values = info.get(key)
+    if values is None:
+        return None
+    mask = info.get(f"_{key}")
+    if mask is not None and not mask[j]:
+        return None
+    return bool(values[j])
+
+
+class Runner:
+    """Runs `bench`'s episodes with `policy`; `record(result)` gets each finished episode."""
+
+    def __init__(
+        self,
+        bench: Benchmark,
+        policy: Policy,
+        record: Callable[[dict[str, Any]], None],
+        *,
+        num_envs: int = 1,
+        workers: int | None = None,
+        hubs: Any = None,
+        registry: Any = None,
+        step_timeout: float | None = None,
+        fail_fast: bool = False,
+        replan: int | None = None,
+        videos: Any = None,
+    ) -> None:
+        self.bench, self.policy, self.record = bench, policy, record
+        self.num_envs, self.workers, self.hubs, self.registry = num_envs, workers, hubs, registry
+        self.step_timeout, self.fail_fast, self.replan, self.videos = step_timeout, fail_fast, replan, videos
+        self.env_steps = 0
+        self.tasks: dict[str, Task] = {}
+        self.sessions: list[_Session] = []
+
+    # Sessions -----------------------------------------------------------------------------
+
+    def run(self, skip: set[str]) -> None:
+        """Every episode of every task, but those in `skip` (`<task id>#<index>`)."""
+        from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+        from ..wire.errors import EnvHubError
+
+        pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
+        for spec in self.bench.tasks:
+            todo = deque(k for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip)
+            if todo:
+                pending.append((spec, todo, 0))
+        free = list(range(self.num_envs))
+        # Sessions start (workers spawn, suites import) and stop in threads while the others
+        # step: a start takes seconds. Two at a time, so a small machine is not swamped.
+        pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-start")
+        self._stops = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-stop")
+        starting: dict[Any, tuple[TaskSpec, deque[int], list[int], int]] = {}
+        try:
+            while pending or self.sessions or starting:
+                while pending and free:
+                    spec, todo, broken = pending.popleft()
+                    n = min(len(free), len(todo))
+                    ids, free = free[:n], free[n:]
+                    starting[pool.submit(self._make, spec, n)] = (spec, todo, ids, broken)
+                if not self.sessions:  # nothing to step: wait for a start
+                    wait(list(starting), return_when=FIRST_COMPLETED)
+                for future in [f for f in starting if f.done()]:
+                    spec, todo, ids, broken = starting.pop(future)
+                    started = self._started_session(future, spec, todo, ids, broken)
+                    if started is not True:
+                        free = sorted(free + ids)
+                        if started is not False:
+                            pending.appendleft(started)
+                for s in list(self.sessions):
+                    try:
+                        self._tick(s)
+                    except EnvHubError as e:
+                        requeue = self._broken(s, e)
+                        if requeue is not None:
+                            pending.appendleft(requeue)
+                    if s not in self.sessions or not any(x.episode is not None for x in s.slots):
+                        if s in self.sessions:
+                            self._close(s)
+                        free = sorted(free + s.ids)
+                self._ask_policy()
+                self._send_all()
+        finally:
+            for s in list(self.sessions):
+                self._close(s)
+            for future in starting:  # sessions that start after all: stopped unused
+                future.add_done_callback(lambda f: f.cancelled() or f.exception() is not None or f.result().close())
+            pool.shutdown(wait=True, cancel_futures=True)
+            self._stops.shutdown(wait=True)
+
+    def _make(self, spec: TaskSpec, n: int) -> Any:
+        import os
+
+        from ..client.factory import make_vec
+
+        # By default a session gets the share of the cores its envs are of `num_envs` (at least
+        # one worker): sessions run side by side, and every worker is an interpreter to start.
+        workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
+        return make_vec(
+            spec.entry,
+            n,
+            workers,
+            "disabled",
+            max_episode_steps=self.bench.settle_steps + self.bench.horizon,
+            registry=self.registry,
+            step_timeout=self.step_timeout,
+            hubs=self.hubs,
+            **self.bench.env_options(spec),
+        )
+
+    def _started_session(
+        self, future: Any, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int
+    ) -> bool | tuple[TaskSpec, deque[int], int]:
+        """The session a start gave, with its first episodes reset: True; False where the
+        task cannot run (its episodes failed with the reason); or the task to start again
+        when its first reset broke the session."""
+        from ..wire.errors import EnvHubError
+
+        try:
+            envs = future.result()
+        except EnvHubError as e:
+            task = self.tasks.get(spec.id) or self.bench.task(spec)
+            for k in todo:
+                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            return False
+        s = _Session(spec, envs, ids, todo, self.bench)
+        s.broken = broken  # type: ignore[attr-defined]
+        self.sessions.append(s)
+        try:
+            self._reset(s, {i: s.queue.popleft() for i in range(len(ids))})
+        except EnvHubError as e:
+            requeue = self._broken(s, e)
+            return False if requeue is None else requeue
+        return True
+
+    def _close(self, s: _Session) -> None:
+        """Stops a session's workers in the background (its results are all in)."""
+        self.sessions.remove(s)
+
+        def close() -> None:
+            try:
+                s.envs.close()
+            except Exception:
+                pass
+
+        self._stops.submit(close)
+
+    def _broken(self, s: _Session, e: Exception) -> tuple[TaskSpec, deque[int], int] | None:
+        """A session that broke (a worker died, a step timed out): its running episodes fail;
+        the task's other episodes go on in a new session, unless sessions of it keep breaking
+        with no episode finished."""
+        for i, slot in enumerate(s.slots):
+            if slot.running:
+                self._finish(s, i, error=f"{type(e).__name__}: {e}")
+        self._close(s)
+        broken = 0 if s.finished else getattr(s, "broken", 0) + 1
+        if not s.queue:
+            return None
+        if broken >= MAX_BROKEN:
+            task = self.tasks.get(s.spec.id) or self.bench.task(s.spec)
+            for k in s.queue:
+                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            return None
+        return s.spec, s.queue, broken
+
+    # Resets -------------------------------------------------------------------------------
+
+    def _reset(self, s: _Session, assign: dict[int, int]) -> None:
+        """Resets the envs in `assign` for their episodes (grouped by reset options: one
+        reset takes one set of options for the envs it resets)."""
+        n = len(s.slots)
+        inits = {i: self.bench.episode_init(k) for i, k in assign.items()}
+        seeds: list[int | None] = [None] * n
+        groups: dict[str, list[int]] = {}
+        for i, init in inits.items():
+            seeds[i] = init.get("seed")
+            options = {k: v for k, v in init.items() if k != "seed"}
+            groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
+        t0 = time.perf_counter()
+        for key, group in groups.items():
+            options = json.loads(key)
+            if s.first:  # a session's first reset is a full one
+                obs, info = s.envs.reset(seed=seeds, options=options or None)
+                s.first = False
+            else:
+                mask = np.zeros(n, dtype=np.bool_)
+                mask[group] = True
+                obs, info = s.envs.reset(seed=seeds, options={**options, "reset_mask": mask})
+            texts, has = info.get("language"), info.get("_language")
+            for i in group:
+                # A language-conditioned suite says the task's instruction in its reset info.
+                if texts is not None and (has is None or has[i]) and isinstance(texts[i], str):
+                    if s.spec.id not in self.tasks:
+                        self.tasks[s.spec.id] = self.bench.task(s.spec, texts[i])
+                s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
+        task = self.tasks.setdefault(s.spec.id, self.bench.task(s.spec))
+        for i, k in assign.items():
+            slot = s.slots[i]
+            slot.episode = Episode(task, k, inits[i])
+            s.started.add(k)
+            try:
+                self.policy.start(s.ids[i], slot.episode)
+            except Exception as e:
+                self._finish(s, i, error=f"policy start failed: {type(e).__name__}: {e}")
+                continue
+            if slot.settle_left == 0:
+                self._frame(s, i)
+
+    def _tick(self, s: _Session) -> None:
+        """Receives the session's step (if sent), then starts the next episodes on the envs
+        whose episode ended."""
+        if getattr(s, "sent", None):
+            self._recv(s)
+        ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
+        for i in ended:
+            s.slots[i] = _Slot()
+        assign = {i: s.queue.popleft() for i in ended if s.queue}
+        if assign:
+            self._reset(s, assign)
+
+    # Policy and steps ---------------------------------------------------------------------
+
+    def _ask_policy(self) -> None:
+        need = [
+            (s, i)
+            for s in self.sessions
+            for i, slot in enumerate(s.slots)
+            if slot.running and slot.settle_left == 0 and (slot.chunk is None or slot.pos >= len(slot.chunk))
+        ]
+        if not need:
+            return
+        requests = [
+            Request(s.ids[i], s.slots[i].episode, s.slots[i].t, s.observer(s.slots[i].obs))  # type: ignore[arg-type]
+            for s, i in need
+        ]
+        try:
+            answers = self.policy.act(requests)
+            if len(answers) != len(requests):
+                raise PolicyError(f"the policy answered {len(answers)} times for {len(requests)} requests")
+        except Exception as e:
+            per_slot = getattr(e, "slots", None)
+            if isinstance(e, PolicyError) and isinstance(per_slot, dict) and getattr(e, "answers", None) is not None:
+                # A server that failed some slots only (`slots`: slot -> message) answered the others.
+                answers = list(e.answers)  # type: ignore[attr-defined]
+                for s, i in need:
+                    if s.ids[i] in per_slot:
+                        self._finish(s, i, error=str(per_slot[s.ids[i]]))
+            else:
+                message = str(e) if isinstance(e, PolicyError) else f"the policy raised {type(e).__name__}: {e}"
+                if not isinstance(e, PolicyError):
+                    message += "\n" + "".join(traceback.format_exception(e)[-3:]).rstrip()
+                for s, i in need:
+                    self._finish(s, i, error=message)
+                return
+        sign = self.bench.action.get("sign")
+        for (s, i), answer in zip(need, answers, strict=True):
+            slot = s.slots[i]
+            if slot.ended:
+                continue
+            try:
+                chunk = check_actions(answer, s.space, sign)
+            except ActionError as e:
+                self._finish(s, i, error=str(e))
+                continue
+            slot.chunk = chunk[: self.replan] if self.replan else chunk
+            slot.pos = 0
+
+    def _send_all(self) -> None:
+        from ..wire.errors import EnvHubError
+
+        for s in list(self.sessions):
+            ids = [i for i, slot in enumerate(s.slots) if slot.running]
+            s.sent = ids  # type: ignore[attr-defined]
+            if not ids:
+                continue
+            actions = np.empty((len(ids), *s.space.shape), dtype=s.space.dtype)
+            for j, i in enumerate(ids):
+                slot = s.slots[i]
+                if slot.settle_left:
+                    actions[j] = self.bench.settle_action  # type: ignore[assignment]
+                else:
+                    actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
+                    slot.pos += 1
+            try:
+                s.envs.send(actions, ids)
+            except EnvHubError:
+                s.sent = []  # type: ignore[attr-defined]
+                raise
+
+    def _recv(self, s: _Session) -> None:
+        waiting = set(s.sent)  # type: ignore[attr-defined]
+        s.sent = []  # type: ignore[attr-defined]
+        self.env_steps += len(waiting)
+        while waiting:
+            obs, rewards, terminated, truncated, info = s.envs.recv()
+            for j, i in enumerate(info["env_id"].tolist()):
+                waiting.discard(i)
+                self._after_step(s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
+
+    def _after_step(
+        self, s: _Session, i: int, obs: Any, reward: float, terminated: bool, truncated: bool, info: Any, j: int
+    ) -> None:
+        slot = s.slots[i]
+        slot.obs = obs
+        if slot.settle_left:
+            slot.settle_left -= 1
+            if terminated or truncated:
+                self._finish(s, i, success=False)
+            elif slot.settle_left == 0:
+                self._frame(s, i)
+            return
+        slot.t += 1
+        slot.ret += reward
+        self._frame(s, i)
+        rule = self.bench.rule
+        if rule == "any_step":
+            if _flag(info, self.bench.success_key, j):
+                slot.success = True
+            elif slot.success is None:
+                slot.success = False
+        elif rule == "last_step":
+            slot.success = bool(_flag(info, self.bench.success_key, j))
+        if (slot.success and rule == "any_step" and self.bench.stop_on_success) or terminated or truncated:
+            self._finish(s, i)
+        elif slot.t >= self.bench.horizon:
+            self._finish(s, i)
+
+    # Episode ends -------------------------------------------------------------------------
+
+    def _frame(self, s: _Session, i: int) -> None:
+        if self.videos is None:
+            return
+        frame = s.observer.frame(s.slots[i].obs)
+        if frame is not None:
+            self.videos.frame(s.ids[i], frame)
+            s.slots[i].frames = True
+
+    def _finish(self, s: _Session | None, i: int, error: str | None = None, success: bool | None = None) -> None:
+        slot = s.slots[i] if s is not None else self._unstarted
+        if slot.ended or slot.episode is None:
+            return
+        slot.ended = True
+        if success is not None:
+            slot.success = success
+        ep = slot.episode
+        rule = self.bench.rule
+        result = {
+            "task": ep.task.id,
+            "index": ep.index,
+            "init": ep.init,
+            "success": None if rule == "none" or error is not None else bool(slot.success),
+            "return": slot.ret,
+            "length": slot.t,
+            "seconds": round(time.perf_counter() - slot.t0, 3),
+            "error": error,
+            "video": None,
+        }
+        if s is not None:
+            s.finished += error is None
+            slot_id = s.ids[i]
+            if self.videos is not None:
+                if error is None and slot.frames:
+                    result["video"] = self.videos.finish(slot_id, ep, bool(slot.success))
+                else:
+                    self.videos.discard(slot_id)
+            try:
+                self.policy.end(slot_id, ep, result)
+            except Exception as e:  # the episode's result stands; the policy's trouble is said
+                result["error"] = result["error"] or f"policy end failed: {type(e).__name__}: {e}"
+        self.record(result)
+        if error is not None and self.fail_fast:
+            raise EvaluationStopped(f"episode {ep.key} failed: {error}")
+
+    def _fail_unstarted(self, episode: Episode, error: str) -> None:
+        self._unstarted = _Slot(episode=episode, t0=time.perf_counter())
+        self._finish(None, -1, error=error)

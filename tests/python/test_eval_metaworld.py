@@ -1,0 +1,130 @@
+"""`envhub eval` on Meta-World against Meta-World's own evaluation.
+
+Meta-World MT10 with Meta-World's scripted policies (`metaworld.policies`, run by
+`envhub.evaluation.experts:metaworld` in the catalog's `metaworld` environment) through
+envhub's evaluation equals `metaworld.evaluation.evaluation` run in-process in that
+environment on `gym.make_vec("Meta-World/MT10", vector_strategy="sync", seed=1)`: per-task
+success rates and per-episode returns, episode for episode (returns to float32's
+precision, which the reference sums some of them in: see RETURN_REL). The
+reference agent returns the scripted actions in the action space's dtype (float32), as the
+envhub policy does.
+
+Skipped where the `metaworld` environment cannot be built (`envhub env sync metaworld`);
+failed instead under ENVHUB_SUITES_REQUIRED=1, as test_py_suites.py does.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+
+import numpy as np
+import pytest
+from conftest import import_envhub
+
+envhub = import_envhub()
+
+from envhub.evaluation import evaluate  # noqa: E402
+
+REQUIRED = bool(os.environ.get("ENVHUB_SUITES_REQUIRED"))
+EPISODES = 3
+SEED = 1
+# Several tasks' rewards are sometimes an np.float32 (the others' are Python floats): from the
+# first such step on, Gymnasium's RecordEpisodeStatistics (`episode_returns += reward`, under
+# NumPy 2's promotion rules) sums the reference's return in float32. envhub carries every
+# reward as float64 (a float32 value exactly) and sums in float64, so returns agree to
+# float32's precision (relative 1e-5 over 500 steps); those summed in float64 on both sides
+# agree bit for bit (counted below).
+RETURN_REL = 1e-5
+
+REFERENCE = """
+import json, sys, warnings
+import numpy as np
+import gymnasium as gym
+import metaworld
+from metaworld.evaluation import evaluation, _get_task_names
+from metaworld.policies import ENV_POLICY_MAP
+warnings.simplefilter("ignore")
+
+envs = gym.make_vec("Meta-World/MT10", vector_strategy="sync", seed=SEED)
+names = _get_task_names(envs)
+experts = [ENV_POLICY_MAP[n]() for n in names]
+
+class Agent:
+    def eval_action(self, obs):
+        return np.stack([np.asarray(p.get_action(o), dtype=np.float32) for p, o in zip(experts, obs)])
+    def reset(self, mask):
+        pass
+
+mean, _, rates, returns = evaluation(Agent(), envs, num_episodes=EPISODES)
+print(json.dumps({"mean": mean, "rates": rates, "returns": returns}))
+"""
+
+
+def metaworld_python() -> str:
+    from envhub._cli import BINARY
+
+    done = subprocess.run([str(BINARY), "env", "sync", "metaworld"], capture_output=True, text=True, timeout=900)
+    found = re.search(r"^metaworld: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
+    if done.returncode != 0 or not found:
+        reason = f"the Python environment `metaworld` cannot be built here: {(done.stderr or done.stdout)[-1500:]}"
+        if REQUIRED:
+            pytest.fail(f"{reason}, and ENVHUB_SUITES_REQUIRED is set")
+        pytest.skip(reason)
+    return os.path.join(found.group(1), "bin", "python")
+
+
+def test_mt10_scripted_equals_metaworld_evaluation(tmp_path):
+    python = metaworld_python()
+    code = REFERENCE.replace("SEED", str(SEED)).replace("EPISODES", str(EPISODES))
+    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    ref = json.loads(done.stdout.strip().splitlines()[-1])
+
+    results = evaluate(
+        "metaworld-mt10",
+        "envhub.evaluation.experts:metaworld",
+        policy_env="metaworld",
+        episodes=EPISODES,
+        num_envs=2,
+        out=tmp_path / "mt10",
+        progress=False,
+    )
+    assert results["summary"]["errors"] == 0, [e["error"] for e in results["episodes"] if e["error"]][:3]
+    ours_returns: dict[str, list[float]] = {}
+    for e in results["episodes"]:
+        ours_returns.setdefault(e["task"].rsplit("/", 1)[-1], []).append(e["return"])
+    ours_rates = {t["task"].rsplit("/", 1)[-1]: t["success_rate"] for t in results["per_task"]}
+    assert set(ours_rates) == set(ref["rates"])
+    exact = 0
+    for task in ref["rates"]:
+        assert ours_rates[task] == ref["rates"][task], task
+        assert ours_returns[task] == pytest.approx(ref["returns"][task], rel=RETURN_REL), task
+        exact += sum(a == b for a, b in zip(ours_returns[task], ref["returns"][task]))
+    assert exact >= 1  # some tasks' returns are summed in float64 by both, and equal bit for bit
+    assert results["summary"]["success_rate"] == pytest.approx(ref["mean"], abs=1e-12)
+    # The episodes' initial conditions are the goals Meta-World's resets drew.
+    assert [e["init"] for e in results["episodes"][:EPISODES]] == [
+        {"goal": g} for g in envhub.evaluation.benchmarks.goal_draws(SEED, EPISODES)
+    ]
+
+
+def test_every_env_of_a_session_has_the_one_goal_set():
+    """The adapter: every env of a session holds the goal set of the one seed (a train goal
+    picked by index gives every env the same start); without one, env i draws its goals from
+    its own generator, so the envs differ; a reset seed (ignored by Meta-World) changes nothing."""
+    metaworld_python()
+    envs = envhub.make_vec("metaworld-reach", 3, seed=3)
+    try:
+        picked, _ = envs.reset(options={"goal": 7})
+        assert np.array_equal(picked[0], picked[1]) and np.array_equal(picked[0], picked[2])
+        drawn, _ = envs.reset()
+        assert not np.array_equal(drawn[0][36:39], drawn[1][36:39])  # goal positions differ
+        again, _ = envs.reset(seed=[11, 12, 13], options={"goal": 7})
+        assert np.array_equal(again, picked)
+        with pytest.raises(envhub.EnvHubError, match="goal"):
+            envs.reset(options={"goal": 50})
+    finally:
+        envs.close()

@@ -1,0 +1,433 @@
+"""Suite environments that installs can share and that stay out of each other's way, on
+Meta-World's environment (the cheapest real suite), built into a cache folder of this module's
+own with `envhub env sync metaworld`.
+
+- The hub's `PYTHONPATH`, `PYTHONHOME`, `VIRTUAL_ENV` and current folder (a broken `numpy`
+  in it) do not reach a suite's worker.
+- A suite whose worker cannot start says why, with Python's error and the environment's
+  name, not that its framework is unknown.
+- A cache made read-only after `sync` (a CI image) still serves sessions.
+- Two installs (two copies of the package, their code told apart by a marker) sharing the
+  cache: each one's workers run its own code — the package their ready line reports, the
+  `_envhub` they map — while the other uses the environment, and after a restart.
+- A worker refuses a hub of another worker protocol, naming both.
+- `envhub env remove` while a session uses the environment is refused, naming its workers'
+  pids; `--force` removes it, and the session's next worker start fails saying it was removed.
+- `envhub env list --json` shows what each environment's requirements resolved to.
+- A CPython that reports itself free-threaded (a script wrapping a real one) is not picked; the
+  error names `uv python install 3.X`.
+
+Without uv or PyPI these skip with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a
+failure.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+from conftest import REPO_ROOT, import_envhub
+
+envhub = import_envhub()
+
+from envhub._cli import BINARY  # noqa: E402
+
+REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
+# A cold build of Meta-World's environment took seconds here; the bound is for slow networks.
+SYNC_TIMEOUT_S = 600
+RUN_TIMEOUT_S = 180
+ENTRY = "metaworld-reach"
+
+
+def skip_or_fail(reason: str) -> None:
+    if REQUIRED:
+        pytest.fail(f"{reason}, and ENVHUB_PYENV_REQUIRED is set")
+    pytest.skip(reason)
+
+
+def cli(
+    *args: str,
+    cache: Path,
+    binary: Path = BINARY,
+    env: dict[str, str] | None = None,
+    cwd: Path | None = None,
+    prefix: list[str] | None = None,
+    timeout: float = RUN_TIMEOUT_S,
+) -> subprocess.CompletedProcess:
+    """`envhub ARGS` with the cache folder `cache`."""
+    return subprocess.run(
+        [*(prefix or []), str(binary), *args],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=cwd,
+        env={**os.environ, "ENVHUB_PYENV_DIR": str(cache), **(env or {})},
+    )
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A cache folder with Meta-World's environment built in it."""
+    if not BINARY.is_file():
+        skip_or_fail(f"{BINARY} is not built; run `make py-install`")
+    folder = tmp_path_factory.mktemp("shared") / "pyenvs"
+    out = cli("env", "sync", "metaworld", cache=folder, timeout=SYNC_TIMEOUT_S)
+    if out.returncode != 0:
+        skip_or_fail(f"`envhub env sync metaworld` failed: {out.stderr.strip()[-2000:]}")
+    return folder
+
+
+def ran(out: subprocess.CompletedProcess, steps: int = 10) -> None:
+    assert out.returncode == 0, out.stderr[-4000:]
+    assert f"{ENTRY}: {steps} steps" in out.stdout, out.stdout
+
+
+def broken_numpy(folder: Path) -> Path:
+    """A folder holding a `numpy` that fails at import."""
+    (folder / "numpy").mkdir(parents=True)
+    (folder / "numpy" / "__init__.py").write_text('raise ImportError("the fake numpy of a test")\n')
+    return folder
+
+
+def test_the_hubs_python_variables_and_folder_do_not_reach_a_suites_worker(cache: Path, tmp_path: Path) -> None:
+    shadow = broken_numpy(tmp_path / "shadow")
+    out = cli(
+        "run",
+        ENTRY,
+        "--num-envs",
+        "2",
+        "--steps",
+        "10",
+        cache=cache,
+        cwd=shadow,  # `python -m` would put it first on `sys.path`
+        env={
+            "PYTHONPATH": str(shadow),
+            "PYTHONHOME": str(tmp_path / "no-such-home"),
+            "VIRTUAL_ENV": str(tmp_path / "another-venv"),
+        },
+    )
+    ran(out)
+
+
+def catalog_metaworld() -> dict:
+    with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
+        catalog = yaml.safe_load(f)
+    entry = next(e for e in catalog["environments"] if e["id"] == ENTRY)
+    return {"spec": catalog["python_envs"]["metaworld"], "entry": entry}
+
+
+def test_a_suite_whose_worker_cannot_start_names_the_error_and_the_environment(cache: Path, tmp_path: Path) -> None:
+    shadow = broken_numpy(tmp_path / "declared")
+    found = catalog_metaworld()
+    # The same requirements (hence the same venv), with a `PYTHONPATH` the environment itself
+    # declares: its workers honour it, and cannot import numpy.
+    spec = {**found["spec"], "env": {**found["spec"].get("env", {}), "PYTHONPATH": str(shadow)}}
+    registry = tmp_path / "registry.yaml"
+    registry.write_text(
+        yaml.safe_dump({"python_envs": {"metaworld": spec}, "environments": [{**found["entry"], "python_env": "metaworld"}]})
+    )
+    out = cli("--registry", str(registry), "run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache)
+    assert out.returncode != 0
+    assert "python env `metaworld`" in out.stderr, out.stderr
+    assert "ImportError: the fake numpy of a test" in out.stderr, out.stderr
+    assert "unknown framework" not in out.stderr, out.stderr
+
+
+def read_only(folder: Path) -> list[str]:
+    """A command prefix that runs its command with `folder` read-only: as root, who ignores
+    file modes, on a read-only bind mount in a mount namespace of its own; else after
+    `chmod -R a-w` (undone by the caller)."""
+    if os.geteuid() != 0:
+        subprocess.run(["chmod", "-R", "a-w", str(folder)], check=True)
+        return []
+    probe = subprocess.run(["unshare", "-m", "true"], check=False, capture_output=True)
+    if probe.returncode != 0 or not shutil.which("unshare"):
+        pytest.skip(f"running as root, and no mount namespace to make the cache read-only in: {probe.stderr!r}")
+    script = 'mount --bind "$0" "$0" && mount -o remount,bind,ro "$0" "$0" && exec "$@"'
+    return ["unshare", "-m", "sh", "-c", script, str(folder)]
+
+
+def test_a_read_only_cache_serves_sessions(cache: Path, tmp_path: Path) -> None:
+    # Another install too, whose overlay the read-only cache cannot hold (it goes under the
+    # temporary folder).
+    other = install_copy(tmp_path / "other", "other")
+    prefix = read_only(cache)
+    try:
+        ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix))
+        ran(cli("run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache, prefix=prefix, binary=other / "bin" / "envhub"))
+        denied = subprocess.run([*prefix, "touch", str(cache / "probe")], check=False, capture_output=True)
+        assert denied.returncode != 0, "the cache was writable: the test proves nothing"
+    finally:
+        if not prefix:
+            subprocess.run(["chmod", "-R", "u+w", str(cache)], check=True)
+
+
+def install_copy(folder: Path, marker: str) -> Path:
+    """A copy of this checkout's `envhub` package in `folder` (hard links where possible: the
+    binaries are large), with a marker of its own in its `__init__.py`."""
+    source = Path(envhub.__file__).parent
+
+    def link_or_copy(src: str, dst: str) -> None:
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copy2(src, dst)
+
+    target = folder / "envhub"
+    shutil.copytree(source, target, copy_function=link_or_copy, ignore=shutil.ignore_patterns("__pycache__"))
+    init = target / "__init__.py"
+    text = init.read_text()
+    init.unlink()  # a new file, not the hard-linked original
+    init.write_text(f"{text}\n_INSTALL_MARKER = {marker!r}\n")
+    return target
+
+
+CLIENT = textwrap.dedent(
+    """\
+    import json, os, signal, sys, time
+    sys.path.insert(0, sys.argv[1])  # as an editable install's `.pth` would
+    import numpy as np
+    import envhub
+
+    def worker():
+        # The living worker (the session's pid list is the first one's).
+        for task in os.listdir("/proc/self/task"):
+            for pid in open(f"/proc/self/task/{task}/children").read().split():
+                if b"envhub.worker" in open(f"/proc/{pid}/cmdline", "rb").read():
+                    return int(pid)
+
+    def report(envs):
+        pid = worker()
+        with open(f"/proc/{pid}/maps") as f:
+            libs = sorted({l.split()[-1] for l in f if l.rstrip().endswith("_envhub.abi3.so")})
+        print(json.dumps({"pid": pid, "libs": libs, "marker": envhub._INSTALL_MARKER}), flush=True)
+
+    action = np.zeros((1, 4), dtype=np.float32)
+    envs = envhub.make_vec("metaworld-reach", 1, restart_on_crash=True)
+    envs.reset(seed=0)
+    envs.step(action)
+    report(envs)
+    sys.stdin.readline()  # the other install has used the environment meanwhile
+    os.kill(worker(), signal.SIGKILL)
+    envs.step(action)  # restarts the worker
+    envs.step(action)
+    report(envs)
+    envs.close()
+    """
+)
+
+
+def start_client(package: Path, cache: Path, log: Path) -> subprocess.Popen:
+    """A client process of the install `package` (imported without `PYTHONPATH`, from a
+    folder elsewhere, so nothing but envhub's own choice leads its workers there), its hub
+    logging what its workers report."""
+    env = {
+        **os.environ,
+        "ENVHUB_PYENV_DIR": str(cache),
+        "ENVHUB_LOG": "warn,envhub::launcher=debug",
+    }
+    env.pop("ENVHUB_PYTHON", None)
+    env.pop("PYTHONPATH", None)
+    return subprocess.Popen(
+        [sys.executable, "-c", CLIENT, str(package.parent)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=log.open("w"),
+        text=True,
+        env=env,
+        cwd=log.parent,
+    )
+
+
+def reported_packages(log: Path) -> list[str]:
+    """The packages the workers' ready lines named, as the hub logged them."""
+    import re
+
+    return re.findall(r'module: "([^"]+)"', log.read_text())
+
+
+def test_two_installs_sharing_the_cache_each_run_their_own_code(cache: Path, tmp_path: Path) -> None:
+    installs = {m: install_copy(tmp_path / m, m) for m in ("first", "second")}
+    logs = {m: tmp_path / f"{m}.log" for m in installs}
+    first = start_client(installs["first"], cache, logs["first"])
+    try:
+        line = first.stdout.readline()
+        assert line, logs["first"].read_text()[-3000:]
+        before = json.loads(line)
+        # The second install opens and closes a session of the same environment meanwhile.
+        second = start_client(installs["second"], cache, logs["second"])
+        out, _ = second.communicate("\n", timeout=RUN_TIMEOUT_S)
+        assert second.returncode == 0, logs["second"].read_text()[-3000:]
+        second_reports = [json.loads(line) for line in out.splitlines()]
+        out, _ = first.communicate("\n", timeout=RUN_TIMEOUT_S)
+        assert first.returncode == 0, logs["first"].read_text()[-3000:]
+        after = json.loads(out.splitlines()[-1])
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert after["pid"] != before["pid"], "the worker was not restarted"
+    for marker, reports in (("first", [before, after]), ("second", second_reports)):
+        package = installs[marker]
+        for r in reports:
+            assert r["marker"] == marker
+            assert r["libs"] == [str(package / "_envhub.abi3.so")], (marker, r)
+        told = reported_packages(logs[marker])
+        assert len(told) == len(reports) and all(os.path.realpath(t) == str(package) for t in told), (marker, told)
+    # Nothing in the venv was re-pointed at an install.
+    site = next(cache.glob("metaworld-*/lib/python*/site-packages"))
+    assert not (site / "envhub").exists()
+
+
+def test_a_worker_refuses_a_hub_of_another_protocol(tmp_path: Path) -> None:
+    package = Path(envhub.__file__).parent
+    out = subprocess.run(
+        [sys.executable, "-m", "envhub.worker", "describe"],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(package.parent), "ENVHUB_WORKER_PROTOCOL": "999"},
+    )
+    assert out.returncode != 0
+    own = envhub._envhub.WORKER_PROTOCOL
+    assert f"speaks envhub worker protocol {own}" in out.stderr, out.stderr
+    assert "the hub that started it speaks 999" in out.stderr and str(package) in out.stderr, out.stderr
+
+
+SESSION = textwrap.dedent(
+    """\
+    import json, os, signal, sys
+    import numpy as np
+    import envhub
+
+    action = np.zeros((1, 4), dtype=np.float32)
+    envs = envhub.make_vec("metaworld-reach", 1, restart_on_crash=True)
+    envs.reset(seed=0)
+    envs.step(action)
+    print(json.dumps({"pids": list(envs.worker_pids)}), flush=True)
+    sys.stdin.readline()  # the environment is removed meanwhile
+    os.kill(envs.worker_pids[0], signal.SIGKILL)
+    try:
+        envs.step(action)  # the restart needs the environment
+        print(json.dumps({"error": None}), flush=True)
+    except envhub.EnvHubError as e:
+        print(json.dumps({"error": str(e)}), flush=True)
+    envs.close()
+    """
+)
+
+
+def test_removing_an_environment_in_use_is_refused_unless_forced(tmp_path: Path) -> None:
+    own = tmp_path / "pyenvs"  # removed below: not the module's cache
+    built = cli("env", "sync", "metaworld", cache=own, timeout=SYNC_TIMEOUT_S)
+    if built.returncode != 0:
+        skip_or_fail(f"`envhub env sync metaworld` failed: {built.stderr.strip()[-2000:]}")
+    session = subprocess.Popen(
+        [sys.executable, "-c", SESSION],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "ENVHUB_PYENV_DIR": str(own)},
+    )
+    try:
+        line = session.stdout.readline()
+        assert line, session.stderr.read()[-3000:]
+        pids = json.loads(line)["pids"]
+        refused = cli("env", "remove", "metaworld", cache=own)
+        assert refused.returncode != 0
+        assert "in use" in refused.stderr and f"pid {pids[0]}" in refused.stderr, refused.stderr
+        assert "--force" in refused.stderr, refused.stderr
+        assert any(p.name.startswith("metaworld-") and p.is_dir() for p in own.iterdir())
+        forced = cli("env", "remove", "--force", "metaworld", cache=own)
+        assert forced.returncode == 0, forced.stderr
+        assert not any(p.name.startswith("metaworld-") and p.is_dir() for p in own.iterdir())
+        out, err = session.communicate("\n", timeout=RUN_TIMEOUT_S)
+    finally:
+        if session.poll() is None:
+            session.kill()
+    error = json.loads(out.splitlines()[-1])["error"]
+    assert error is not None, "the session restarted a worker without its environment"
+    assert "python env `metaworld` was removed while this session used it" in error, error
+    assert "envhub env sync metaworld" in error, error
+    assert "No such file" not in error and "ENOENT" not in error, error
+
+
+def test_prune_removes_what_the_rules_select_and_never_what_is_in_use(cache: Path, tmp_path: Path) -> None:
+    # Nothing unused for a day: the environment was just used.
+    kept = cli("env", "prune", "--unused-days", "1", cache=cache)
+    assert kept.returncode == 0 and "0 environment(s) removed" in kept.stdout, kept.stdout + kept.stderr
+    # A budget it exceeds selects it; a dry run removes nothing.
+    dry = cli("env", "prune", "--max-size", "1M", "--dry-run", cache=cache)
+    assert dry.returncode == 0, dry.stderr
+    assert "would remove" in dry.stdout and "metaworld-" in dry.stdout, dry.stdout
+    assert any(p.name.startswith("metaworld-") for p in cache.iterdir())
+    # Sizes count disk once per file: far less than the files' lengths summed twice over.
+    listed = json.loads(cli("env", "list", "--json", cache=cache).stdout)
+    size = next(r["size_bytes"] for r in listed if r["name"] == "metaworld" and r["in_catalog"])
+    assert 10e6 < size < 2e9, size
+
+
+def real_cpython_not_in_usr_bin() -> Path | None:
+    """A pyenv CPython whose minor version `/usr/bin` lacks (so it is the only one of it)."""
+    root = Path(os.environ.get("PYENV_ROOT") or Path.home() / ".pyenv")
+    for python in sorted(root.glob("versions/3.*/bin/python3.[0-9]*")):
+        if python.name.count(".") == 1 and python.name[-1].isdigit() and not Path("/usr/bin", python.name).exists():
+            return python
+    return None
+
+
+FREE_THREADED = """\
+#!/bin/sh
+# A CPython that says it is free-threaded: every answer it gives (uv's question, envhub's)
+# claims the GIL is disabled.
+"{python}" "$@" | sed -e 's/"gil_disabled": false/"gil_disabled": true/g'
+"""
+
+
+def test_a_free_threaded_python_is_not_picked_and_the_hint_names_the_install_command(tmp_path: Path) -> None:
+    real = real_cpython_not_in_usr_bin()
+    if real is None:
+        pytest.skip("no pyenv CPython whose version /usr/bin lacks")
+    minor = real.name.removeprefix("python")
+    fake_dir = tmp_path / "bin"
+    fake_dir.mkdir()
+    fake = fake_dir / real.name
+    fake.write_text(FREE_THREADED.format(python=real))
+    fake.chmod(0o755)
+    registry = tmp_path / "registry.yaml"
+    registry.write_text(
+        yaml.safe_dump({"python_envs": {"ft": {"python": minor, "requirements": ["packaging"]}}, "environments": []})
+    )
+    env = {
+        # The fake first; no pyenv, no uv-managed Pythons.
+        "PATH": f"{fake_dir}:/usr/bin:/bin",
+        "UV_PYTHON_INSTALL_DIR": str(tmp_path / "uv-pythons"),
+        "ENVHUB_PYTHON_INSTALL": "",
+    }
+    out = cli("--registry", str(registry), "env", "sync", "ft", cache=tmp_path / "pyenvs", env=env, timeout=SYNC_TIMEOUT_S)
+    assert out.returncode != 0, f"built on the free-threaded fake: {out.stdout}"
+    assert f"wants CPython {minor}" in out.stderr, out.stderr
+    assert f"`uv python install {minor}`" in out.stderr and "ENVHUB_PYTHON_INSTALL=1" in out.stderr, out.stderr
+    present = out.stderr.split("present:")[1].splitlines()[0]
+    assert str(fake) not in present, out.stderr
+
+
+def test_the_list_shows_what_the_requirements_resolved_to(cache: Path) -> None:
+    listed = cli("env", "list", "--json", cache=cache)
+    assert listed.returncode == 0, listed.stderr
+    row = next(r for r in json.loads(listed.stdout) if r["name"] == "metaworld" and r["in_catalog"])
+    resolved = row["resolved"]
+    assert "metaworld==3.1.1" in resolved and "mujoco==3.3.0" in resolved, resolved
+    # What the unpinned requirements became, with their versions.
+    assert any(r.startswith("numpy==") for r in resolved) and any(r.startswith("packaging==") for r in resolved)
+    assert resolved == sorted(resolved)
