@@ -243,6 +243,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
             spec,
             route: route(),
             workers: 2,
+            key: "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff".into(),
         };
         add("open_reply", name, picked(json(&reply)));
     }
