@@ -44,6 +44,7 @@ fn cartpole_spec() -> ReadySpec {
         max_episode_steps: Some(500),
         render_fps: Some(50.0),
         pid: 4242,
+        worker: None,
     }
 }
 
@@ -66,6 +67,7 @@ fn nested_spec() -> ReadySpec {
         max_episode_steps: None,
         render_fps: None,
         pid: 7,
+        worker: None,
     }
 }
 
