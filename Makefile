@@ -66,7 +66,7 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
+.PHONY: fuzz help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -74,6 +74,7 @@ help:
 	@echo "make lint   cargo fmt --check and clippy -D warnings"
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
+	@echo "make fuzz   coverage-guided fuzzing of the parsers (cargo-fuzz, FUZZ_SECONDS each)"
 	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
@@ -251,6 +252,14 @@ py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
 	fi
 
 test: lint rust-test py-test
+
+# Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
+# cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. Opt-in: its
+# AddressSanitizer build of the targets takes minutes; `make test` runs the quick tier
+# (hub/src/fuzz.rs) and checks the seed corpora (protocol/tests/fuzz_seeds.rs).
+FUZZ_SECONDS ?= 10
+fuzz:
+	scripts/fuzz.sh $(FUZZ_SECONDS)
 
 clean:
 	$(CARGO) clean
