@@ -8,7 +8,6 @@ use super::Outcome;
 use anyhow::Context;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 #[derive(clap::Args, Debug)]
 #[command(disable_help_flag = true)]
@@ -30,17 +29,9 @@ pub(crate) fn run(
     config: Option<&Path>,
     args: &Args,
 ) -> anyhow::Result<Outcome> {
-    let python = envhub::python_interpreter();
-    let mut command = Command::new(&python);
-    command.args(["-m", "envhub.evaluation"]).args(&args.args);
-    if !registries.is_empty() {
-        let joined = std::env::join_paths(registries).context("registry paths")?;
-        command.env(envhub::env_vars::ENVHUB_REGISTRY, joined);
-    }
-    if let Some(config) = config {
-        command.env(envhub::env_vars::ENVHUB_CONFIG, config);
-    }
-    let status = command.status().with_context(|| {
+    let (python, mut command) =
+        super::record::python_module("envhub.evaluation", registries, config)?;
+    let status = command.args(&args.args).status().with_context(|| {
         format!(
             "cannot run `{} -m envhub.evaluation`\nhint: the evaluation runs in the Python package: set ENVHUB_PYTHON to an interpreter with envhub installed",
             python.display()

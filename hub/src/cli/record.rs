@@ -54,16 +54,17 @@ pub(crate) struct Args {
     when_full: String,
 }
 
-/// The hub's interpreter running `python -m envhub.recording ARGS`, with the command line's
-/// registries and config file.
-fn recorder(
+/// The hub's interpreter set to run `python -m MODULE` (arguments to add), with the command
+/// line's registries and config file: how `envhub record` and `envhub eval` reach the Python
+/// package. Returns the interpreter too, for messages.
+pub(crate) fn python_module(
+    module: &str,
     registries: &[PathBuf],
     config: Option<&Path>,
-    args: &[OsString],
-) -> anyhow::Result<Outcome> {
+) -> anyhow::Result<(PathBuf, Command)> {
     let python = envhub::python_interpreter();
     let mut command = Command::new(&python);
-    command.args(["-m", "envhub.recording"]).args(args);
+    command.args(["-m", module]);
     if !registries.is_empty() {
         let joined = std::env::join_paths(registries).context("registry paths")?;
         command.env(envhub::env_vars::ENVHUB_REGISTRY, joined);
@@ -71,7 +72,18 @@ fn recorder(
     if let Some(config) = config {
         command.env(envhub::env_vars::ENVHUB_CONFIG, config);
     }
-    let status = command.status().with_context(|| {
+    Ok((python, command))
+}
+
+/// The hub's interpreter running `python -m envhub.recording ARGS`, with the command line's
+/// registries and config file.
+fn recorder(
+    registries: &[PathBuf],
+    config: Option<&Path>,
+    args: &[OsString],
+) -> anyhow::Result<Outcome> {
+    let (python, mut command) = python_module("envhub.recording", registries, config)?;
+    let status = command.args(args).status().with_context(|| {
         format!(
             "cannot run `{} -m envhub.recording`\nhint: recording runs in the Python package: set ENVHUB_PYTHON to an interpreter with `envhub[record]` installed",
             python.display()
