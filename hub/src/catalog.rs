@@ -10,7 +10,7 @@
 //! lock is held while a worker is asked, so callers that need another catalog, or one already
 //! known, never wait behind it.
 
-use crate::bounded::{self, RunError, seconds};
+use crate::bounded::{self, RunError};
 use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT, ENVHUB_TEST_ADAPTERS};
 use crate::python_host::{self, UserAdapters};
 use crate::worker_binary::worker_binary;
@@ -141,20 +141,7 @@ const WITH_USER_CAPACITY: usize = 16;
 /// How long a `describe` may take before it is killed and reported as hung
 /// (`ENVHUB_DESCRIBE_TIMEOUT`, seconds; default 30).
 fn describe_timeout() -> Duration {
-    const DEFAULT: Duration = Duration::from_secs(30);
-    let Ok(text) = std::env::var(ENVHUB_DESCRIBE_TIMEOUT) else {
-        return DEFAULT;
-    };
-    match text.trim().parse::<f64>() {
-        Ok(s) if s.is_finite() && s > 0.0 => Duration::from_secs_f64(s),
-        _ => {
-            tracing::warn!(
-                "ignoring {ENVHUB_DESCRIBE_TIMEOUT}=`{text}`: not a positive number of seconds; using {}",
-                seconds(DEFAULT)
-            );
-            DEFAULT
-        }
-    }
+    envhub_session::seconds_from_env(ENVHUB_DESCRIBE_TIMEOUT, Duration::from_secs(30))
 }
 
 /// Forgets the catalog, so the next [`adapters`] call asks the workers again.

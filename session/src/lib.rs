@@ -26,6 +26,6 @@ pub use env::{Env, Step};
 pub use envhub_protocol::Frame;
 pub use launch::{Launch, Process};
 pub use remote::{LOCAL, RemoteSlice, Slice, SliceOpener};
-pub use session_options::{SessionOptions, cores, workers_for};
+pub use session_options::{SessionOptions, cores, seconds_from_env, workers_for};
 pub use vec_env::{StartPlan, VecEnv};
 pub use worker_link::InterruptCheck;

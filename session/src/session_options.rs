@@ -43,22 +43,20 @@ pub struct SessionOptions {
     pub info_row_bytes: usize,
 }
 
-/// `ENVHUB_START_TIMEOUT` seconds, else 120 (a value that is not a positive number is
-/// ignored with a warning).
-fn default_start_timeout() -> Duration {
-    const DEFAULT: Duration = Duration::from_secs(120);
-    let Ok(text) = std::env::var(envhub_core::env_vars::ENVHUB_START_TIMEOUT) else {
-        return DEFAULT;
+/// A duration in seconds from the environment variable `name`, else `default`; a value that
+/// is not a positive number of seconds is ignored with a warning that says so.
+pub fn seconds_from_env(name: &str, default: Duration) -> Duration {
+    let Ok(text) = std::env::var(name) else {
+        return default;
     };
     match text.trim().parse::<f64>() {
         Ok(secs) if secs.is_finite() && secs > 0.0 => Duration::from_secs_f64(secs),
         _ => {
             tracing::warn!(
-                "ignoring {}=`{text}`: not a positive number of seconds; using {}s",
-                envhub_core::env_vars::ENVHUB_START_TIMEOUT,
-                DEFAULT.as_secs()
+                "ignoring {name}=`{text}`: not a positive number of seconds; using {}s",
+                default.as_secs_f64()
             );
-            DEFAULT
+            default
         }
     }
 }
@@ -67,7 +65,10 @@ impl Default for SessionOptions {
     fn default() -> Self {
         SessionOptions {
             step_timeout: Duration::from_secs(60),
-            start_timeout: default_start_timeout(),
+            start_timeout: seconds_from_env(
+                envhub_core::env_vars::ENVHUB_START_TIMEOUT,
+                Duration::from_secs(120),
+            ),
             restart_on_crash: false,
             spin: Duration::from_micros(50),
             max_spin: Duration::from_millis(2),
