@@ -89,7 +89,10 @@ def oldest(tmp_path_factory) -> tuple[Path, str]:
 
 
 def run_in(python: str, code: str) -> str:
-    done = subprocess.run([python, "-c", code], check=False, capture_output=True, text=True, timeout=120)
+    """`code` run by the environment's interpreter with this envhub on its path (a venv holds
+    the suite only; the hub puts its own install on a worker's path, as this does)."""
+    env = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
+    done = subprocess.run([python, "-c", code], check=False, capture_output=True, text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
     return done.stdout
 
