@@ -27,6 +27,7 @@ from __future__ import annotations
 import os
 import re
 import subprocess
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,10 @@ from conftest import import_envhub
 envhub = import_envhub()
 
 from envhub.evaluation import evaluate  # noqa: E402
+
+# The environment's interpreter run directly, with this envhub on its path (a venv holds the
+# suite only; the hub puts its own install on a worker's path).
+WITH_ENVHUB = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
 from envhub.evaluation.catalog import Catalog  # noqa: E402
 
 REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVHUB_SUITES_REQUIRED"))
@@ -127,6 +132,7 @@ def libero_python() -> str:
         capture_output=True,
         text=True,
         timeout=300,
+        env=WITH_ENVHUB,
     )
     if check.returncode != 0:
         skip(f"LIBERO is unavailable in its environment: {check.stderr.strip()[-1500:]}")
@@ -140,7 +146,7 @@ def test_first_observation_and_success_flags_match_libero_in_process(tmp_path):
     code = REFERENCE.replace("INIT_STATES", str(INIT_STATES)).replace("HORIZON", str(HORIZON))
     code = code.replace("KEYS", repr(keys))
     ref_file = tmp_path / "ref.npz"
-    env = {**os.environ, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
+    env = {**WITH_ENVHUB, "MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
     done = subprocess.run([python, "-c", code, str(ref_file)], capture_output=True, text=True, timeout=900, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
     ref = np.load(ref_file)
