@@ -196,17 +196,52 @@ pub(crate) fn worker_python(
         store.used(&env);
         env
     };
-    // This install's own way into the venv: its overlay, never a link another install
-    // re-points.
-    let overlay = store.overlay(name).map_err(|e| failed(e.to_string()))?;
-    Ok(Some(WorkerPython {
+    as_run(store, env)
+        .map(Some)
+        .map_err(|e| failed(e.to_string()))
+}
+
+/// How this install's processes run in a built environment: its interpreter and variables,
+/// and this install's own way into the venv (its overlay, never a link another install
+/// re-points).
+fn as_run(
+    store: &Store,
+    env: envhub_pyenv::PythonEnv,
+) -> Result<WorkerPython, envhub_pyenv::PyEnvError> {
+    let overlay = store.overlay(&env.name)?;
+    Ok(WorkerPython {
         sys_path: vec![overlay],
         package: store.packages().first().cloned(),
         hold: Some(env.hold()),
         name: env.name,
         interpreter: env.python,
         env: env.env,
-    }))
+    })
+}
+
+/// A program of this install run in the catalog's Python environment `name` (`envhub env
+/// run`), built first where it is not: its command, and the environment it runs in.
+pub fn program_in(
+    registry: &Registry,
+    name: &str,
+    args: &[std::ffi::OsString],
+) -> Result<(std::process::Command, WorkerPython), String> {
+    let env = named_env(registry, name)?;
+    Ok((crate::python_host::environment_program(&env, args), env))
+}
+
+fn named_env(registry: &Registry, name: &str) -> Result<WorkerPython, String> {
+    let all = registry.python_envs().all();
+    let spec = all.get(name).ok_or_else(|| {
+        let known: Vec<&str> = all.keys().map(String::as_str).collect();
+        format!(
+            "no python env `{name}` in the catalog (defined: {})\nhint: `envhub env list` shows them",
+            if known.is_empty() { "none".to_string() } else { known.join(", ") }
+        )
+    })?;
+    let store = store()?;
+    let env = store.ensure(name, spec).map_err(|e| format!("{e:#}"))?;
+    as_run(store, env).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -156,15 +156,46 @@ pub(crate) fn worker_command_in(
 /// packages than its environment's (a ROS or conda `PYTHONPATH`, an activated venv).
 const HUB_PYTHON_VARS: &[&str] = &["PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV", "PYTHONUSERBASE"];
 
-/// The worker in a provisioned environment: its interpreter, with none of the hub's Python
-/// variables, as if its venv were activated (`VIRTUAL_ENV`, its `bin/` first on `PATH`),
-/// then the variables the environment declares. It starts through [`bootstrap`] rather than
+/// The worker in a provisioned environment ([`in_environment`]). It starts through
+/// [`bootstrap`] rather than
 /// `-m`, which would put the current folder first on `sys.path` (`-P` exists only from 3.11).
 fn provisioned_command(
     env: &envhub_shm::WorkerPython,
     adapters: &[String],
     extra: &UserAdapters,
 ) -> Command {
+    let mut cmd = in_environment(env);
+    // User adapters' folders go after the venv's own packages: they can add modules, never
+    // shadow the suite's pins.
+    let mut after = Vec::new();
+    if !adapters.is_empty() {
+        after.extend(user_adapters_of_this_process().pythonpath);
+        after.extend(extra.pythonpath.iter().cloned());
+    }
+    cmd.arg("-c").arg(bootstrap(env, &unique(after)));
+    cmd
+}
+
+/// A program run in a provisioned environment by `envhub env run` (a policy, a user's
+/// script): its interpreter with `args`, as [`provisioned_command`] sets it up, with this
+/// install's overlay as `PYTHONPATH`, so it imports this install's `envhub` (after the
+/// script's folder or, with `-m`, the current one, as Python does).
+pub(crate) fn environment_program(
+    env: &envhub_shm::WorkerPython,
+    args: &[std::ffi::OsString],
+) -> Command {
+    let mut cmd = in_environment(env);
+    if let Ok(joined) = std::env::join_paths(&env.sys_path) {
+        cmd.env("PYTHONPATH", joined);
+    }
+    cmd.args(args);
+    cmd
+}
+
+/// The environment's interpreter, with none of the hub's Python variables, as if its venv
+/// were activated (`VIRTUAL_ENV`, its `bin/` first on `PATH`), then the variables the
+/// environment declares.
+fn in_environment(env: &envhub_shm::WorkerPython) -> Command {
     let mut cmd = Command::new(&env.interpreter);
     for var in HUB_PYTHON_VARS {
         cmd.env_remove(var);
@@ -181,14 +212,6 @@ fn provisioned_command(
         }
     }
     cmd.envs(&env.env);
-    // User adapters' folders go after the venv's own packages: they can add modules, never
-    // shadow the suite's pins.
-    let mut after = Vec::new();
-    if !adapters.is_empty() {
-        after.extend(user_adapters_of_this_process().pythonpath);
-        after.extend(extra.pythonpath.iter().cloned());
-    }
-    cmd.arg("-c").arg(bootstrap(env, &unique(after)));
     cmd
 }
 

@@ -32,6 +32,31 @@ pub(crate) fn exclusive(path: &Path) -> std::io::Result<Option<Result<Exclusive,
     Ok(Some(Err(holders(&file.metadata()?))))
 }
 
+/// A shared hold on `path` for this process and whatever it `exec`s into: the descriptor
+/// is left open across `exec` (no `CLOEXEC`), so the program that replaces this one holds
+/// the environment for its whole life, as a worker does. Waits while a removal holds it
+/// exclusively; an error when the file is gone (removed, or removed while waiting).
+pub fn shared_across_exec(path: &Path) -> std::io::Result<std::os::fd::OwnedFd> {
+    let fd = std::os::fd::OwnedFd::from(File::open(path)?);
+    // SAFETY: `fd` is an open descriptor owned here for the duration of both calls.
+    unsafe {
+        if libc::flock(fd.as_raw_fd(), libc::LOCK_SH) != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let flags = libc::fcntl(fd.as_raw_fd(), libc::F_GETFD);
+        if flags < 0 || libc::fcntl(fd.as_raw_fd(), libc::F_SETFD, flags & !libc::FD_CLOEXEC) < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+    }
+    if !path.exists() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            "removed while waiting for it",
+        ));
+    }
+    Ok(fd)
+}
+
 /// The pids that hold a lock on the file of `meta`, from `/proc/locks`.
 pub(crate) fn holders(meta: &std::fs::Metadata) -> Vec<u32> {
     let text = std::fs::read_to_string("/proc/locks").unwrap_or_default();

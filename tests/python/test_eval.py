@@ -288,7 +288,7 @@ def test_a_policy_in_another_interpreter_gives_the_same_results(tmp_path, polici
     from envhub.evaluation.policy_env import EnvPolicy
 
     here = ev(PENDULUM, f"{policies}:act", num_envs=2, out=tmp_path / "here", progress=False)
-    there = EnvPolicy(f"{policies}:act", sys.executable, env_name="(this interpreter)")
+    there = EnvPolicy(f"{policies}:act", [sys.executable], env_name="(this interpreter)")
     remote = ev(PENDULUM, there, num_envs=2, out=tmp_path / "there", progress=False)
     assert table(here) == table(remote)
     assert remote["policy"]["python_env"] == "(this interpreter)"

@@ -13,6 +13,9 @@ own with `envhub env sync metaworld`.
 - A worker refuses a hub of another worker protocol, naming both.
 - `envhub env remove` while a session uses the environment is refused, naming its workers'
   pids; `--force` removes it, and the session's next worker start fails saying it was removed.
+- `envhub env run NAME -- ARGS` runs a program as the workers run (this install's `envhub`,
+  the suite's packages, none of the caller's Python variables), holding the environment, and
+  exits with the program's status.
 - `envhub env list --json` shows what each environment's requirements resolved to.
 - A CPython that reports itself free-threaded (a script wrapping a real one) is not picked; the
   error names `uv python install 3.X`.
@@ -360,6 +363,51 @@ def test_removing_an_environment_in_use_is_refused_unless_forced(tmp_path: Path)
     assert "python env `metaworld` was removed while this session used it" in error, error
     assert "envhub env sync metaworld" in error, error
     assert "No such file" not in error and "ENOENT" not in error, error
+
+
+RUN_PROBE = """
+import json, os, sys, time
+import envhub, metaworld
+print(json.dumps({"envhub": envhub.__file__, "metaworld": metaworld.__file__, "prefix": sys.prefix,
+                  "venv": os.environ.get("VIRTUAL_ENV"), "path": sys.path, "args": sys.argv[1:]}), flush=True)
+sys.stdin.readline()
+sys.exit(7)
+"""
+
+
+def test_env_run_runs_a_program_as_the_workers_run_holding_the_environment(cache: Path, tmp_path: Path) -> None:
+    shadow = broken_numpy(tmp_path / "shadow")
+    probe = tmp_path / "probe.py"
+    probe.write_text(RUN_PROBE)
+    program = subprocess.Popen(
+        [str(BINARY), "env", "run", "metaworld", "--", str(probe), "--flag", "x"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "ENVHUB_PYENV_DIR": str(cache), "PYTHONPATH": str(shadow)},
+    )
+    try:
+        line = program.stdout.readline()
+        assert line, program.stderr.read()[-3000:]
+        seen = json.loads(line)
+        # This install's envhub, through its overlay; the suite from the environment's venv.
+        assert Path(seen["envhub"]).resolve().parent == Path(envhub.__file__).resolve().parent, seen
+        assert ".installs" in seen["envhub"], seen
+        assert Path(seen["metaworld"]).is_relative_to(Path(seen["prefix"])), seen
+        assert seen["venv"] == seen["prefix"] and str(shadow) not in seen["path"], seen
+        assert seen["args"] == ["--flag", "x"], seen
+        # The program holds the environment: removing it is refused, naming the program.
+        refused = cli("env", "remove", "metaworld", cache=cache)
+        assert refused.returncode != 0 and f"pid {program.pid}" in refused.stderr, refused.stderr
+        out, err = program.communicate("\n", timeout=RUN_TIMEOUT_S)
+    finally:
+        if program.poll() is None:
+            program.kill()
+    assert program.returncode == 7, err[-3000:]  # the program's own status
+    unknown = cli("env", "run", "no-such-env", "--", "-c", "pass", cache=cache)
+    assert unknown.returncode != 0 and "no python env `no-such-env`" in unknown.stderr, unknown.stderr
+    assert "metaworld" in unknown.stderr, unknown.stderr
 
 
 def test_prune_removes_what_the_rules_select_and_never_what_is_in_use(cache: Path, tmp_path: Path) -> None:

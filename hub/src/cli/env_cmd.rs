@@ -26,6 +26,17 @@ enum Command {
         /// Names (`python_envs:` of the registry); none: every one.
         names: Vec<String>,
     },
+    /// Run a program in a catalog environment (built first if not ready), as its workers
+    /// run: its interpreter and variables, importing this install's `envhub`, holding the
+    /// environment so it is not removed under it. `envhub env run metaworld -- -m
+    /// my_eval --tasks 10`, `envhub env run libero -- script.py`.
+    Run {
+        /// The environment's name (`python_envs:` of the registry).
+        name: String,
+        /// The interpreter's arguments (after `--`).
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
     /// Delete the built environments of these names (every version of each); refused while
     /// running sessions' workers use one, naming their pids.
     Remove {
@@ -83,6 +94,7 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
     match &args.command {
         Command::List { json } => list(registry, store, *json),
         Command::Sync { names } => sync(registry, store, names),
+        Command::Run { name, args } => run_in(registry, name, args),
         Command::Remove { names, force } => {
             for name in names {
                 for dir in store.remove(name, *force)? {
@@ -98,6 +110,28 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
             dry_run,
         } => prune(registry, store, *unused_days, *unnamed, *max_size, *dry_run),
     }
+}
+
+/// Replaces this process with the program (so signals, pipes and the exit status are the
+/// program's own), holding the environment across the `exec`.
+fn run_in(registry: &Registry, name: &str, args: &[std::ffi::OsString]) -> anyhow::Result<Outcome> {
+    use std::os::unix::process::CommandExt;
+    let (mut program, env) =
+        provision::program_in(registry, name, args).map_err(anyhow::Error::msg)?;
+    let _held = match &env.hold {
+        Some(hold) => Some(envhub_pyenv::shared_across_exec(hold).with_context(|| {
+            format!(
+                "cannot hold python env `{name}` (`{}`): it was removed\nhint: `envhub env sync {name}` builds it again",
+                hold.display()
+            )
+        })?),
+        None => None,
+    };
+    let error = program.exec();
+    anyhow::bail!(
+        "cannot run `{}` of python env `{name}`: {error}",
+        env.interpreter.display()
+    )
 }
 
 fn prune(

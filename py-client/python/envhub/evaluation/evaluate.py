@@ -49,9 +49,11 @@ def make_policy(
     per_task: bool = False,
     server: str | None = None,
     server_protocol: str = "vla-eval",
+    registry: Any = None,
 ) -> Policy:
     """A `Policy` from what the caller gave: a Policy, a callable, `module:function` (run
-    here, or in the catalog Python environment `policy_env`), or a server URL."""
+    here, or in the Python environment `policy_env` of the catalog `registry`), or a server
+    URL."""
     from .callable import CallablePolicy, PerTask, load
 
     if server is not None:
@@ -63,9 +65,10 @@ def make_policy(
     if policy_env is not None:
         if not isinstance(policy, str):
             raise ValueError("--policy-env runs a policy named `module:function` (an object cannot travel there)")
-        from .policy_env import EnvPolicy, env_python
+        from .policy_env import EnvPolicy, env_command
 
-        return EnvPolicy(policy, env_python(policy_env), per_task=per_task, env_name=policy_env)
+        command = env_command(policy_env, registry)
+        return EnvPolicy(policy, command, per_task=per_task, env_name=policy_env)
     if all(hasattr(policy, m) for m in ("act", "start", "end", "describe", "close")):
         return policy
     name = policy if isinstance(policy, str) else None
@@ -128,7 +131,7 @@ def evaluate(
     folder = os.fspath(out) if out is not None else tempfile.mkdtemp(prefix=f"envhub-eval-{bench.name}-")
     pol = make_policy(
         policy, policy_env=policy_env or (bench.python_env if isinstance(policy, str) and server is None else None),
-        per_task=per_task, server=server, server_protocol=server_protocol,
+        per_task=per_task, server=server, server_protocol=server_protocol, registry=catalog.registry,
     )
     try:
         description = pol.describe()

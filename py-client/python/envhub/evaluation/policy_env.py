@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import pickle
-import re
 import subprocess
 import sys
 from typing import Any, Sequence
@@ -20,34 +19,30 @@ import numpy as np
 
 from .policy import Episode, PolicyError, Request
 
-__all__ = ["EnvPolicy", "env_python"]
+__all__ = ["EnvPolicy", "env_command"]
 
 
-def env_python(name: str) -> str:
-    """The interpreter of the catalog's Python environment `name`, built first where it is
-    not (`envhub env sync NAME`)."""
+def env_command(name: str, registry: Any = None) -> list[str]:
+    """The command that runs the rest of its arguments in the catalog's Python environment
+    `name` as its workers run (`envhub env run NAME --`): built first where it is not, its
+    interpreter importing this install's `envhub`, the environment held while it runs."""
     from .._cli import BINARY
 
-    done = subprocess.run([str(BINARY), "env", "sync", name], capture_output=True, text=True, timeout=1800)
-    found = re.search(rf"^{re.escape(name)}: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
-    if done.returncode != 0 or not found:
-        raise PolicyError(
-            f"the policy's Python environment `{name}` is not available: "
-            f"{(done.stderr or done.stdout).strip()[-1500:]}\nhint: `envhub env list` names the catalog's environments"
-        )
-    return os.path.join(found.group(1), "bin", "python")
+    files: list[str] = []
+    for source in getattr(registry, "sources", None) or []:
+        files += ["--registry", "@default" if source.endswith("(@default)") else source]
+    return [str(BINARY), *files, "env", "run", name, "--"]
 
 
 class EnvPolicy:
     """A `Policy` whose callable (`module:function`) runs in another interpreter."""
 
-    def __init__(self, spec: str, python: str, per_task: bool = False, env_name: str | None = None) -> None:
+    def __init__(self, spec: str, command: Sequence[str], per_task: bool = False, env_name: str | None = None) -> None:
         self.spec, self.env_name = spec, env_name
-        args = [python, "-m", "envhub.evaluation.policy_env", spec] + (["--per-task"] if per_task else [])
-        path = os.pathsep.join(p for p in [os.getcwd(), os.environ.get("PYTHONPATH", "")] if p)
-        self.proc = subprocess.Popen(
-            args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env={**os.environ, "PYTHONPATH": path}
-        )
+        args = [*command, "-m", "envhub.evaluation.policy_env", spec] + (["--per-task"] if per_task else [])
+        # `-m` puts the current folder first on the child's path: the policy's module is found
+        # where `--policy` names it, as in this process.
+        self.proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         self.info: dict[str, Any] = self._call("describe")
 
     def _call(self, command: str, *args: Any) -> Any:
