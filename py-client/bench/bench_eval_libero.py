@@ -17,6 +17,8 @@ on each side, one run of each:
   vla-eval` against the same model server process;
 - `callable`: `envhub eval ... --policy bench_eval_libero.py:constant` (the policy a Python
   callable in envhub's process);
+- `render` (only when named): the CPU time of one LIBERO step with the cameras and without,
+  in one process: how much of a step is the renderer on this machine;
 - `bare`: LIBERO's `OffScreenRenderEnv` stepped by hand in `--shards` processes with the
   same episodes, cameras, settling and horizon, no harness: the simulator and the renderer
   alone, the floor both harnesses sit on.
@@ -220,14 +222,21 @@ def profiled(cmd: list[str], name: str) -> list[str]:
 # resetting envs, importing them. Everything else is the harness's (its interpreters, imports,
 # messages, copies, results) or the model server client's.
 SIMULATOR = re.compile(r"\((?:[^()]*/)?(?:robosuite|libero|mujoco|torch|bddl)/")
+# Innermost frames that wait for another process (a worker's step, the server's answer, the
+# next command): py-spy counts such a thread while it is runnable, which on a loaded machine
+# is not the same as working, so the harness's work is reported with and without them.
+WAITS = re.compile(
+    r"^(?:VectorEnv\.recv \(envhub/client/vector\.py|serve \(envhub/worker/entry\.py|\w*Selector\.select "
+    r"\(selectors\.py|Popen\._try_wait|Condition\.wait|_wait_for_tstate_lock|Event\.wait)"
+)
+_FRAME = re.compile(r"^\S.* \(.+:\d+\)$")
 
 
-def read_profile(path: Path) -> tuple[float, float, dict[str, float]]:
-    """Seconds of samples on the simulator's stack and the harness's, and the harness's
-    seconds by innermost frame, from py-spy's raw output (a stack `a;b;c N` per line; a
-    process's command line may span lines)."""
-    sim = harness = 0.0
-    leaves: dict[str, float] = {}
+def read_profile(path: Path) -> dict[str, float]:
+    """Seconds of samples by innermost frame, each key prefixed `sim:` or `harness:`, from
+    py-spy's raw output (a stack `process ...;a;b;c N` per record; a process's command line
+    may span lines)."""
+    out: dict[str, float] = {}
     record = ""
     for line in path.read_text(errors="replace").splitlines():
         record = f"{record}\n{line}" if record else line
@@ -236,26 +245,33 @@ def read_profile(path: Path) -> tuple[float, float, dict[str, float]]:
             continue
         stack, seconds = record[: found.start()], int(found.group(1)) / PROFILE["rate"]
         record = ""
-        frames = [f for f in stack.split(";") if not f.startswith("process ")]
-        if any(SIMULATOR.search(f) for f in frames):
-            sim += seconds
-        else:
-            harness += seconds
-            leaf = frames[-1] if frames else "(process)"
-            leaves[leaf] = leaves.get(leaf, 0.0) + seconds
-    return sim, harness, leaves
+        # The frames after the process labels (`process PID:"command line"`, which may hold
+        # anything): the innermost run of `function (file:line)` entries.
+        parts = stack.split(";")
+        start = len(parts)
+        while start > 0 and _FRAME.match(parts[start - 1]) and not parts[start - 1].startswith("process "):
+            start -= 1
+        frames = parts[start:]
+        side = "sim" if any(SIMULATOR.search(f) for f in frames) else "harness"
+        key = f"{side}:{frames[-1] if frames else '(no Python frame)'}"
+        out[key] = out.get(key, 0.0) + seconds
+    return out
 
 
 def profile_split(name: str) -> dict:
-    sim = harness = 0.0
     leaves: dict[str, float] = {}
     for path in sorted(Path(PROFILE["dir"]).glob(f"{name}*.txt")):
-        s, h, part = read_profile(path)
-        sim, harness = sim + s, harness + h
-        for k, v in part.items():
+        for k, v in read_profile(path).items():
             leaves[k] = leaves.get(k, 0.0) + v
-    top = sorted(leaves.items(), key=lambda kv: -kv[1])[:8]
-    return {"sim_s": sim, "harness_s": harness, "harness_top": {k: round(v, 2) for k, v in top}}
+    harness = {k[8:]: v for k, v in leaves.items() if k.startswith("harness:")}
+    waits = sum(v for k, v in harness.items() if WAITS.match(k))
+    top = sorted(harness.items(), key=lambda kv: -kv[1])[:8]
+    return {
+        "sim_s": sum(v for k, v in leaves.items() if k.startswith("sim:")),
+        "harness_s": sum(harness.values()),
+        "harness_work_s": sum(harness.values()) - waits,
+        "harness_top": {k: round(v, 2) for k, v in top},
+    }
 
 
 def run_checked(cmd: list[str], env: dict, what: str, cwd: str | None = None) -> subprocess.CompletedProcess:
@@ -368,6 +384,13 @@ def run_envhub(policy: list[str], tasks: int, episodes: int, shards: int, camera
 def compare(args: argparse.Namespace) -> list[dict]:
     python = vla_eval_python()
     only = set(args.only.split(","))
+    if "render" in only:
+        cmd = [str(python), str(HERE), "render", str(args.camera)]
+        done = subprocess.run(cmd, capture_output=True, text=True, env=vla_env(python), check=True)
+        split = json.loads(done.stdout.strip().splitlines()[-1])
+        print(json.dumps({"bench": "libero-step-render", **split}), flush=True)
+        if only == {"render"}:
+            return []
     total = args.tasks * args.episodes
     steps = total * (SETTLE + HORIZON)
     server = Server(python)
@@ -409,7 +432,8 @@ def compare(args: argparse.Namespace) -> list[dict]:
             line["profile"] = {
                 "simulator_s": round(split["sim_s"], 1),
                 "harness_s": round(split["harness_s"], 1),
-                "harness_ms_per_env_step": round(split["harness_s"] / steps * 1e3, 2),
+                "harness_work_s": round(split["harness_work_s"], 1),
+                "harness_work_ms_per_env_step": round(split["harness_work_s"] / steps * 1e3, 2),
                 "harness_top_s": split["harness_top"],
             }
         lines.append(line)
@@ -419,8 +443,9 @@ def compare(args: argparse.Namespace) -> list[dict]:
             if name in runs:
                 line = {**base, "comparison": f"envhub {name} / vla-eval", "ratio": round(ref / runs[name]["seconds"], 2)}
                 if PROFILE:
-                    ours, theirs = profile_split(name)["harness_s"], profile_split("vla-eval")["harness_s"]
-                    line["harness_time_ratio"] = round(ours / theirs, 3) if theirs else None
+                    ours, theirs = profile_split(name), profile_split("vla-eval")
+                    for key in ("harness_s", "harness_work_s"):
+                        line[f"{key[:-2]}_ratio"] = round(ours[key] / theirs[key], 3) if theirs[key] else None
                 lines.append(line)
     return lines
 
@@ -481,7 +506,41 @@ def bare(shard: int, shards: int, tasks: int, episodes: int, camera: int) -> Non
     print(json.dumps({"step_cpu": step_cpu, "steps": steps}))
 
 
+def render_split(camera: int, steps: int = 20) -> None:
+    """CPU milliseconds of one `env.step` of LIBERO-spatial's task 0 with its two cameras at
+    `camera`, and with no camera (`use_camera_obs=False`): what rendering costs here."""
+    import functools
+
+    import torch
+
+    torch.load = functools.partial(torch.load, weights_only=False)
+    from libero.libero import benchmark
+    from libero.libero.envs import OffScreenRenderEnv
+
+    suite = benchmark.get_benchmark_dict()[SUITE]()
+    out = {}
+    for name, kwargs in (
+        (f"cameras_{camera}", {"camera_heights": camera, "camera_widths": camera}),
+        ("no_camera", {"use_camera_obs": False}),
+    ):
+        env = OffScreenRenderEnv(bddl_file_name=suite.get_task_bddl_file_path(0), **kwargs)
+        env.seed(7)
+        env.reset()
+        env.set_init_state(suite.get_task_init_states(0)[0])
+        for _ in range(SETTLE):
+            env.step(ACTION)
+        c0 = time.process_time()
+        for _ in range(steps):
+            env.step(ACTION)
+        out[f"{name}_step_cpu_ms"] = round((time.process_time() - c0) / steps * 1e3, 1)
+        env.close()
+    print(json.dumps(out))
+
+
 def main() -> int:
+    if len(sys.argv) > 1 and sys.argv[1] == "render":
+        render_split(int(sys.argv[2]))
+        return 0
     if len(sys.argv) > 1 and sys.argv[1] == "serve":
         serve()
         return 0
