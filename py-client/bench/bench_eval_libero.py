@@ -1,7 +1,7 @@
 """LIBERO evaluation speed: `envhub eval` against AllenAI's `vla-eval run --no-docker`.
 
     python py-client/bench/bench_eval_libero.py [--tasks 2] [--episodes 10] [--shards 2]
-           [--camera 256] [--only bare,vla-eval,server,callable]
+           [--camera 256] [--only render,bare,vla-eval,server,callable] [--profile DIR [--rate 50]]
 
 LIBERO-spatial, the first `--tasks` tasks × `--episodes` episodes (episode k from the task's
 init state k), a constant-action policy (`[0, 0, 0, 0, 0, 0, -1]`: nothing succeeds, every
@@ -40,10 +40,19 @@ sync libero`, whose `pip freeze` is the constraint file) plus `vla-eval==0.8.0`;
 config file for it lives in that venv (LIBERO_CONFIG_PATH), its assets are the PyPI asset
 packages' (linked where LIBERO looks first).
 
-Prints one JSON line per comparison: episodes per minute of each, the ratios, and the CPU
-seconds of each run (every process of it, the model server's share included) with what each
-harness adds beyond the bare run's CPU, per env step. Run it under the interpreter envhub is
-installed in, e.g. from a checkout:
+`--profile DIR` runs each harness under py-spy (`record --subprocesses`: vla-eval's shard
+processes; envhub's CLI, evaluation process and workers; not the model server) and splits
+its samples: the simulator's (a frame of the stack in LIBERO, robosuite, MuJoCo, torch,
+bddl), the harness's work, and the harness's waits for another process (py-spy counts a
+waiting thread whenever it is runnable, which on a loaded machine is often), with the
+harness's top innermost frames; the comparison lines give the ratio of envhub's harness
+work to vla-eval's. py-spy is found on PATH or beside this interpreter (pip install py-spy).
+
+Prints one JSON line per run and comparison: episodes per minute of each and the ratios;
+without `--profile`, the CPU seconds of each run too (every waited-for process of it, the
+model server's share included; under py-spy, whose children are not all reaped as theirs,
+they undercount) and, with `bare`, what each harness adds beyond the bare run's CPU per env
+step. Run it under the interpreter envhub is installed in, e.g. from a checkout:
 
     PYTHONPATH=py-client/python ENVHUB_PYTHON=.venv/bin/python \\
         .venv/bin/python py-client/bench/bench_eval_libero.py
@@ -417,9 +426,10 @@ def compare(args: argparse.Namespace) -> list[dict]:
             "camera": args.camera, "env_steps": steps, "load_average": [round(x, 1) for x in os.getloadavg()]}
     lines = []
     for name, r in runs.items():
-        line = {**base, "run": name, "seconds": round(r["seconds"], 1), "cpu_s": round(r["cpu"], 1),
-                "episodes_per_min": r["episodes_per_min"]}
-        if "bare" in runs:
+        line = {**base, "run": name, "seconds": round(r["seconds"], 1), "episodes_per_min": r["episodes_per_min"]}
+        if not PROFILE:
+            line["cpu_s"] = round(r["cpu"], 1)
+        if "bare" in runs and not PROFILE:
             line["step_render_cpu_s"] = round(runs["bare"]["step_cpu"], 1)
             if name != "bare":
                 # What the harness adds beyond the bare loop's CPU (simulator, renderer, imports).
