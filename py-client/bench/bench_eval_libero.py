@@ -9,8 +9,8 @@ episode runs its 10 settling steps and its 220 policy steps), `--shards` episode
 on each side, one run of each:
 
 - `vla-eval`: `vla-eval run --no-docker` (vla-eval 0.8.0's `LIBEROBenchmark`, its sync
-  runner), `--shards` shard processes (`--shard-id i --num-shards n --eval-id E`, as its
-  `scripts/run_sharded.sh` starts them) against one vla-eval model server, with
+  runner), `--shards` shard processes (`--shard-id i --num-shards n --eval-id E`, as
+  `vla-eval run --help` describes sharding) against one vla-eval model server, with
   `send_wrist_image` and `send_state` on so that it sends what envhub sends (both cameras,
   the proprioception);
 - `server`: `envhub eval libero-spatial --num-envs n --server ws://... --server-protocol
