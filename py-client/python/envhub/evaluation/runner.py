@@ -49,6 +49,7 @@ class _Slot:
     pos: int = 0
     t0: float = 0.0
     obs: Any = None
+    action: Any = None  # the last action the env got (a row of the batch sent)
     ended: bool = False
     frames: bool = False
 
@@ -105,10 +106,12 @@ class Runner:
         fail_fast: bool = False,
         replan: int | None = None,
         videos: Any = None,
+        dataset: Any = None,
     ) -> None:
         self.bench, self.policy, self.record = bench, policy, record
         self.num_envs, self.workers, self.hubs, self.registry = num_envs, workers, hubs, registry
         self.step_timeout, self.fail_fast, self.replan, self.videos = step_timeout, fail_fast, replan, videos
+        self.dataset = dataset
         self.env_steps = 0
         self.tasks: dict[str, Task] = {}
         self.sessions: list[_Session] = []
@@ -204,6 +207,12 @@ class Runner:
             for k in todo:
                 self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
             return False
+        if self.dataset is not None:
+            try:
+                self.dataset.session(envs, spec.id)
+            except BaseException:
+                envs.close()
+                raise
         s = _Session(spec, envs, ids, todo, self.bench)
         s.broken = broken  # type: ignore[attr-defined]
         self.sessions.append(s)
@@ -361,6 +370,7 @@ class Runner:
                     actions[j] = self.bench.settle_action  # type: ignore[assignment]
                 else:
                     actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
+                    slot.action = actions[j]
                     slot.pos += 1
             try:
                 s.envs.send(actions, ids)
@@ -392,6 +402,8 @@ class Runner:
             return
         slot.t += 1
         slot.ret += reward
+        if self.dataset is not None:
+            self.dataset.step(s.ids[i], slot.action, reward, terminated)
         self._frame(s, i)
         rule = self.bench.rule
         if rule == "any_step":
@@ -409,6 +421,9 @@ class Runner:
     # Episode ends -------------------------------------------------------------------------
 
     def _frame(self, s: _Session, i: int) -> None:
+        """Env `i` shows its policy a new observation (after settling, after each step)."""
+        if self.dataset is not None:
+            self.dataset.observe(s.ids[i], s.slots[i].obs)
         if self.videos is None:
             return
         frame = s.observer.frame(s.slots[i].obs)
@@ -444,6 +459,11 @@ class Runner:
                     result["video"] = self.videos.finish(slot_id, ep, bool(slot.success))
                 else:
                     self.videos.discard(slot_id)
+            if self.dataset is not None:
+                if error is None:
+                    self.dataset.finish(slot_id, ep.task.text or ep.task.id, result["success"])
+                else:
+                    self.dataset.discard(slot_id)
             try:
                 self.policy.end(slot_id, ep, result)
             except Exception as e:  # the episode's result stands; the policy's trouble is said
