@@ -295,6 +295,43 @@ def test_a_policy_in_another_interpreter_gives_the_same_results(tmp_path, polici
     assert there.proc.poll() is not None  # closed with the evaluation
 
 
+ARENA_POLICY = textwrap.dedent(
+    """\
+    import numpy as np
+
+    def digest(observations, tasks):
+        # What it was shown, as numbers: checksums, one value, whether it could write it.
+        return [np.array([o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0],
+                          float(o["cam"].flags.writeable), float(o["cam"].shape[0])]) for o in observations]
+    """
+)
+
+
+def test_observations_reach_a_policy_in_another_interpreter_through_shared_memory(tmp_path):
+    from envhub.evaluation.arena import Arena
+    from envhub.evaluation.policy import Episode, Request, Task
+    from envhub.evaluation.policy_env import EnvPolicy
+
+    (tmp_path / "arena_policy.py").write_text(ARENA_POLICY)
+    there = EnvPolicy(f"{tmp_path / 'arena_policy.py'}:digest", [sys.executable], env_name="(this interpreter)")
+    episode = Episode(Task("b", "t", "e", "text", 0), 0)
+    rng = np.random.default_rng(3)
+    try:
+        # 8 KB, then 6 MB (beyond the arena's first MiB: it grows), then small again.
+        for side, n in ((16, 3), (512, 8), (8, 2)):
+            obs = [
+                {"cam": rng.integers(0, 256, (side, side, 3), dtype=np.uint8), "state": rng.normal(size=4)}
+                for _ in range(n)
+            ]
+            answers = there.act([Request(i, episode, 0, o) for i, o in enumerate(obs)])
+            for o, a in zip(obs, answers):
+                expect = [o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0], 0.0, side]
+                assert a.tolist() == expect
+        assert there.arena.capacity >= 512 * 512 * 3 * 8 > Arena().capacity
+    finally:
+        there.close()
+
+
 def test_cli_writes_the_table_and_results(tmp_path, policies):
     from conftest import mujoco_or_skip
 
