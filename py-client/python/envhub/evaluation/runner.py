@@ -4,8 +4,11 @@ A task runs in a session of its entry (the task is a make option, so one session
 task); sessions of several tasks run at once while the env budget (`num_envs`) allows: a
 task with fewer episodes left than free envs leaves the rest to the next tasks. A benchmark
 whose adapter switches tasks on reset (`task_reset_option`) runs every task in one session
-instead, each env taking the next episode of any task (a session's start, workers that
-import the suite, is paid once). Every env
+instead (a session's start, workers that import the suite, is paid once): its episodes queue
+task by task in turn (each task's first, then each task's second, ...), so the first envs
+start on different tasks, and an env whose episode ends takes the next episode of the task
+it runs while there is one (a task's env is made once per env that runs it, as Meta-World's
+own MT10 vector env has one env per task), else the queue's first. Every env
 (slot, numbered across sessions) runs one episode at a time: a reset with the episode's
 initial condition, the settling steps with the protocol's fixed action, then policy steps
 (an action chunk is executed one action per step before the slot asks again) until success
@@ -73,6 +76,7 @@ class _Session:
         self.space = envs.single_action_space
         self.observer = Observer(bench.observation, envs.single_observation_space)
         self.slots = [_Slot() for _ in ids]
+        self.tasks: list[str | None] = [None] * len(ids)  # the task each env last ran (its id)
         self.finished = 0  # episodes that ended without an error
         self.broken = broken  # sessions of these episodes that broke before this one
         self.sent: list[int] = []
@@ -133,10 +137,12 @@ class Runner:
         pending: deque[tuple[deque[Job], int]] = deque()
         for spec in self.bench.tasks:
             todo = deque((spec, k) for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip)
-            if todo and pending and self.bench.task_reset_option is not None:
-                pending[0][0].extend(todo)  # one session for every task, task after task
-            elif todo:
+            if todo:
                 pending.append((todo, 0))
+        if self.bench.task_reset_option is not None and pending:
+            # One session for every task, the tasks in turn.
+            jobs = [(k, spec.index, (spec, k)) for todo, _ in pending for spec, k in todo]
+            pending = deque([(deque(job for _, _, job in sorted(jobs, key=lambda j: j[:2])), 0)])
         free = list(range(self.num_envs))
         # Sessions start (workers spawn, suites import) and stop in threads while the others
         # step: a start takes seconds. Two at a time, so a small machine is not swamped.
@@ -291,6 +297,7 @@ class Runner:
                         self.tasks[spec.id] = self.bench.task(spec, texts[i])
                 s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
         for i, (spec, k) in assign.items():
+            s.tasks[i] = spec.id
             task = self.tasks.setdefault(spec.id, self.bench.task(spec))
             slot = s.slots[i]
             slot.episode = Episode(task, k, inits[i])
@@ -302,6 +309,17 @@ class Runner:
             if slot.settle_left == 0:
                 self._frame(s, i)
 
+    def _next_job(self, s: _Session, i: int) -> Job:
+        """The next episode for env `i`: in a session of every task, the next one of the task
+        the env runs while there is one (no other task's env to make), else the queue's first."""
+        current = s.tasks[i]
+        if current is not None:
+            for n, job in enumerate(s.queue):
+                if job[0].id == current:
+                    del s.queue[n]
+                    return job
+        return s.queue.popleft()
+
     def _tick(self, s: _Session) -> None:
         """Receives the session's step (if sent), then starts the next episodes on the envs
         whose episode ended."""
@@ -310,7 +328,11 @@ class Runner:
         ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
         for i in ended:
             s.slots[i] = _Slot()
-        assign = {i: s.queue.popleft() for i in ended if s.queue}
+        assign: dict[int, Job] = {}
+        for i in ended:
+            if not s.queue:
+                break
+            assign[i] = self._next_job(s, i)
         if assign:
             self._reset(s, assign)
 
