@@ -98,6 +98,7 @@ def test_builtin_benchmarks_parse_with_the_reference_protocols():
     assert mt10.env_options(mt10.tasks[0]) == {"env_name": "reach-v3", "benchmark": "MT10", "seed": 1}
     # Meta-World's envs switch tasks on reset: one session runs every task.
     assert mt10.reset_options(mt10.tasks[1]) == {"task": "push-v3"}
+    assert mt10.session_options(mt10.tasks[:2])["env_name"] == ["reach-v3", "push-v3"]  # env i's first task
     assert benches["libero-10"].reset_options(benches["libero-10"].tasks[1]) == {}
     assert benches["dm-control"].rule == "none" and benches["mujoco"].rule == "none"
 

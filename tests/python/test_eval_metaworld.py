@@ -160,6 +160,13 @@ def test_reset_option_task_switches_an_env_to_another_task():
         assert np.array_equal(ours[1], theirs[1]) and r1[1] == r2[1]
         back, _ = envs.reset(options={"goal": 4, "task": "reach-v3"})
         assert np.array_equal(back, reach)
+        # A task per env from the start: env i runs env_name[i], as in its task's own session.
+        both = envhub.make_vec("metaworld-reach", 2, seed=1, benchmark="MT10", env_name=["reach-v3", "push-v3"])
+        try:
+            mixed, _ = both.reset(options={"goal": 4})
+            assert np.array_equal(mixed[0], reach[0]) and np.array_equal(mixed[1], pushed[1])
+        finally:
+            both.close()
         with pytest.raises(envhub.EnvHubError, match=r"not a task of Meta-World's MT10; valid: push-v3, "):
             envs.reset(options={"task": "pussh-v3"})
         with pytest.raises(envhub.EnvHubError, match="valid: .*window-close-v3"):

@@ -25,7 +25,7 @@ FIELDS = {
     "tasks": "with `entry`: a task count (tasks 0..n-1), or a list of task indexes or names",
     "task_option": "the entry option that names the task (default `task`)",
     "task_reset_option": "with `entry`: the reset option that switches an env to a task (the adapter takes it, as "
-    "Meta-World's `task`): one session runs every task",
+    "Meta-World's `task`, and a list for `task_option`, a task per env): one session runs every task",
     "episodes_per_task": "episodes of each task (a positive integer)",
     "init": "how episode k starts: {init_states: true, seed: S (optional)} | {train_goals: {seed: S, benchmark: MT10}} | "
     "{seeds: [..]} | {seed_start: N}",
@@ -151,6 +151,14 @@ class Benchmark:
         if self.task_reset_option is None:
             return {}
         return {self.task_reset_option: spec.name}
+
+    def session_options(self, specs: list[TaskSpec]) -> dict[str, Any]:
+        """What the envs of a session are made with, env `i` to run `specs[i]`'s task first
+        (a list of tasks, one per env, where envs switch tasks on reset)."""
+        options = self.env_options(specs[0])
+        if self.task_reset_option is not None and len({spec.id for spec in specs}) > 1:
+            options[self.raw.get("task_option", "task")] = [spec.name for spec in specs]
+        return options
 
     def env_options(self, spec: TaskSpec) -> dict[str, Any]:
         """What the envs of a task's session are made with."""

@@ -155,8 +155,9 @@ class Runner:
                     todo, broken = pending.popleft()
                     n = min(len(free), len(todo))
                     ids, free = free[:n], free[n:]
-                    # Made with the first episode's task (the one its first env runs).
-                    starting[pool.submit(self._make, todo[0][0], n)] = (todo, ids, broken)
+                    # Env i made with the task of the episode it runs first.
+                    first = [spec for spec, _ in list(todo)[:n]]
+                    starting[pool.submit(self._make, first, n)] = (todo, ids, broken)
                 if not self.sessions:  # nothing to step: wait for a start
                     wait(list(starting), return_when=FIRST_COMPLETED)
                 for future in [f for f in starting if f.done()]:
@@ -187,7 +188,7 @@ class Runner:
             pool.shutdown(wait=True, cancel_futures=True)
             self._stops.shutdown(wait=True)
 
-    def _make(self, spec: TaskSpec, n: int) -> Any:
+    def _make(self, specs: list[TaskSpec], n: int) -> Any:
         import os
 
         from ..client.factory import make_vec
@@ -196,7 +197,7 @@ class Runner:
         # one worker): sessions run side by side, and every worker is an interpreter to start.
         workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
         return make_vec(
-            spec.entry,
+            specs[0].entry,
             n,
             workers,
             "disabled",
@@ -204,7 +205,7 @@ class Runner:
             registry=self.registry,
             step_timeout=self.step_timeout,
             hubs=self.hubs,
-            **self.bench.env_options(spec),
+            **self.bench.session_options(specs),
         )
 
     def _started_session(
@@ -222,8 +223,10 @@ class Runner:
             return False
         s = _Session(envs, ids, todo, self.bench, broken)
         self.sessions.append(s)
+        first = {i: s.queue.popleft() for i in range(len(ids))}
+        s.tasks = [spec.id for spec, _ in first.values()]  # as the envs were made
         try:
-            self._reset(s, {i: s.queue.popleft() for i in range(len(ids))})
+            self._reset(s, first)
         except EnvHubError as e:
             requeue = self._broken(s, e)
             return False if requeue is None else requeue
@@ -276,7 +279,8 @@ class Runner:
         for i, init in inits.items():
             seeds[i] = init.get("seed")
             options = {k: v for k, v in init.items() if k != "seed"}
-            options.update(self.bench.reset_options(assign[i][0]))
+            if s.tasks[i] != assign[i][0].id:  # switch the env's task
+                options.update(self.bench.reset_options(assign[i][0]))
             groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
         t0 = time.perf_counter()
         for key, group in groups.items():

@@ -33,7 +33,9 @@ class MetaWorldAdapter(SuiteAdapter):
     `MT25`, `MT50`) takes the goal set Meta-World's benchmark of that seed gives the task
     (they differ from MT1's: one generator draws every task's goals in turn), as
     `gym.make_vec("Meta-World/MT10", seed=...)` builds its envs. `reset(options={"goal": g})`
-    starts the episode from train goal `g` (0..49) rather than a drawn one.
+    starts the episode from train goal `g` (0..49) rather than a drawn one. `env_name` may be a
+    list: env `i` of a session runs task `env_name[i mod n]` (with `benchmark: MT10` and MT10's
+    ten tasks, the envs of `gym.make_vec("Meta-World/MT10")`).
     `reset(options={"task": "push-v3"})` switches an env made by task name to another task of
     its benchmark (any of the 50 for MT1) from that episode on: the task's env is made on first
     use in the worker, as an entry naming it would make it (same goal set, seed and options),
@@ -59,6 +61,12 @@ class MetaWorldAdapter(SuiteAdapter):
         per_env = kwargs.pop("goal_seed_per_env", False)
         if benchmark not in GOAL_SETS:
             raise unknown_id("Meta-World benchmark", str(benchmark), list(GOAL_SETS), f"one of {', '.join(GOAL_SETS)}")
+        names = kwargs.get("env_name")
+        if isinstance(names, list):
+            # A task per env, as Meta-World's MT10 vector env has: env i runs names[i mod n].
+            if not names or not all(isinstance(n, str) for n in names):
+                raise TypeError(f"Meta-World option `env_name` must be a task name or a list of them, not {names!r}")
+            kwargs["env_name"] = names[int(config.env_index or 0) % len(names)]
         if not env_id.startswith("Meta-World/"):
             if env_id not in metaworld.ALL_V3_ENVIRONMENTS:
                 raise unknown_id(
