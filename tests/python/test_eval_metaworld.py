@@ -161,10 +161,16 @@ def test_reset_option_task_switches_an_env_to_another_task():
         back, _ = envs.reset(options={"goal": 4, "task": "reach-v3"})
         assert np.array_equal(back, reach)
         # A task per env from the start: env i runs env_name[i], as in its task's own session.
-        both = envhub.make_vec("metaworld-reach", 2, seed=1, benchmark="MT10", env_name=["reach-v3", "push-v3"])
+        # With keep_tasks 1 an env closes the task it leaves, and makes it again on return.
+        both = envhub.make_vec(
+            "metaworld-reach", 2, seed=1, benchmark="MT10", env_name=["reach-v3", "push-v3"], keep_tasks=1
+        )
         try:
             mixed, _ = both.reset(options={"goal": 4})
             assert np.array_equal(mixed[0], reach[0]) and np.array_equal(mixed[1], pushed[1])
+            both.reset(options={"goal": 4, "task": "push-v3"})
+            again, _ = both.reset(options={"goal": 4, "task": "reach-v3"})
+            assert np.array_equal(again, reach)
         finally:
             both.close()
         with pytest.raises(envhub.EnvHubError, match=r"not a task of Meta-World's MT10; valid: push-v3, "):
