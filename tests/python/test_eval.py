@@ -96,6 +96,10 @@ def test_builtin_benchmarks_parse_with_the_reference_protocols():
     mt10, mt50 = benches["metaworld-mt10"], benches["metaworld-mt50"]
     assert (len(mt10.tasks), len(mt50.tasks), mt10.horizon, mt10.rule) == (10, 50, 500, "any_step")
     assert mt10.env_options(mt10.tasks[0]) == {"env_name": "reach-v3", "benchmark": "MT10", "seed": 1}
+    # Meta-World's envs switch tasks on reset: one session runs every task.
+    assert mt10.reset_options(mt10.tasks[1]) == {"task": "push-v3"}
+    assert mt10.session_options(mt10.tasks[:2])["env_name"] == ["reach-v3", "push-v3"]  # env i's first task
+    assert benches["libero-10"].reset_options(benches["libero-10"].tasks[1]) == {}
     assert benches["dm-control"].rule == "none" and benches["mujoco"].rule == "none"
 
 
@@ -131,6 +135,9 @@ def test_usage_errors_name_the_valid_choices(args, expected):
         ({**PENDULUM, "settle": {"steps": 2, "action": [float("nan")]}}, "`settle.action` must be a list of finite numbers"),
         ({**PENDULUM, "episodes_per_task": 0}, "`episodes_per_task` must be an integer >= 1"),
         ({**PENDULUM, "init": {"seeds": [1, 2]}}, "5 episodes per task but 2 seeds"),
+        ({**PENDULUM, "task_reset_option": "task"}, "`tasks`/`task_option`/`task_reset_option` go with `entry`"),
+        ({**{k: v for k, v in PENDULUM.items() if k != "entries"}, "entry": "gym-pendulum", "task_reset_option": "task"},
+         "`task_reset_option` switches between `tasks`; this benchmark lists none"),
     ],
 )
 def test_protocol_fields_are_checked(decl, expected):
