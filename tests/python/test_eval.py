@@ -307,9 +307,14 @@ ARENA_POLICY = textwrap.dedent(
     import numpy as np
 
     def digest(observations, tasks):
-        # What it was shown, as numbers: checksums, one value, whether it could write it.
-        return [np.array([o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0],
-                          float(o["cam"].flags.writeable), float(o["cam"].shape[0])]) for o in observations]
+        # What it was shown, as numbers: checksums, one value, whether it may write it (as
+        # in-process); then it writes into it (as Meta-World's scripted policies do).
+        out = []
+        for o in observations:
+            out.append(np.array([o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0],
+                                 float(o["cam"].flags.writeable), float(o["cam"].shape[0])]))
+            o["cam"].fill(0)
+        return out
     """
 )
 
@@ -332,7 +337,7 @@ def test_observations_reach_a_policy_in_another_interpreter_through_shared_memor
             ]
             answers = there.act([Request(i, episode, 0, o) for i, o in enumerate(obs)])
             for o, a in zip(obs, answers):
-                expect = [o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0], 0.0, side]
+                expect = [o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0], 1.0, side]
                 assert a.tolist() == expect
         assert there.arena.capacity >= 512 * 512 * 3 * 8 > Arena().capacity
     finally:

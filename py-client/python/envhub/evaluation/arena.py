@@ -1,13 +1,15 @@
 """Observations to a policy in another process (`--policy-env`) through shared memory.
 
 The evaluation writes each batch's arrays into one memory file (`memfd`) that the policy's
-process maps read-only; the pipe carries the requests with every array replaced by its place
+process maps; the pipe carries the requests with every array replaced by its place
 in that file (`Ref`). One copy per array, where pickling over a pipe makes three (into the
 pickle, through the pipe, out of it) and a system call per 64 KiB. The file grows (doubling)
 when a batch does not fit; the message says its size, and the reader maps it again.
 
-What the policy is given are read-only views, valid until its next `act` call (the next
-batch overwrites them): a policy that keeps observations (a frame history) copies them.
+What the policy is given are views, valid until its next `act` call (the next batch
+overwrites them): a policy that keeps observations (a frame history) copies them. They are
+writable, as in-process observations are (Meta-World's scripted policies write into theirs);
+what a policy writes there is overwritten by the next batch and never read back.
 """
 
 from __future__ import annotations
@@ -102,7 +104,7 @@ class Arena:
 
 
 class ArenaView:
-    """The policy's side: the arena mapped read-only, and requests given their arrays back."""
+    """The policy's side: the arena mapped (shared), and requests given their arrays back."""
 
     def __init__(self, fd: int) -> None:
         self.fd = fd
@@ -112,7 +114,7 @@ class ArenaView:
     def take(self, requests: Sequence[Any], size: int) -> list[Any]:
         if size > self.size:
             # The old mapping is dropped, not closed: a policy may still hold views of it.
-            self._map = mmap.mmap(self.fd, size, access=mmap.ACCESS_READ)
+            self._map = mmap.mmap(self.fd, size)
             self.size = size
 
         def view(value: Any) -> Any:

@@ -2,7 +2,7 @@
 process of that environment's interpreter loads the policy, and the two speak a small pipe
 protocol: pickled `(command, args)` messages on the child's stdin, pickled replies on its
 stdout (the child's prints go to stderr). Observations' arrays travel through shared memory
-(`arena.py`: written once into a memory file the child maps read-only); the pipe carries
+(`arena.py`: written once into a memory file the child maps); the pipe carries
 where they are.
 
     python -m envhub.evaluation.policy_env SPEC --arena FD [--per-task]   # the child, run by EnvPolicy
