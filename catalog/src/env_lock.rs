@@ -154,7 +154,10 @@ mod tests {
         let text = file.render("suites.yaml");
         assert_eq!(LockFile::parse(&text).unwrap(), file);
         // One pin a line, platforms in a stable order: diffs show what moved.
-        assert!(text.contains("\n        - \"torch==2.9.0+cpu\"\n"), "{text}");
+        assert!(
+            text.contains("\n        - \"torch==2.9.0+cpu\"\n"),
+            "{text}"
+        );
         assert!(
             text.find("aarch64").unwrap() < text.find("x86_64").unwrap(),
             "{text}"

@@ -287,7 +287,10 @@ mod tests {
     fn the_key_covers_the_context_and_the_uv_options() {
         let a = spec(&["mujoco==3.3.0"]);
         let key = a.key("3.11", &[], "platform x86_64-unknown-linux-gnu\n");
-        assert_ne!(key, a.key("3.11", &[], "platform aarch64-unknown-linux-gnu\n"));
+        assert_ne!(
+            key,
+            a.key("3.11", &[], "platform aarch64-unknown-linux-gnu\n")
+        );
         let mut cpu = a.clone();
         cpu.torch_backend = Some("cpu".into());
         let mut indexed = a.clone();
@@ -313,7 +316,12 @@ mod tests {
         cpu.torch_backend = Some("CUDA 12".into());
         assert!(cpu.validate().unwrap_err().contains("torch_backend"));
         indexed.index_url = Some("pypi.org/simple".into());
-        assert!(indexed.validate().unwrap_err().contains("`pypi.org/simple`"));
+        assert!(
+            indexed
+                .validate()
+                .unwrap_err()
+                .contains("`pypi.org/simple`")
+        );
     }
 
     #[test]

@@ -1,12 +1,12 @@
 //! The environment registry: YAML catalogs loaded, combined, looked up and searched.
 
 use crate::entry::EnvEntry;
+pub use crate::python_envs::LockSource;
 use crate::registry_error::id_lines;
 pub use crate::registry_error::{DEFAULT_REGISTRY_NAME, RegistryError};
 use crate::tags::{stem, stems_match, tag_stems};
 use envhub_core::canonical_framework;
 use serde::Deserialize;
-pub use crate::python_envs::LockSource;
 use std::path::{Path, PathBuf};
 
 /// The catalog that ships with envhub, compiled in so the binary works from anywhere.

@@ -17,7 +17,9 @@ mod lock;
 mod store;
 mod uv;
 
-pub use envhub_catalog::{EnvLock, LockFile, Locking, PythonEnvSpec, package_name, valid_name};
+pub use envhub_catalog::{
+    EnvLock, LOCK_VERSION, LockFile, Locking, PythonEnvSpec, package_name, valid_name,
+};
 pub use error::PyEnvError;
 pub use hold::shared_across_exec;
 pub use interpreter::{Interpreter, version_of};

@@ -362,6 +362,35 @@ impl Store {
         })
     }
 
+    /// How `spec` stands against its lock, in a word or three for `envhub env list`:
+    /// `unlocked`, `locked`, `stale` (declaration changed), `not in lock`,
+    /// `no pins for <platform>`, `locked for Python <version>`.
+    pub fn lock_state(&self, name: &str, spec: &PythonEnvSpec) -> String {
+        let lock = match &spec.lock {
+            Locking::Unlocked => return "unlocked".into(),
+            Locking::Missing { .. } => return "not in lock".into(),
+            Locking::Locked { lock, .. } => lock,
+        };
+        if lock.declaration != spec.declaration_hash(&self.extra_requirements) {
+            return "stale".into();
+        }
+        let version = match &spec.python {
+            Some(v) => v.trim().to_string(),
+            None => match self.base_and_version(name, spec) {
+                Ok((_, v)) => v,
+                Err(_) => lock.python.clone(),
+            },
+        };
+        let platform = uv::platform();
+        if lock.python != version {
+            format!("locked for Python {}", lock.python)
+        } else if !lock.platforms.contains_key(&platform) {
+            format!("no pins for {platform}")
+        } else {
+            "locked".into()
+        }
+    }
+
     /// Resolves `spec` with uv's resolver (`uv pip compile`) for each of `platforms` (uv's
     /// target names): its lock entry. Needs no interpreter of its version on this machine
     /// unless an sdist must be built to learn its dependencies.
