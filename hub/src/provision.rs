@@ -255,7 +255,9 @@ mod tests {
         assert!(!registry.python_envs().all().is_empty());
         for (name, spec) in registry.python_envs().all() {
             let envhub_pyenv::Locking::Locked { lock, .. } = &spec.lock else {
-                panic!("python env `{name}` is not in configs/env_registry.lock.yaml: run `envhub env lock {name}` from the checkout");
+                panic!(
+                    "python env `{name}` is not in configs/env_registry.lock.yaml: run `envhub env lock {name}` from the checkout"
+                );
             };
             assert_eq!(
                 lock.declaration,
