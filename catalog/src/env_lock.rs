@@ -9,7 +9,7 @@
 //! version: 1
 //! python_envs:
 //!   metaworld:
-//!     declaration: "4c1f0e2a9b7d3e65"   # hash of the declaration it was resolved from
+//!     declaration: "e78dee4ddec9768f"   # hash of the declaration it was resolved from
 //!     python: "3.11"
 //!     platforms:
 //!       x86_64-unknown-linux-gnu:

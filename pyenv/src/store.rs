@@ -410,9 +410,9 @@ impl Store {
         };
         let requirements = spec.full_requirements(&self.extra_requirements);
         let no_deps = spec.no_deps_sorted();
-        std::fs::create_dir_all(&self.root).map_err(io(name, "create", &self.root))?;
-        let scratch = self.root.join(format!(
-            ".lock-{name}-{}-{}",
+        // Outside the cache folder, where `list` and `prune` would take it for a build.
+        let scratch = std::env::temp_dir().join(format!(
+            "envhub-lock-{name}-{}-{}",
             std::process::id(),
             SystemTime::now()
                 .duration_since(UNIX_EPOCH)
