@@ -1176,6 +1176,52 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_lock_state_says_how_a_declaration_fits_its_lock() {
+        let store = Store::new("/nonexistent".into(), "uv".into(), "python3".into())
+            .with_extra_requirements(vec!["numpy".into()]);
+        let mut spec = PythonEnvSpec {
+            python: Some("3.11".into()),
+            requirements: vec!["mujoco==3.3.0".into()],
+            ..Default::default()
+        };
+        assert_eq!(store.lock_state("s", &spec), "unlocked");
+        let mut lock = EnvLock {
+            declaration: spec.declaration_hash(&["numpy".into()]),
+            python: "3.11".into(),
+            platforms: BTreeMap::new(),
+        };
+        lock.platforms
+            .insert(uv::platform(), vec!["mujoco==3.3.0".into()]);
+        let locked = |lock: &EnvLock| Locking::Locked {
+            file: "s.lock.yaml".into(),
+            lock: lock.clone(),
+        };
+        spec.lock = locked(&lock);
+        assert_eq!(store.lock_state("s", &spec), "locked");
+        // The worker's requirements are part of what was locked.
+        let bare = Store::new("/nonexistent".into(), "uv".into(), "python3".into());
+        assert_eq!(bare.lock_state("s", &spec), "stale");
+        let mut other = lock.clone();
+        other.platforms = [("riscv64-unknown-linux".to_string(), vec![])].into();
+        spec.lock = locked(&other);
+        assert_eq!(
+            store.lock_state("s", &spec),
+            format!("no pins for {}", uv::platform())
+        );
+        let mut older = lock.clone();
+        older.python = "3.10".into();
+        spec.lock = locked(&older);
+        assert_eq!(store.lock_state("s", &spec), "locked for Python 3.10");
+        spec.lock = Locking::Missing {
+            file: "s.lock.yaml".into(),
+        };
+        assert_eq!(store.lock_state("s", &spec), "not in lock");
+        spec.lock = locked(&lock);
+        spec.requirements.push("packaging".into());
+        assert_eq!(store.lock_state("s", &spec), "stale");
+    }
+
+    #[test]
     fn compile_output_becomes_pins() {
         let text = "# header\nmujoco==3.3.0\n    # via metaworld\n--index-url https://x\n\nabsl-py==2.5.1  # comment\n";
         assert_eq!(pins_of(text), ["absl-py==2.5.1", "mujoco==3.3.0"]);
