@@ -11,6 +11,7 @@
 
 mod builtin_assets;
 mod entry;
+mod env_lock;
 mod matching;
 mod python_env_spec;
 mod python_envs;
@@ -19,9 +20,10 @@ mod registry_error;
 mod tags;
 
 pub use entry::EnvEntry;
+pub use env_lock::{EnvLock, LOCK_VERSION, LockFile, Locking, lock_path};
 pub use matching::{Candidate, MatchError, TaskMatch, TaskSpec, match_task};
 pub use python_env_spec::{PythonEnvSpec, fnv1a64, package_name, parse_version, valid_name};
 pub use python_envs::{FrameworkDefaults, PythonEnvs};
 pub use registry::{
-    Benchmark, DEFAULT_REGISTRY_NAME, Registry, RegistryError, SearchHit, SearchQuery,
+    Benchmark, DEFAULT_REGISTRY_NAME, LockSource, Registry, RegistryError, SearchHit, SearchQuery,
 };

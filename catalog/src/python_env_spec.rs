@@ -1,5 +1,6 @@
 //! What a Python environment is made of, and the key that names its venv.
 
+use crate::env_lock::Locking;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -22,10 +23,26 @@ pub struct PythonEnvSpec {
     /// the key: they change how it runs, not what is installed.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub env: BTreeMap<String, String>,
+    /// The package index uv installs from instead of its default (`--index-url`); part of
+    /// the key and of the lock's declaration.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub index_url: Option<String>,
+    /// Further indexes uv looks in (`--extra-index-url`, in order).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extra_index_urls: Vec<String>,
+    /// uv's PyTorch backend (`--torch-backend`: `cpu`, `cu128`, `auto`): which index torch
+    /// and its kin come from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub torch_backend: Option<String>,
+    /// How it stands against its registry file's lock file (set when the registry loads).
+    #[serde(skip)]
+    pub lock: Locking,
 }
 
 /// Version of the key's recipe: bumped when what goes into a venv changes for the same spec.
-const KEY_RECIPE: &str = "envhub-pyenv 1";
+const KEY_RECIPE: &str = "envhub-pyenv 2";
+/// Version of the declaration hash a lock records.
+const DECLARATION_RECIPE: &str = "envhub-lock 1";
 
 impl PythonEnvSpec {
     /// Checks what a registry file can get wrong, as a message naming the faulty value.
@@ -48,6 +65,23 @@ impl PythonEnvSpec {
         {
             return Err(format!(
                 "`python: {python}` is not a CPython version; write `3.10` or `3.10.13`"
+            ));
+        }
+        for url in self.index_url.iter().chain(&self.extra_index_urls) {
+            if !url.contains("://") || url.trim() != url || url.is_empty() {
+                return Err(format!(
+                    "`{url}` is not an index URL; write one such as `https://download.pytorch.org/whl/cpu`"
+                ));
+            }
+        }
+        if let Some(backend) = &self.torch_backend
+            && (backend.is_empty()
+                || !backend
+                    .chars()
+                    .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '.' || c == '-'))
+        {
+            return Err(format!(
+                "`torch_backend: {backend}` is not a uv torch backend; write one such as `cpu`, `cu128` or `auto`"
             ));
         }
         for name in self.env.keys() {
@@ -75,23 +109,68 @@ impl PythonEnvSpec {
         normalized(self.no_deps.iter())
     }
 
-    /// The stable key of this environment built on Python `python_version` (major.minor or
-    /// full): 16 hex digits of a hash of the version and [`full_requirements`]. Equal sets in
-    /// another order give the same key; any change of a pin gives another.
-    ///
-    /// [`full_requirements`]: PythonEnvSpec::full_requirements
-    pub fn key(&self, python_version: &str, extra: &[String]) -> String {
-        let mut text = format!("{KEY_RECIPE}\npython {python_version}\n");
+    /// What uv is told besides the requirements: the index options and torch backend, as
+    /// its command-line arguments.
+    pub fn uv_args(&self) -> Vec<String> {
+        let mut args = Vec::new();
+        if let Some(url) = &self.index_url {
+            args.extend(["--index-url".to_string(), url.clone()]);
+        }
+        for url in &self.extra_index_urls {
+            args.extend(["--extra-index-url".to_string(), url.clone()]);
+        }
+        if let Some(backend) = &self.torch_backend {
+            args.extend(["--torch-backend".to_string(), backend.clone()]);
+        }
+        args
+    }
+
+    /// The text both hashes start from: the full requirements, the `no_deps` packages and
+    /// the uv options (absent ones add nothing).
+    fn declared(&self, extra: &[String]) -> String {
+        let mut text = String::new();
         for req in self.full_requirements(extra) {
             text.push_str(&req);
             text.push('\n');
         }
-        // Absent from the keys of environments without them, which stay what they were.
         for req in self.no_deps_sorted() {
             text.push_str("no-deps ");
             text.push_str(&req);
             text.push('\n');
         }
+        for arg in self.uv_args() {
+            text.push_str(&arg);
+            text.push('\n');
+        }
+        text
+    }
+
+    /// The hash a lock records of the declaration it was resolved from (16 hex digits): the
+    /// Python version as written, [`full_requirements`], `no_deps` and the uv options; not
+    /// `env` (how it runs, not what is installed).
+    ///
+    /// [`full_requirements`]: PythonEnvSpec::full_requirements
+    pub fn declaration_hash(&self, extra: &[String]) -> String {
+        let text = format!(
+            "{DECLARATION_RECIPE}\npython {}\n{}",
+            self.python.as_deref().unwrap_or("").trim(),
+            self.declared(extra)
+        );
+        format!("{:016x}", fnv1a64(text.as_bytes()))
+    }
+
+    /// The stable key of this environment built on Python `python_version` (major.minor or
+    /// full): 16 hex digits of a hash of the version, [`full_requirements`], `no_deps`, the
+    /// uv options and `context` — what else decides what gets installed (the platform, uv's
+    /// configuration, the locked pins). Equal sets in another order give the same key; any
+    /// change of a pin gives another.
+    ///
+    /// [`full_requirements`]: PythonEnvSpec::full_requirements
+    pub fn key(&self, python_version: &str, extra: &[String], context: &str) -> String {
+        let text = format!(
+            "{KEY_RECIPE}\npython {python_version}\n{}{context}",
+            self.declared(extra)
+        );
         format!("{:016x}", fnv1a64(text.as_bytes()))
     }
 }
@@ -179,7 +258,7 @@ mod tests {
         let plain = spec(&["robosuite==1.4.0"]);
         let mut with = plain.clone();
         with.no_deps = vec!["hf-libero==0.1.4".into()];
-        assert_ne!(plain.key("3.11", &[]), with.key("3.11", &[]));
+        assert_ne!(plain.key("3.11", &[], ""), with.key("3.11", &[], ""));
         with.no_deps.push("--index-url x".into());
         assert!(with.validate().unwrap_err().contains("--index-url x"));
     }
@@ -190,18 +269,59 @@ mod tests {
         let a = spec(&["gymnasium==1.2.0", "mujoco==3.3.0"]);
         let b = spec(&["mujoco==3.3.0 ", "gymnasium==1.2.0", "mujoco==3.3.0"]);
         // Fixed: a change here renames every user's venvs (bump KEY_RECIPE on purpose).
-        assert_eq!(a.key("3.11", &extra), "86fdc979830fdb49");
-        assert_eq!(a.key("3.11", &extra), b.key("3.11", &extra));
-        assert_ne!(a.key("3.11", &extra), a.key("3.10", &extra));
+        assert_eq!(a.key("3.11", &extra, ""), "7fe40b9a57f71698");
+        assert_eq!(a.key("3.11", &extra, ""), b.key("3.11", &extra, ""));
+        assert_ne!(a.key("3.11", &extra, ""), a.key("3.10", &extra, ""));
         assert_ne!(
-            a.key("3.11", &extra),
-            spec(&["gymnasium==1.2.1", "mujoco==3.3.0"]).key("3.11", &extra)
+            a.key("3.11", &extra, ""),
+            spec(&["gymnasium==1.2.1", "mujoco==3.3.0"]).key("3.11", &extra, "")
         );
-        assert_ne!(a.key("3.11", &extra), a.key("3.11", &[]));
+        assert_ne!(a.key("3.11", &extra, ""), a.key("3.11", &[], ""));
         // Variables do not change what is installed.
         let mut with_env = a.clone();
         with_env.env.insert("MUJOCO_GL".into(), "egl".into());
-        assert_eq!(a.key("3.11", &extra), with_env.key("3.11", &extra));
+        assert_eq!(a.key("3.11", &extra, ""), with_env.key("3.11", &extra, ""));
+    }
+
+    #[test]
+    fn the_key_covers_the_context_and_the_uv_options() {
+        let a = spec(&["mujoco==3.3.0"]);
+        let key = a.key("3.11", &[], "platform x86_64-unknown-linux-gnu\n");
+        assert_ne!(
+            key,
+            a.key("3.11", &[], "platform aarch64-unknown-linux-gnu\n")
+        );
+        let mut cpu = a.clone();
+        cpu.torch_backend = Some("cpu".into());
+        let mut indexed = a.clone();
+        indexed.extra_index_urls = vec!["https://example.org/simple".into()];
+        let keys = [&a, &cpu, &indexed].map(|s| s.key("3.11", &[], ""));
+        assert!(keys[0] != keys[1] && keys[1] != keys[2] && keys[0] != keys[2]);
+        assert_eq!(
+            cpu.uv_args(),
+            ["--torch-backend", "cpu"].map(String::from).to_vec()
+        );
+        // The lock's declaration hash: the declaration as written, not how it runs.
+        let mut with_env = a.clone();
+        with_env.env.insert("MUJOCO_GL".into(), "egl".into());
+        assert_eq!(a.declaration_hash(&[]), with_env.declaration_hash(&[]));
+        assert_ne!(a.declaration_hash(&[]), cpu.declaration_hash(&[]));
+        assert_ne!(
+            a.declaration_hash(&[]),
+            a.declaration_hash(&["numpy".to_string()])
+        );
+        let mut pinned_python = a.clone();
+        pinned_python.python = Some("3.12".into());
+        assert_ne!(a.declaration_hash(&[]), pinned_python.declaration_hash(&[]));
+        cpu.torch_backend = Some("CUDA 12".into());
+        assert!(cpu.validate().unwrap_err().contains("torch_backend"));
+        indexed.index_url = Some("pypi.org/simple".into());
+        assert!(
+            indexed
+                .validate()
+                .unwrap_err()
+                .contains("`pypi.org/simple`")
+        );
     }
 
     #[test]

@@ -14,10 +14,12 @@
 //! the provisioning's part (`envhub-pyenv`, driven by the facade).
 
 use crate::entry::EnvEntry;
+use crate::env_lock::{LockFile, Locking};
 use crate::python_env_spec::PythonEnvSpec;
 use crate::registry_error::{RegistryError, id_lines};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 /// A framework's settings in a registry file (`frameworks:`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -34,6 +36,19 @@ pub struct FrameworkDefaults {
 pub struct PythonEnvs {
     specs: BTreeMap<String, PythonEnvSpec>,
     frameworks: BTreeMap<String, String>,
+    lock_files: BTreeMap<String, Option<PathBuf>>,
+}
+
+/// A registry file's lock file, as loading found it.
+#[derive(Clone, Debug, Default)]
+pub struct LockSource {
+    /// Where it is, or would be written (`None`: nowhere writable, such as the built-in
+    /// catalog outside an envhub checkout).
+    pub path: Option<PathBuf>,
+    /// Its content, where it exists.
+    pub file: Option<LockFile>,
+    /// Its name in messages.
+    pub name: String,
 }
 
 impl PythonEnvs {
@@ -45,6 +60,11 @@ impl PythonEnvs {
     /// Every environment, by name.
     pub fn all(&self) -> &BTreeMap<String, PythonEnvSpec> {
         &self.specs
+    }
+
+    /// Where the lock file of the registry file declaring `name` is, or would be written.
+    pub fn lock_file(&self, name: &str) -> Option<&Path> {
+        self.lock_files.get(name)?.as_deref()
     }
 
     /// The name of the environment `entry` runs in: its own `python_env`, else its
@@ -66,7 +86,9 @@ impl PythonEnvs {
         entries: &[EnvEntry],
         text: &str,
         path: &str,
+        lock: &LockSource,
     ) -> Result<(), RegistryError> {
+        let mut specs = specs;
         for (name, spec) in &specs {
             let message = if !crate::python_env_spec::valid_name(name) {
                 Some(format!(
@@ -82,6 +104,21 @@ impl PythonEnvs {
                     message: format!("`python_envs.{name}`: {message}"),
                 });
             }
+        }
+        for (name, spec) in specs.iter_mut() {
+            spec.lock = match &lock.file {
+                None => Locking::Unlocked,
+                Some(file) => match file.python_envs.get(name) {
+                    Some(entry) => Locking::Locked {
+                        file: lock.name.clone(),
+                        lock: entry.clone(),
+                    },
+                    None => Locking::Missing {
+                        file: lock.name.clone(),
+                    },
+                },
+            };
+            self.lock_files.insert(name.clone(), lock.path.clone());
         }
         self.specs.extend(specs);
         let unknown = |used: &str, by: String, line: usize| RegistryError::PythonEnv {

@@ -1,15 +1,18 @@
 //! The environment registry: YAML catalogs loaded, combined, looked up and searched.
 
 use crate::entry::EnvEntry;
+pub use crate::python_envs::LockSource;
 use crate::registry_error::id_lines;
 pub use crate::registry_error::{DEFAULT_REGISTRY_NAME, RegistryError};
 use crate::tags::{stem, stems_match, tag_stems};
 use envhub_core::canonical_framework;
 use serde::Deserialize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The catalog that ships with envhub, compiled in so the binary works from anywhere.
 const DEFAULT_REGISTRY: &str = include_str!("../../configs/env_registry.yaml");
+/// Its lock file (`envhub env lock` in a checkout rewrites it; a rebuild ships it).
+const DEFAULT_LOCK: &str = include_str!("../../configs/env_registry.lock.yaml");
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -104,11 +107,7 @@ impl Registry {
     pub fn builtin() -> Registry {
         let mut registry = Registry::default();
         registry
-            .add_yaml(
-                DEFAULT_REGISTRY,
-                &builtin_name(),
-                &crate::builtin_assets::builtin_dir(),
-            )
+            .add_builtin()
             .expect("the built-in registry is valid (checked by tests)");
         registry
     }
@@ -132,11 +131,7 @@ impl Registry {
         for path in paths {
             let path = path.as_ref();
             if path == Path::new(DEFAULT_REGISTRY_NAME) {
-                registry.add_yaml(
-                    DEFAULT_REGISTRY,
-                    &builtin_name(),
-                    &crate::builtin_assets::builtin_dir(),
-                )?;
+                registry.add_builtin()?;
                 continue;
             }
             let text = std::fs::read_to_string(path).map_err(|source| RegistryError::Read {
@@ -144,7 +139,23 @@ impl Registry {
                 source,
             })?;
             let dir = path.parent().unwrap_or(Path::new("."));
-            registry.add_yaml(&text, &path.display().to_string(), dir)?;
+            let lock_path = crate::env_lock::lock_path(path);
+            let file = match std::fs::read_to_string(&lock_path) {
+                Ok(text) => Some(lock_error(&lock_path.display().to_string(), &text)?),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+                Err(source) => {
+                    return Err(RegistryError::Read {
+                        path: lock_path,
+                        source,
+                    });
+                }
+            };
+            let lock = LockSource {
+                name: lock_path.display().to_string(),
+                path: Some(lock_path),
+                file,
+            };
+            registry.add_yaml_locked(&text, &path.display().to_string(), dir, &lock)?;
         }
         Ok(registry)
     }
@@ -157,6 +168,39 @@ impl Registry {
         name: &str,
         base_dir: &Path,
     ) -> Result<(), RegistryError> {
+        self.add_yaml_locked(text, name, base_dir, &LockSource::default())
+    }
+
+    /// The built-in catalog with its lock. Its lock file is written (by `envhub env lock`)
+    /// into `configs/` of the current folder when that is an envhub checkout of this very
+    /// catalog; elsewhere there is nowhere to write it.
+    fn add_builtin(&mut self) -> Result<(), RegistryError> {
+        let name = builtin_name();
+        let lock_name = format!("configs/env_registry.lock.yaml ({DEFAULT_REGISTRY_NAME})");
+        let in_checkout = std::fs::read_to_string("configs/env_registry.yaml")
+            .is_ok_and(|text| text == DEFAULT_REGISTRY);
+        let lock = LockSource {
+            path: in_checkout.then(|| PathBuf::from("configs/env_registry.lock.yaml")),
+            file: Some(lock_error(&lock_name, DEFAULT_LOCK)?),
+            name: lock_name,
+        };
+        self.add_yaml_locked(
+            DEFAULT_REGISTRY,
+            &name,
+            &crate::builtin_assets::builtin_dir(),
+            &lock,
+        )
+    }
+
+    /// [`add_yaml`](Registry::add_yaml) with the file's lock file (see
+    /// [`LockSource`]): its environments are then locked, or unlocked where it has none.
+    pub fn add_yaml_locked(
+        &mut self,
+        text: &str,
+        name: &str,
+        base_dir: &Path,
+        lock: &LockSource,
+    ) -> Result<(), RegistryError> {
         let file = parse(text, name)?;
         self.python_envs.add_file(
             file.python_envs,
@@ -164,6 +208,7 @@ impl Registry {
             &file.environments,
             text,
             name,
+            lock,
         )?;
         for (name_of, value) in file.benchmarks {
             let serde_json::Value::Object(fields) = value else {
@@ -316,6 +361,17 @@ impl Registry {
         }
         hits
     }
+}
+
+/// A lock file parsed, or the error naming it.
+fn lock_error(name: &str, text: &str) -> Result<crate::env_lock::LockFile, RegistryError> {
+    crate::env_lock::LockFile::parse(text).map_err(|message| RegistryError::PythonEnv {
+        path: name.to_string(),
+        line: 0,
+        message: format!(
+            "invalid lock file: {message}\nhint: regenerate it with `envhub env lock`"
+        ),
+    })
 }
 
 fn builtin_name() -> String {

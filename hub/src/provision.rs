@@ -249,6 +249,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_builtin_catalogs_environments_ship_locked_for_linux() {
+        let extra: Vec<String> = WORKER_REQUIREMENTS.iter().map(|s| s.to_string()).collect();
+        let registry = Registry::builtin();
+        assert!(!registry.python_envs().all().is_empty());
+        for (name, spec) in registry.python_envs().all() {
+            let envhub_pyenv::Locking::Locked { lock, .. } = &spec.lock else {
+                panic!(
+                    "python env `{name}` is not in configs/env_registry.lock.yaml: run `envhub env lock {name}` from the checkout"
+                );
+            };
+            assert_eq!(
+                lock.declaration,
+                spec.declaration_hash(&extra),
+                "python env `{name}` changed since it was locked: run `envhub env lock {name}` from the checkout"
+            );
+            for platform in ["x86_64-unknown-linux-gnu", "aarch64-unknown-linux-gnu"] {
+                let pins = &lock.platforms[platform];
+                assert!(pins.iter().all(|p| p.contains("==")), "{name} {platform}");
+            }
+        }
+    }
+
+    #[test]
     fn the_worker_needs_what_pyproject_lists() {
         let pyproject = include_str!("../../py-client/pyproject.toml");
         for need in WORKER_REQUIREMENTS {

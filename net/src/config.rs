@@ -189,6 +189,25 @@ pub fn open_hub(
                 what: "zenoh config",
                 reason: format!("`listen/endpoints`: {e}"),
             })?;
+        // Loopback is open to every user of the machine: links into this hub must present
+        // this user's local credential, which only this user's processes can read.
+        let credential = crate::local::credential().map_err(|e| HubError::Network {
+            reason: format!("cannot make this user's local credential: {e}"),
+            hint: "check that the folder of local hubs (`ENVHUB_LOCAL_HUBS`, \
+                   `$XDG_RUNTIME_DIR/envhub-hubs`) is this user's; or give credentials \
+                   (docs/security.md)"
+                .into(),
+        })?;
+        config
+            .insert_json5(
+                "transport/auth/usrpwd/dictionary_file",
+                &serde_json::to_string(&credential.dictionary.to_string_lossy())
+                    .expect("strings serialize"),
+            )
+            .map_err(|e| HubError::InvalidConfig {
+                what: "zenoh config",
+                reason: format!("`transport/auth/usrpwd/dictionary_file`: {e}"),
+            })?;
         match zenoh::open(config).wait() {
             Ok(session) => {
                 let local = crate::local::publish(name, &endpoint)
@@ -224,7 +243,49 @@ pub fn open(net: &NetConfig, listen_default: bool) -> Result<zenoh::Session, Hub
     use zenoh::Wait;
     let mut config = net.zenoh_config(listen_default)?;
     crate::exposure::guard_client(&mut config, net.multicast)?;
+    present_local_credential(&mut config, net)?;
     zenoh::open(config).wait().map_err(|e| open_failed(net, e))
+}
+
+/// A client that connects only to this user's local hubs presents this user's local
+/// credential (those hubs refuse links without it). Only then: Zenoh's user/password makes
+/// a link fail where the other end checks none, and one session has one credential.
+fn present_local_credential(config: &mut zenoh::Config, net: &NetConfig) -> Result<(), HubError> {
+    let given = config
+        .get_json("transport/auth/usrpwd/user")
+        .is_ok_and(|v| !matches!(v.trim(), "null" | "\"\""));
+    if given || net.connect.is_empty() {
+        return Ok(());
+    }
+    let local = crate::local::endpoints();
+    if !net.connect.iter().all(|e| local.contains(e)) {
+        return Ok(());
+    }
+    let credential = match crate::local::credential() {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::warn!("this user's local hubs will refuse this client: {e}");
+            return Ok(());
+        }
+    };
+    for (key, value) in [
+        ("transport/auth/usrpwd/user", crate::local::LOCAL_USER),
+        (
+            "transport/auth/usrpwd/password",
+            credential.password.as_str(),
+        ),
+    ] {
+        config
+            .insert_json5(
+                key,
+                &serde_json::to_string(value).expect("strings serialize"),
+            )
+            .map_err(|e| HubError::InvalidConfig {
+                what: "zenoh config",
+                reason: format!("`{key}`: {e}"),
+            })?;
+    }
+    Ok(())
 }
 
 impl NetConfig {

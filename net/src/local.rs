@@ -7,6 +7,11 @@
 //! daemon's socket folder), and removes it when it leaves. A client given no endpoint and no
 //! Zenoh config connects to the loopback endpoints listed there (of hubs whose process is
 //! alive).
+//!
+//! Loopback is open to every user of the machine, so the folder also holds this user's local
+//! credential ([`credential`]): a password only this user can read, which a default hub
+//! checks every link into it against (Zenoh's user/password), and which this user's clients
+//! present to their local hubs.
 
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
@@ -94,6 +99,99 @@ pub fn publish(name: &str, endpoint: &str) -> Result<Published, String> {
     };
     write().map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
     Ok(Published(path))
+}
+
+/// The user name in this user's local credential.
+pub const LOCAL_USER: &str = "envhub";
+
+/// This user's credential for the local hubs: a password only this user can read, and the
+/// Zenoh user/password dictionary a local hub checks links into it against.
+#[derive(Clone, Debug)]
+pub struct Credential {
+    /// The password (64 hex digits, from the OS's random source).
+    pub password: String,
+    /// `envhub:<password>`, the hub's `transport/auth/usrpwd/dictionary_file`.
+    pub dictionary: PathBuf,
+}
+
+/// This user's local credential, made on first need in the private folder (0600 files, in a
+/// folder only this user can enter), so only this user's processes can present it.
+pub fn credential() -> Result<Credential, String> {
+    let dir = dir();
+    ensure(&dir)?;
+    let secret = dir.join("credential");
+    let dictionary = dir.join("usrpwd");
+    let password = match read_private(&secret)? {
+        Some(p) => p,
+        None => {
+            let mut bytes = [0u8; 32];
+            std::io::Read::read_exact(
+                &mut std::fs::File::open("/dev/urandom")
+                    .map_err(|e| format!("cannot open /dev/urandom: {e}"))?,
+                &mut bytes,
+            )
+            .map_err(|e| format!("cannot read /dev/urandom: {e}"))?;
+            let made: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+            // Two processes may make it at once: the first link wins and both read it back.
+            write_private(&dir, &secret, &made, false)?;
+            read_private(&secret)?.ok_or_else(|| format!("`{}` vanished", secret.display()))?
+        }
+    };
+    let line = format!("{LOCAL_USER}:{password}\n");
+    if read_private(&dictionary)?.as_deref() != Some(line.trim_end()) {
+        write_private(&dir, &dictionary, &line, true)?;
+    }
+    Ok(Credential {
+        password,
+        dictionary,
+    })
+}
+
+/// A file of this user that no one else can read, trimmed; `None` when there is none.
+fn read_private(path: &Path) -> Result<Option<String>, String> {
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display())),
+    };
+    if !meta.is_file() || meta.uid() != uid() || meta.mode() & 0o077 != 0 || meta.len() > 4096 {
+        return Err(format!(
+            "`{}` is not a file of this user closed to others (uid {}, mode {:o})",
+            path.display(),
+            meta.uid(),
+            meta.mode() & 0o777
+        ));
+    }
+    std::fs::read_to_string(path)
+        .map(|t| Some(t.trim().to_string()))
+        .map_err(|e| format!("cannot read `{}`: {e}", path.display()))
+}
+
+/// Writes `path` (mode 0600) whole through a temporary file: renamed over it (`replace`), or
+/// linked to it only where there is none yet (a file another process made first stays).
+fn write_private(dir: &Path, path: &Path, body: &str, replace: bool) -> Result<(), String> {
+    use std::io::Write;
+    let tmp = dir.join(format!(".credential-{}.tmp", std::process::id()));
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .mode(0o600)
+            .open(&tmp)?;
+        f.write_all(body.as_bytes())?;
+        f.sync_all()?;
+        if replace {
+            return std::fs::rename(&tmp, path);
+        }
+        let linked = std::fs::hard_link(&tmp, path);
+        let _ = std::fs::remove_file(&tmp);
+        match linked {
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
+            other => other,
+        }
+    };
+    write().map_err(|e| format!("cannot write `{}`: {e}", path.display()))
 }
 
 fn alive(pid: i32) -> bool {

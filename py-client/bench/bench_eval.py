@@ -16,14 +16,19 @@ episode per env, through `evaluate` against `make_vec` stepped by hand with the 
 actions; fixed costs (imports, session start, results files) cancel out in the difference
 of a long and a short run. Reported per env step, in microseconds.
 
-Prints one JSON line per comparison; the figures in docs/eval.md come from here.
+Prints one JSON line per comparison; the figures in docs/eval.md come from here. On a shared
+machine the wall-clock ratio moves with the other jobs' load, so `metaworld` also gives each
+side's CPU seconds (its processes' user + system time, children included) and the load
+average before and after.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -66,13 +71,23 @@ def metaworld_python() -> str:
     return f"{found.group(1)}/bin/python"
 
 
+def cpu_seconds() -> float:
+    """User + system seconds of this process and its children that have been waited for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 def metaworld(episodes: int, num_envs: int) -> dict:
     from envhub.evaluation import evaluate
 
     python = metaworld_python()
+    load = os.getloadavg()[0]
     code = REFERENCE.replace("EPISODES", str(episodes))
+    c0 = cpu_seconds()
     ref = subprocess.run([python, "-c", code], capture_output=True, text=True, check=True)
+    reference_cpu = cpu_seconds() - c0
     reference = json.loads(ref.stdout.strip().splitlines()[-1])
+    c0 = cpu_seconds()
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as out:
         results = evaluate(
@@ -85,6 +100,7 @@ def metaworld(episodes: int, num_envs: int) -> dict:
             progress=False,
         )
     ours = time.perf_counter() - t0
+    ours_cpu = cpu_seconds() - c0
     total = 10 * episodes
     return {
         "bench": "metaworld-mt10-scripted",
@@ -92,6 +108,9 @@ def metaworld(episodes: int, num_envs: int) -> dict:
         "envhub_episodes_per_min": round(total / ours * 60, 1),
         "metaworld_async_episodes_per_min": round(total / reference["seconds"] * 60, 1),
         "ratio": round(reference["seconds"] / ours, 2),
+        "envhub_cpu_s": round(ours_cpu, 1),
+        "metaworld_cpu_s": round(reference_cpu, 1),
+        "load_average": [round(load, 2), round(os.getloadavg()[0], 2)],
         "envhub_success": results["summary"]["success_rate"],
         "metaworld_success": reference["mean"],
         "num_envs": num_envs,

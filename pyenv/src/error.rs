@@ -38,6 +38,15 @@ pub enum PyEnvError {
         /// What is wrong.
         message: String,
     },
+    /// Its lock does not fit: made from another declaration, for other platforms, or
+    /// missing from its registry file's lock file.
+    #[error("python env `{name}`: {message}")]
+    Lock {
+        /// The environment.
+        name: String,
+        /// What does not fit, with the fix.
+        message: String,
+    },
     /// `uv venv` or `uv pip install` failed.
     #[error(
         "python env `{name}`: {stage} failed for {packages}:\n{message}\nhint: fix the requirement in the registry's `python_envs:` (`envhub env list` shows them); other envs are unaffected"

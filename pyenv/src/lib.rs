@@ -17,9 +17,11 @@ mod lock;
 mod store;
 mod uv;
 
-pub use envhub_catalog::{PythonEnvSpec, package_name, valid_name};
+pub use envhub_catalog::{
+    EnvLock, LOCK_VERSION, LockFile, Locking, PythonEnvSpec, package_name, valid_name,
+};
 pub use error::PyEnvError;
 pub use hold::shared_across_exec;
 pub use interpreter::{Interpreter, version_of};
 pub use store::{Manifest, Plan, PruneRule, Pruned, PythonEnv, Store, Stored};
-pub use uv::find_uv;
+pub use uv::{SETTINGS_VARS, find_uv, platform, settings as uv_settings};

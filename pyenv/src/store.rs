@@ -12,7 +12,9 @@ use crate::hold;
 use crate::interpreter::{self, Interpreter};
 use crate::lock;
 use crate::uv;
-use envhub_catalog::{PythonEnvSpec, fnv1a64, parse_version, valid_name};
+use envhub_catalog::{
+    EnvLock, Locking, PythonEnvSpec, fnv1a64, package_name, parse_version, valid_name,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -40,6 +42,12 @@ pub struct Manifest {
     /// unpinned requirement became on this machine, that day.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub resolved: Vec<String>,
+    /// The platform it was built for (uv's name, `x86_64-unknown-linux-gnu`).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub platform: String,
+    /// The lock's pins it was built from exactly (empty: its registry has no lock).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub locked: Vec<String>,
     /// When it was built (seconds since the Unix epoch).
     pub created_unix: u64,
     /// How long building it took.
@@ -132,6 +140,13 @@ pub struct Plan {
     pub no_deps: Vec<String>,
     /// Variables for its workers.
     pub env: BTreeMap<String, String>,
+    /// The platform it is for (uv's name, `x86_64-unknown-linux-gnu`).
+    pub platform: String,
+    /// Its lock's pins for this platform, installed exactly (`uv pip sync`); `None`: its
+    /// registry file has no lock, and `requirements` are resolved when it is built.
+    pub locked: Option<Vec<String>>,
+    /// uv's options from the declaration (index URLs, torch backend).
+    pub uv_args: Vec<String>,
 }
 
 /// Builds environments into a cache folder with uv and finds them there.
@@ -239,7 +254,93 @@ impl Store {
             )));
         }
         spec.validate().map_err(invalid)?;
-        let (base, version) = match &spec.python {
+        let (base, version) = self.base_and_version(name, spec)?;
+        let platform = uv::platform();
+        let locked = self.locked_pins(name, spec, &version, &platform)?;
+        let mut context = format!("platform {platform}\n");
+        for pin in locked.iter().flatten() {
+            context.push_str(&format!("locked {pin}\n"));
+        }
+        context.push_str(&uv::settings());
+        let key = spec.key(&version, &self.extra_requirements, &context);
+        Ok(Plan {
+            name: name.to_string(),
+            dir: self.root.join(format!("{name}-{key}")),
+            key,
+            base,
+            requirements: spec.full_requirements(&self.extra_requirements),
+            no_deps: spec.no_deps_sorted(),
+            env: spec.env.clone(),
+            platform,
+            locked,
+            uv_args: spec.uv_args(),
+        })
+    }
+
+    /// The pins of `spec`'s lock for `platform`; `None` where its registry has no lock
+    /// file; an error naming the fix where the lock does not fit the declaration.
+    fn locked_pins(
+        &self,
+        name: &str,
+        spec: &PythonEnvSpec,
+        version: &str,
+        platform: &str,
+    ) -> Result<Option<Vec<String>>, PyEnvError> {
+        let refused = |message: String| PyEnvError::Lock {
+            name: name.to_string(),
+            message,
+        };
+        let (file, lock) = match &spec.lock {
+            Locking::Unlocked => return Ok(None),
+            Locking::Missing { file } => {
+                return Err(refused(format!(
+                    "is not in the lock file `{file}`: it was added to the registry without relocking\nhint: `envhub env lock {name}` resolves it (then commit the lock file)"
+                )));
+            }
+            Locking::Locked { file, lock } => (file, lock),
+        };
+        let declared = spec.declaration_hash(&self.extra_requirements);
+        if lock.declaration != declared {
+            return Err(refused(format!(
+                "its declaration in the registry changed since it was locked (the lock file `{file}` was made from declaration {}, the registry's is {declared})\nhint: `envhub env lock {name}` resolves it again (then commit the lock file)",
+                lock.declaration
+            )));
+        }
+        if lock.python != version {
+            return Err(refused(format!(
+                "the lock file `{file}` is for Python {}, but it would be built on Python {version} (the hub's interpreter's version, as it names none)\nhint: name `python: \"{}\"` in its declaration, or `envhub env lock {name}` with this interpreter",
+                lock.python, lock.python
+            )));
+        }
+        match lock.platforms.get(platform) {
+            Some(pins) => Ok(Some(pins.clone())),
+            None => Err(refused(format!(
+                "the lock file `{file}` has no pins for this platform, {platform} (it has {})\nhint: `envhub env lock {name} --platform {platform}` adds them (then commit the lock file)",
+                if lock.platforms.is_empty() {
+                    "none".to_string()
+                } else {
+                    lock.platforms
+                        .keys()
+                        .cloned()
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            ))),
+        }
+    }
+
+    /// The interpreter to base `spec` on and its version as the key names it (as the
+    /// registry writes it, else the hub's interpreter's major.minor).
+    fn base_and_version(
+        &self,
+        name: &str,
+        spec: &PythonEnvSpec,
+    ) -> Result<(PathBuf, String), PyEnvError> {
+        let invalid = |message: String| PyEnvError::InvalidSpec {
+            name: name.to_string(),
+            message,
+        };
+        Ok(match &spec.python {
             Some(requested) => {
                 let path = self.find_python(name, requested)?;
                 (path, requested.trim().to_string())
@@ -258,17 +359,144 @@ impl Store {
                 let (major, minor, _) = parse_version(&version).expect("checked by version_of");
                 (self.default_python.clone(), format!("{major}.{minor}"))
             }
-        };
-        let key = spec.key(&version, &self.extra_requirements);
-        Ok(Plan {
-            name: name.to_string(),
-            dir: self.root.join(format!("{name}-{key}")),
-            key,
-            base,
-            requirements: spec.full_requirements(&self.extra_requirements),
-            no_deps: spec.no_deps_sorted(),
-            env: spec.env.clone(),
         })
+    }
+
+    /// How `spec` stands against its lock, in a word or three for `envhub env list`:
+    /// `unlocked`, `locked`, `stale` (declaration changed), `not in lock`,
+    /// `no pins for <platform>`, `locked for Python <version>`.
+    pub fn lock_state(&self, name: &str, spec: &PythonEnvSpec) -> String {
+        let lock = match &spec.lock {
+            Locking::Unlocked => return "unlocked".into(),
+            Locking::Missing { .. } => return "not in lock".into(),
+            Locking::Locked { lock, .. } => lock,
+        };
+        if lock.declaration != spec.declaration_hash(&self.extra_requirements) {
+            return "stale".into();
+        }
+        let version = match &spec.python {
+            Some(v) => v.trim().to_string(),
+            None => match self.base_and_version(name, spec) {
+                Ok((_, v)) => v,
+                Err(_) => lock.python.clone(),
+            },
+        };
+        let platform = uv::platform();
+        if lock.python != version {
+            format!("locked for Python {}", lock.python)
+        } else if !lock.platforms.contains_key(&platform) {
+            format!("no pins for {platform}")
+        } else {
+            "locked".into()
+        }
+    }
+
+    /// Resolves `spec` with uv's resolver (`uv pip compile`) for each of `platforms` (uv's
+    /// target names): its lock entry. Needs no interpreter of its version on this machine
+    /// unless an sdist must be built to learn its dependencies.
+    pub fn lock(
+        &self,
+        name: &str,
+        spec: &PythonEnvSpec,
+        platforms: &[String],
+    ) -> Result<EnvLock, PyEnvError> {
+        spec.validate().map_err(|message| PyEnvError::InvalidSpec {
+            name: name.to_string(),
+            message,
+        })?;
+        let version = match &spec.python {
+            Some(requested) => requested.trim().to_string(),
+            None => self.base_and_version(name, spec)?.1,
+        };
+        let requirements = spec.full_requirements(&self.extra_requirements);
+        let no_deps = spec.no_deps_sorted();
+        // Outside the cache folder, where `list` and `prune` would take it for a build.
+        let scratch = std::env::temp_dir().join(format!(
+            "envhub-lock-{name}-{}-{}",
+            std::process::id(),
+            SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .unwrap_or_default()
+                .subsec_nanos()
+        ));
+        std::fs::create_dir_all(&scratch).map_err(io(name, "create", &scratch))?;
+        let result = (|| {
+            let mut locked = EnvLock {
+                declaration: spec.declaration_hash(&self.extra_requirements),
+                python: version.clone(),
+                platforms: BTreeMap::new(),
+            };
+            for platform in platforms {
+                let mut pins = self.compile(
+                    name,
+                    spec,
+                    &scratch,
+                    &version,
+                    platform,
+                    &requirements,
+                    false,
+                )?;
+                if !no_deps.is_empty() {
+                    let bare =
+                        self.compile(name, spec, &scratch, &version, platform, &no_deps, true)?;
+                    // Installed after the others, so their version wins.
+                    let names: Vec<String> = bare.iter().map(|p| package_name(p)).collect();
+                    pins.retain(|p| !names.contains(&package_name(p)));
+                    pins.extend(bare);
+                }
+                pins.sort();
+                pins.dedup();
+                locked.platforms.insert(platform.clone(), pins);
+            }
+            Ok(locked)
+        })();
+        let _ = std::fs::remove_dir_all(&scratch);
+        result
+    }
+
+    /// One `uv pip compile` of `requirements` for `platform`: `name==version` pins.
+    #[allow(clippy::too_many_arguments)]
+    fn compile(
+        &self,
+        name: &str,
+        spec: &PythonEnvSpec,
+        scratch: &Path,
+        version: &str,
+        platform: &str,
+        requirements: &[String],
+        no_deps: bool,
+    ) -> Result<Vec<String>, PyEnvError> {
+        let tag = if no_deps { "no-deps" } else { "requirements" };
+        let input = scratch.join(format!("{tag}.in"));
+        let output = scratch.join(format!("{tag}-{platform}.txt"));
+        let text: String = requirements.iter().map(|r| format!("{r}\n")).collect();
+        std::fs::write(&input, text).map_err(io(name, "write", &input))?;
+        let mut compile = Command::new(&self.uv);
+        compile
+            .args(["pip", "compile", "--quiet", "--no-header", "--no-annotate"])
+            .args(["--python-version", version, "--python-platform", platform])
+            .args(spec.uv_args());
+        if no_deps {
+            compile.arg("--no-deps");
+        }
+        compile.arg(&input).arg("-o").arg(&output);
+        let show = self.progress;
+        uv::run(compile, Duration::from_secs(10), |elapsed| {
+            if show {
+                eprintln!(
+                    "envhub: python env `{name}`: resolving for {platform} ({} s)",
+                    elapsed.as_secs()
+                );
+            }
+        })
+        .map_err(|uv::Failed(message)| PyEnvError::Install {
+            name: name.to_string(),
+            stage: format!("`uv pip compile` for {platform}, Python {version}"),
+            packages: uv::named_packages(&message, requirements),
+            message,
+        })?;
+        let text = std::fs::read_to_string(&output).map_err(io(name, "read", &output))?;
+        Ok(pins_of(&text))
     }
 
     /// The newest CPython (default build) matching `requested`: pyenv's, then those uv
@@ -333,6 +561,7 @@ impl Store {
         let python = plan.dir.join("bin").join("python");
         (manifest.requirements == plan.requirements
             && manifest.no_deps == plan.no_deps
+            && manifest.locked.as_slice() == plan.locked.as_deref().unwrap_or_default()
             && python.exists())
         .then(|| PythonEnv {
             name: plan.name.clone(),
@@ -714,20 +943,37 @@ impl Store {
             }
         })?;
         let python = tmp.join("bin").join("python");
-        let mut install = Command::new(&self.uv);
-        install
-            .args(["pip", "install", "--quiet", "--python"])
-            .arg(&python)
-            .args(&plan.requirements);
-        uv::run(install, every, progress("installing"))
-            .map_err(|uv::Failed(m)| failed("`uv pip install`", m))?;
-        if !plan.no_deps.is_empty() {
-            let mut bare = Command::new(&self.uv);
-            bare.args(["pip", "install", "--quiet", "--no-deps", "--python"])
+        if let Some(pins) = &plan.locked {
+            // Exactly the lock: `uv pip sync` installs what it lists and nothing else (no
+            // resolution, no dependency it does not list), and removes anything else.
+            let file = tmp.join("envhub-lock.txt");
+            let text: String = pins.iter().map(|p| format!("{p}\n")).collect();
+            std::fs::write(&file, text).map_err(io(name, "write", &file))?;
+            let mut sync = Command::new(&self.uv);
+            sync.args(["pip", "sync", "--quiet", "--python"])
                 .arg(&python)
-                .args(&plan.no_deps);
-            uv::run(bare, every, progress("installing without dependencies"))
-                .map_err(|uv::Failed(m)| failed("`uv pip install --no-deps`", m))?;
+                .args(&plan.uv_args)
+                .arg(&file);
+            uv::run(sync, every, progress("installing the lock"))
+                .map_err(|uv::Failed(m)| failed("`uv pip sync` of the lock", m))?;
+        } else {
+            let mut install = Command::new(&self.uv);
+            install
+                .args(["pip", "install", "--quiet", "--python"])
+                .arg(&python)
+                .args(&plan.uv_args)
+                .args(&plan.requirements);
+            uv::run(install, every, progress("installing"))
+                .map_err(|uv::Failed(m)| failed("`uv pip install`", m))?;
+            if !plan.no_deps.is_empty() {
+                let mut bare = Command::new(&self.uv);
+                bare.args(["pip", "install", "--quiet", "--no-deps", "--python"])
+                    .arg(&python)
+                    .args(&plan.uv_args)
+                    .args(&plan.no_deps);
+                uv::run(bare, every, progress("installing without dependencies"))
+                    .map_err(|uv::Failed(m)| failed("`uv pip install --no-deps`", m))?;
+            }
         }
         if !self.packages.is_empty() {
             let overlay = self.overlay(name)?;
@@ -761,6 +1007,24 @@ impl Store {
             .map(String::from)
             .collect();
         resolved.sort();
+        if let Some(pins) = &plan.locked {
+            let normal = |list: &[String]| -> Vec<String> {
+                let mut out: Vec<String> = list.iter().map(|p| normal_pin(p)).collect();
+                out.sort();
+                out
+            };
+            let (want, got) = (normal(pins), normal(&resolved));
+            if want != got {
+                let missing: Vec<&String> = want.iter().filter(|p| !got.contains(p)).collect();
+                let extra: Vec<&String> = got.iter().filter(|p| !want.contains(p)).collect();
+                return Err(failed(
+                    "checking the venv against the lock",
+                    format!(
+                        "installed packages differ from the lock: missing {missing:?}, not in the lock {extra:?}"
+                    ),
+                ));
+            }
+        }
         let manifest = Manifest {
             name: name.clone(),
             key: plan.key.clone(),
@@ -769,6 +1033,8 @@ impl Store {
             requirements: plan.requirements.clone(),
             no_deps: plan.no_deps.clone(),
             resolved,
+            platform: plan.platform.clone(),
+            locked: plan.locked.clone().unwrap_or_default(),
             created_unix: SystemTime::now()
                 .duration_since(UNIX_EPOCH)
                 .unwrap_or_default()
@@ -778,6 +1044,27 @@ impl Store {
         let path = tmp.join(MANIFEST);
         let text = serde_json::to_string_pretty(&manifest).expect("a manifest serializes");
         std::fs::write(&path, text).map_err(io(name, "write", &path))
+    }
+}
+
+/// The `name==version` lines of a `uv pip compile` output (comments, options and blank
+/// lines dropped).
+fn pins_of(text: &str) -> Vec<String> {
+    let mut pins: Vec<String> = text
+        .lines()
+        .map(|l| l.split(" #").next().unwrap_or("").trim())
+        .filter(|l| !l.is_empty() && !l.starts_with('#') && !l.starts_with('-'))
+        .map(String::from)
+        .collect();
+    pins.sort();
+    pins
+}
+
+/// A pin with its package name normalized (`PyOpenGL==3.1.10` → `pyopengl==3.1.10`).
+fn normal_pin(pin: &str) -> String {
+    match pin.split_once("==") {
+        Some((name, version)) => format!("{}=={}", package_name(name), version.trim()),
+        None => pin.trim().to_string(),
     }
 }
 
@@ -887,6 +1174,59 @@ fn last_lines(text: &str, n: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lock_state_says_how_a_declaration_fits_its_lock() {
+        let store = Store::new("/nonexistent".into(), "uv".into(), "python3".into())
+            .with_extra_requirements(vec!["numpy".into()]);
+        let mut spec = PythonEnvSpec {
+            python: Some("3.11".into()),
+            requirements: vec!["mujoco==3.3.0".into()],
+            ..Default::default()
+        };
+        assert_eq!(store.lock_state("s", &spec), "unlocked");
+        let mut lock = EnvLock {
+            declaration: spec.declaration_hash(&["numpy".into()]),
+            python: "3.11".into(),
+            platforms: BTreeMap::new(),
+        };
+        lock.platforms
+            .insert(uv::platform(), vec!["mujoco==3.3.0".into()]);
+        let locked = |lock: &EnvLock| Locking::Locked {
+            file: "s.lock.yaml".into(),
+            lock: lock.clone(),
+        };
+        spec.lock = locked(&lock);
+        assert_eq!(store.lock_state("s", &spec), "locked");
+        // The worker's requirements are part of what was locked.
+        let bare = Store::new("/nonexistent".into(), "uv".into(), "python3".into());
+        assert_eq!(bare.lock_state("s", &spec), "stale");
+        let mut other = lock.clone();
+        other.platforms = [("riscv64-unknown-linux".to_string(), vec![])].into();
+        spec.lock = locked(&other);
+        assert_eq!(
+            store.lock_state("s", &spec),
+            format!("no pins for {}", uv::platform())
+        );
+        let mut older = lock.clone();
+        older.python = "3.10".into();
+        spec.lock = locked(&older);
+        assert_eq!(store.lock_state("s", &spec), "locked for Python 3.10");
+        spec.lock = Locking::Missing {
+            file: "s.lock.yaml".into(),
+        };
+        assert_eq!(store.lock_state("s", &spec), "not in lock");
+        spec.lock = locked(&lock);
+        spec.requirements.push("packaging".into());
+        assert_eq!(store.lock_state("s", &spec), "stale");
+    }
+
+    #[test]
+    fn compile_output_becomes_pins() {
+        let text = "# header\nmujoco==3.3.0\n    # via metaworld\n--index-url https://x\n\nabsl-py==2.5.1  # comment\n";
+        assert_eq!(pins_of(text), ["absl-py==2.5.1", "mujoco==3.3.0"]);
+        assert_eq!(normal_pin("PyOpenGL==3.1.10"), "pyopengl==3.1.10");
+    }
 
     #[test]
     fn disk_usage_counts_a_hard_linked_file_once() {

@@ -40,6 +40,104 @@ pub fn find_uv(explicit: Option<&Path>, python: Option<&Path>) -> Result<PathBuf
     Err(searched.join(", "))
 }
 
+/// uv's variables that change what it resolves or installs (indexes, what it may build,
+/// which versions it picks, its configuration file); part of every environment's key.
+/// Not these: where its cache is, how it links files, timeouts, concurrency, credentials.
+pub const SETTINGS_VARS: &[&str] = &[
+    "UV_INDEX",
+    "UV_DEFAULT_INDEX",
+    "UV_INDEX_URL",
+    "UV_EXTRA_INDEX_URL",
+    "UV_FIND_LINKS",
+    "UV_NO_INDEX",
+    "UV_INDEX_STRATEGY",
+    "UV_TORCH_BACKEND",
+    "UV_PRERELEASE",
+    "UV_RESOLUTION",
+    "UV_EXCLUDE_NEWER",
+    "UV_NO_BINARY",
+    "UV_NO_BINARY_PACKAGE",
+    "UV_NO_BUILD",
+    "UV_NO_BUILD_PACKAGE",
+    "UV_CONSTRAINT",
+    "UV_OVERRIDE",
+    "UV_BUILD_CONSTRAINT",
+    "UV_CONFIG_FILE",
+    "UV_NO_CONFIG",
+];
+
+/// The uv configuration that decides what gets installed, as text for the key: the set
+/// [`SETTINGS_VARS`], then the content of every configuration file uv reads for a `uv pip`
+/// command run from the current folder — `UV_CONFIG_FILE`'s, else the nearest `uv.toml`
+/// (or `pyproject.toml` with a `[tool.uv]` table) of the current folder and its parents,
+/// then the user's (`$XDG_CONFIG_HOME/uv/uv.toml`, `~/.config/uv/uv.toml`) and the system's
+/// (`$XDG_CONFIG_DIRS/uv/uv.toml`, `/etc/uv/uv.toml`); none with `UV_NO_CONFIG`.
+pub fn settings() -> String {
+    let mut text = String::new();
+    for var in SETTINGS_VARS {
+        if let Some(value) = std::env::var_os(var) {
+            text.push_str(&format!("{var}={}\n", value.to_string_lossy()));
+        }
+    }
+    for file in config_files() {
+        if let Ok(content) = std::fs::read_to_string(&file) {
+            text.push_str(&format!("uv config {}\n{content}\n", file.display()));
+        }
+    }
+    text
+}
+
+fn config_files() -> Vec<PathBuf> {
+    let set = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty());
+    if set("UV_NO_CONFIG").is_some_and(|v| v != "0" && v != "false") {
+        return Vec::new();
+    }
+    let mut files = Vec::new();
+    if let Some(file) = set("UV_CONFIG_FILE") {
+        files.push(PathBuf::from(file));
+    } else if let Ok(cwd) = std::env::current_dir() {
+        for dir in cwd.ancestors() {
+            let uv_toml = dir.join("uv.toml");
+            let pyproject = dir.join("pyproject.toml");
+            if uv_toml.is_file() {
+                files.push(uv_toml);
+                break;
+            }
+            if std::fs::read_to_string(&pyproject).is_ok_and(|t| t.contains("[tool.uv")) {
+                files.push(pyproject);
+                break;
+            }
+        }
+    }
+    let user = set("XDG_CONFIG_HOME")
+        .map(PathBuf::from)
+        .or_else(|| set("HOME").map(|h| PathBuf::from(h).join(".config")));
+    files.extend(user.map(|d| d.join("uv").join("uv.toml")));
+    let system = set("XDG_CONFIG_DIRS")
+        .map(|dirs| {
+            std::env::split_paths(&dirs)
+                .map(|d| d.join("uv").join("uv.toml"))
+                .collect::<Vec<_>>()
+        })
+        .unwrap_or_else(|| vec![PathBuf::from("/etc/xdg/uv/uv.toml")]);
+    files.extend(system);
+    files.push(PathBuf::from("/etc/uv/uv.toml"));
+    files
+}
+
+/// This machine's platform as uv names targets (`--python-platform`):
+/// `x86_64-unknown-linux-gnu`, `aarch64-apple-darwin`, ...
+pub fn platform() -> String {
+    let arch = std::env::consts::ARCH;
+    if cfg!(target_os = "macos") {
+        format!("{arch}-apple-darwin")
+    } else if cfg!(target_env = "musl") {
+        format!("{arch}-unknown-linux-musl")
+    } else {
+        format!("{arch}-unknown-linux-gnu")
+    }
+}
+
 /// How a uv run ended badly: its message (stderr, trimmed).
 pub(crate) struct Failed(pub String);
 

@@ -10,6 +10,7 @@ mod daemon;
 mod failures;
 mod lan_peer;
 mod lying_hub;
+mod other_user;
 mod python_worker;
 mod rapier_rollouts;
 mod remote_hubs;

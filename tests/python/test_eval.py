@@ -96,6 +96,10 @@ def test_builtin_benchmarks_parse_with_the_reference_protocols():
     mt10, mt50 = benches["metaworld-mt10"], benches["metaworld-mt50"]
     assert (len(mt10.tasks), len(mt50.tasks), mt10.horizon, mt10.rule) == (10, 50, 500, "any_step")
     assert mt10.env_options(mt10.tasks[0]) == {"env_name": "reach-v3", "benchmark": "MT10", "seed": 1}
+    # Meta-World's envs switch tasks on reset: one session runs every task.
+    assert mt10.reset_options(mt10.tasks[1]) == {"task": "push-v3"}
+    assert mt10.session_options(mt10.tasks[:2])["env_name"] == ["reach-v3", "push-v3"]  # env i's first task
+    assert benches["libero-10"].reset_options(benches["libero-10"].tasks[1]) == {}
     assert benches["dm-control"].rule == "none" and benches["mujoco"].rule == "none"
 
 
@@ -131,6 +135,9 @@ def test_usage_errors_name_the_valid_choices(args, expected):
         ({**PENDULUM, "settle": {"steps": 2, "action": [float("nan")]}}, "`settle.action` must be a list of finite numbers"),
         ({**PENDULUM, "episodes_per_task": 0}, "`episodes_per_task` must be an integer >= 1"),
         ({**PENDULUM, "init": {"seeds": [1, 2]}}, "5 episodes per task but 2 seeds"),
+        ({**PENDULUM, "task_reset_option": "task"}, "`tasks`/`task_option`/`task_reset_option` go with `entry`"),
+        ({**{k: v for k, v in PENDULUM.items() if k != "entries"}, "entry": "gym-pendulum", "task_reset_option": "task"},
+         "`task_reset_option` switches between `tasks`; this benchmark lists none"),
     ],
 )
 def test_protocol_fields_are_checked(decl, expected):
@@ -293,6 +300,48 @@ def test_a_policy_in_another_interpreter_gives_the_same_results(tmp_path, polici
     assert table(here) == table(remote)
     assert remote["policy"]["python_env"] == "(this interpreter)"
     assert there.proc.poll() is not None  # closed with the evaluation
+
+
+ARENA_POLICY = textwrap.dedent(
+    """\
+    import numpy as np
+
+    def digest(observations, tasks):
+        # What it was shown, as numbers: checksums, one value, whether it may write it (as
+        # in-process); then it writes into it (as Meta-World's scripted policies do).
+        out = []
+        for o in observations:
+            out.append(np.array([o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0],
+                                 float(o["cam"].flags.writeable), float(o["cam"].shape[0])]))
+            o["cam"].fill(0)
+        return out
+    """
+)
+
+
+def test_observations_reach_a_policy_in_another_interpreter_through_shared_memory(tmp_path):
+    from envhub.evaluation.arena import Arena
+    from envhub.evaluation.policy import Episode, Request, Task
+    from envhub.evaluation.policy_env import EnvPolicy
+
+    (tmp_path / "arena_policy.py").write_text(ARENA_POLICY)
+    there = EnvPolicy(f"{tmp_path / 'arena_policy.py'}:digest", [sys.executable], env_name="(this interpreter)")
+    episode = Episode(Task("b", "t", "e", "text", 0), 0)
+    rng = np.random.default_rng(3)
+    try:
+        # 8 KB, then 6 MB (beyond the arena's first MiB: it grows), then small again.
+        for side, n in ((16, 3), (512, 8), (8, 2)):
+            obs = [
+                {"cam": rng.integers(0, 256, (side, side, 3), dtype=np.uint8), "state": rng.normal(size=4)}
+                for _ in range(n)
+            ]
+            answers = there.act([Request(i, episode, 0, o) for i, o in enumerate(obs)])
+            for o, a in zip(obs, answers):
+                expect = [o["cam"].astype(np.float64).sum(), float(o["cam"][1, 2, 0]), o["state"][0], 1.0, side]
+                assert a.tolist() == expect
+        assert there.arena.capacity >= 512 * 512 * 3 * 8 > Arena().capacity
+    finally:
+        there.close()
 
 
 def test_cli_writes_the_table_and_results(tmp_path, policies):

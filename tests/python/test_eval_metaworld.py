@@ -76,19 +76,27 @@ def metaworld_python() -> str:
     return os.path.join(found.group(1), "bin", "python")
 
 
-def test_mt10_scripted_equals_metaworld_evaluation(tmp_path):
+@pytest.fixture(scope="module")
+def reference():
+    """Meta-World's own evaluation of MT10 (seed 1, EPISODES per task), run once."""
     python = metaworld_python()
     code = REFERENCE.replace("SEED", str(SEED)).replace("EPISODES", str(EPISODES))
     done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    ref = json.loads(done.stdout.strip().splitlines()[-1])
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
+
+# One env runs every episode of every task in turn, switching tasks on reset; ten envs run
+# them side by side, each switching as it takes the next episode: the table is the same.
+@pytest.mark.parametrize("num_envs", [1, 10])
+def test_mt10_scripted_equals_metaworld_evaluation(tmp_path, reference, num_envs):
+    ref = reference
     results = evaluate(
         "metaworld-mt10",
         "envhub.evaluation.experts:metaworld",
         policy_env="metaworld",
         episodes=EPISODES,
-        num_envs=2,
+        num_envs=num_envs,
         out=tmp_path / "mt10",
         progress=False,
     )
@@ -128,3 +136,47 @@ def test_every_env_of_a_session_has_the_one_goal_set():
             envs.reset(options={"goal": 50})
     finally:
         envs.close()
+
+
+def test_reset_option_task_switches_an_env_to_another_task():
+    """`reset(options={"task": t})`: an env (here the second of two, alone, by mask) runs task
+    t from that reset on, starting as a session made for t starts (same goal set, seed and
+    env index), and back; a name outside the benchmark's tasks is an error naming them."""
+    metaworld_python()
+    envs = envhub.make_vec("metaworld-reach", 2, seed=1, benchmark="MT10")
+    push = envhub.make_vec("metaworld-reach", 2, seed=1, benchmark="MT10", env_name="push-v3")
+    try:
+        reach, _ = envs.reset(options={"goal": 4})
+        pushed, _ = push.reset(options={"goal": 4})
+        assert not np.array_equal(reach[1], pushed[1])
+        mask = np.array([False, True])
+        switched, _ = envs.reset(options={"goal": 4, "task": "push-v3", "reset_mask": mask})
+        assert np.array_equal(switched[0], reach[0]) and np.array_equal(switched[1], pushed[1])
+        # The same steps give the same observations as in push's own session.
+        action = np.full((2, 4), 0.3, dtype=np.float32)
+        for _ in range(5):
+            ours, r1, *_ = envs.step(action)
+            theirs, r2, *_ = push.step(action)
+        assert np.array_equal(ours[1], theirs[1]) and r1[1] == r2[1]
+        back, _ = envs.reset(options={"goal": 4, "task": "reach-v3"})
+        assert np.array_equal(back, reach)
+        # A task per env from the start: env i runs env_name[i], as in its task's own session.
+        # With keep_tasks 1 an env closes the task it leaves, and makes it again on return.
+        both = envhub.make_vec(
+            "metaworld-reach", 2, seed=1, benchmark="MT10", env_name=["reach-v3", "push-v3"], keep_tasks=1
+        )
+        try:
+            mixed, _ = both.reset(options={"goal": 4})
+            assert np.array_equal(mixed[0], reach[0]) and np.array_equal(mixed[1], pushed[1])
+            both.reset(options={"goal": 4, "task": "push-v3"})
+            again, _ = both.reset(options={"goal": 4, "task": "reach-v3"})
+            assert np.array_equal(again, reach)
+        finally:
+            both.close()
+        with pytest.raises(envhub.EnvHubError, match=r"not a task of Meta-World's MT10; valid: push-v3, "):
+            envs.reset(options={"task": "pussh-v3"})
+        with pytest.raises(envhub.EnvHubError, match="valid: .*window-close-v3"):
+            envs.reset(options={"task": "assembly-v3"})  # an MT50 task, not MT10's
+    finally:
+        envs.close()
+        push.close()

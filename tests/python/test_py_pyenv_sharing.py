@@ -137,6 +137,8 @@ def test_a_suite_whose_worker_cannot_start_names_the_error_and_the_environment(c
     registry.write_text(
         yaml.safe_dump({"python_envs": {"metaworld": spec}, "environments": [{**found["entry"], "python_env": "metaworld"}]})
     )
+    # The catalog's lock too (`env:` is not part of what it was resolved from).
+    shutil.copy(REPO_ROOT / "configs" / "env_registry.lock.yaml", tmp_path / "registry.lock.yaml")
     out = cli("--registry", str(registry), "run", ENTRY, "--num-envs", "2", "--steps", "10", cache=cache)
     assert out.returncode != 0
     assert "python env `metaworld`" in out.stderr, out.stderr

@@ -1,4 +1,4 @@
-//! `envhub env list|sync|remove|prune`: the Python environments suites run in.
+//! `envhub env list|lock|sync|run|remove|prune`: the Python environments suites run in.
 
 use super::{Outcome, table};
 use anyhow::Context;
@@ -21,7 +21,19 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Build (if not ready) the named environments of the catalog, or all of them.
+    /// Resolve the named environments (or all) with uv's resolver into the lock file beside
+    /// the registry file that declares each (`<registry>.lock.yaml`), for this platform and
+    /// those the lock already has (or those `--platform` names). Commit the lock file.
+    Lock {
+        /// Names (`python_envs:` of the registry); none: every one.
+        names: Vec<String>,
+        /// Resolve for exactly these platforms (uv's names: `x86_64-unknown-linux-gnu`,
+        /// `aarch64-unknown-linux-gnu`, `aarch64-apple-darwin`); repeatable.
+        #[arg(long = "platform", value_name = "PLATFORM")]
+        platforms: Vec<String>,
+    },
+    /// Build (if not ready) the named environments of the catalog, or all of them: exactly
+    /// their lock's pins for this platform where their registry file has a lock file.
     Sync {
         /// Names (`python_envs:` of the registry); none: every one.
         names: Vec<String>,
@@ -93,6 +105,7 @@ pub(crate) fn run(registry: &Registry, args: &Args) -> anyhow::Result<Outcome> {
     let store = provision::store().map_err(anyhow::Error::msg)?;
     match &args.command {
         Command::List { json } => list(registry, store, *json),
+        Command::Lock { names, platforms } => lock(registry, store, names, platforms),
         Command::Sync { names } => sync(registry, store, names),
         Command::Run { name, args } => run_in(registry, name, args),
         Command::Remove { names, force } => {
@@ -193,6 +206,100 @@ fn megabytes(bytes: u64) -> String {
     format!("{:.0} MB", bytes as f64 / 1e6)
 }
 
+fn lock(
+    registry: &Registry,
+    store: &envhub_pyenv::Store,
+    names: &[String],
+    platforms: &[String],
+) -> anyhow::Result<Outcome> {
+    use envhub_pyenv::LockFile;
+    use std::collections::BTreeMap;
+    use std::path::PathBuf;
+    let envs = registry.python_envs();
+    let all = envs.all();
+    if all.is_empty() {
+        eprintln!(
+            "the catalog declares no Python environments (`python_envs:` in a registry file)"
+        );
+        return Ok(Outcome::NotFound);
+    }
+    let chosen: Vec<&String> = if names.is_empty() {
+        all.keys().collect()
+    } else {
+        names.iter().collect()
+    };
+    let mut files: BTreeMap<PathBuf, LockFile> = BTreeMap::new();
+    let mut failed = Vec::new();
+    for name in chosen {
+        let spec = all.get(name).with_context(|| {
+            let known: Vec<&str> = all.keys().map(String::as_str).collect();
+            format!("no python env `{name}` in the catalog (defined: {})\nhint: `envhub env list` shows them", known.join(", "))
+        })?;
+        let path = envs.lock_file(name).with_context(|| {
+            format!(
+                "python env `{name}` is declared by the built-in catalog, whose lock file lives in an envhub checkout\nhint: run `envhub env lock` from the checkout's root (the folder holding configs/env_registry.yaml), then rebuild envhub"
+            )
+        })?;
+        let file = files.entry(path.to_path_buf()).or_insert_with(|| {
+            std::fs::read_to_string(path)
+                .ok()
+                .and_then(|text| LockFile::parse(&text).ok())
+                .unwrap_or(LockFile {
+                    version: envhub_pyenv::LOCK_VERSION,
+                    ..Default::default()
+                })
+        });
+        let wanted: Vec<String> = if platforms.is_empty() {
+            let mut wanted = vec![envhub_pyenv::platform()];
+            if let Some(old) = file.python_envs.get(name) {
+                wanted.extend(old.platforms.keys().cloned());
+            }
+            wanted.sort();
+            wanted.dedup();
+            wanted
+        } else {
+            platforms.to_vec()
+        };
+        let start = std::time::Instant::now();
+        match store.lock(name, spec, &wanted) {
+            Ok(lock) => {
+                let counts: Vec<String> = lock
+                    .platforms
+                    .iter()
+                    .map(|(p, pins)| format!("{p}: {} packages", pins.len()))
+                    .collect();
+                println!(
+                    "{name}: locked for Python {} in {:.1} s ({})",
+                    lock.python,
+                    start.elapsed().as_secs_f64(),
+                    counts.join(", ")
+                );
+                file.python_envs.insert(name.clone(), lock);
+            }
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                failed.push(name.clone());
+            }
+        }
+    }
+    for (path, file) in &mut files {
+        // What the registry file no longer declares leaves its lock.
+        file.python_envs
+            .retain(|n, _| envs.lock_file(n) == Some(path.as_path()));
+        let registry_name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().replace(".lock.yaml", ".yaml"))
+            .unwrap_or_default();
+        let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
+        std::fs::write(&tmp, file.render(&registry_name))
+            .and_then(|()| std::fs::rename(&tmp, path))
+            .with_context(|| format!("cannot write the lock file `{}`", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    anyhow::ensure!(failed.is_empty(), "failed to lock: {}", failed.join(", "));
+    Ok(Outcome::Done)
+}
+
 fn sync(
     registry: &Registry,
     store: &envhub_pyenv::Store,
@@ -245,6 +352,12 @@ struct Row {
     size_bytes: Option<u64>,
     last_use_unix: Option<u64>,
     requirements: Vec<String>,
+    /// `locked`, `unlocked` (its registry file has no lock file), or why its lock does not
+    /// fit: `stale`, `not in lock`, `no pins for <platform>`, `locked for Python <version>`.
+    lock: String,
+    /// Why it cannot be built as declared (a lock that does not fit), if so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
     /// What they resolved to when it was built (`name==version`; empty: not built, or
     /// built by an envhub that did not record it).
     resolved: Vec<String>,
@@ -275,11 +388,26 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                     size_bytes: found.map(|s| s.size_bytes),
                     last_use_unix: found.and_then(|s| unix(s.last_use)),
                     requirements: plan.requirements,
+                    lock: store.lock_state(name, spec),
+                    error: None,
                     resolved: found
                         .and_then(|s| s.manifest.as_ref().map(|m| m.resolved.clone()))
                         .unwrap_or_default(),
                 });
             }
+            Err(e @ envhub_pyenv::PyEnvError::Lock { .. }) => rows.push(Row {
+                name: name.clone(),
+                folder: String::new(),
+                ready: false,
+                in_catalog: true,
+                python: spec.python.clone().unwrap_or_else(|| "(hub's)".into()),
+                size_bytes: None,
+                last_use_unix: None,
+                requirements: spec.requirements.clone(),
+                lock: store.lock_state(name, spec),
+                error: Some(e.to_string()),
+                resolved: Vec::new(),
+            }),
             Err(e) => eprintln!("warning: {e}"),
         }
     }
@@ -304,6 +432,12 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                 .as_ref()
                 .map(|m| m.requirements.clone())
                 .unwrap_or_default(),
+            lock: match s.manifest.as_ref() {
+                Some(m) if !m.locked.is_empty() => "locked".into(),
+                Some(_) => "unlocked".into(),
+                None => "-".into(),
+            },
+            error: None,
             resolved: s
                 .manifest
                 .as_ref()
@@ -329,6 +463,7 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                     (false, false) => "no (interrupted)".into(),
                 },
                 r.python.clone(),
+                r.lock.clone(),
                 r.size_bytes
                     .map_or("-".into(), |b| format!("{:.0} MB", b as f64 / 1e6)),
                 r.last_use_unix
@@ -345,6 +480,7 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
                 "KEY",
                 "READY",
                 "PYTHON",
+                "LOCK",
                 "SIZE",
                 "LAST USE",
                 "REQUIREMENTS"
@@ -352,6 +488,9 @@ fn list(registry: &Registry, store: &envhub_pyenv::Store, json: bool) -> anyhow:
             &cells
         )
     );
+    for r in rows.iter().filter(|r| r.error.is_some()) {
+        eprintln!("warning: {}", r.error.as_deref().unwrap_or_default());
+    }
     println!("cache: {}", store.root().display());
     Ok(Outcome::Done)
 }

@@ -24,6 +24,8 @@ FIELDS = {
     "entry": "one catalog entry that runs every task (with `tasks`)",
     "tasks": "with `entry`: a task count (tasks 0..n-1), or a list of task indexes or names",
     "task_option": "the entry option that names the task (default `task`)",
+    "task_reset_option": "with `entry`: the reset option that switches an env to a task (the adapter takes it, as "
+    "Meta-World's `task`, and a list for `task_option`, a task per env): one session runs every task",
     "episodes_per_task": "episodes of each task (a positive integer)",
     "init": "how episode k starts: {init_states: true, seed: S (optional)} | {train_goals: {seed: S, benchmark: MT10}} | "
     "{seeds: [..]} | {seed_start: N}",
@@ -59,13 +61,15 @@ def closest(word: str, valid: list[str], what: str) -> BenchmarkError:
 
 @dataclass(frozen=True)
 class TaskSpec:
-    """One task: its id, the entry that runs it, the options that pick it, its text."""
+    """One task: its id, the entry that runs it, the options that pick it, its text, and its
+    name (the value of the entry's task option; None with `entries`)."""
 
     id: str
     entry: str
     options: dict[str, Any]
     text: str
     index: int
+    name: Any = None
 
 
 @dataclass
@@ -89,6 +93,8 @@ class Benchmark:
     python_env: str | None
     source: str
     raw: dict[str, Any] = field(default_factory=dict)
+    #: The reset option that switches an env to a task: one session runs every task.
+    task_reset_option: str | None = None
 
     def task(self, spec: TaskSpec, text: str | None = None) -> Task:
         return Task(benchmark=self.name, id=spec.id, entry=spec.entry, text=text or spec.text, index=spec.index)
@@ -139,6 +145,20 @@ class Benchmark:
         if "seed_start" in self.init:
             return {"seed": int(self.init["seed_start"]) + k}
         return {}
+
+    def reset_options(self, spec: TaskSpec) -> dict[str, Any]:
+        """The reset options that switch an env of a shared session to `spec`'s task."""
+        if self.task_reset_option is None:
+            return {}
+        return {self.task_reset_option: spec.name}
+
+    def session_options(self, specs: list[TaskSpec]) -> dict[str, Any]:
+        """What the envs of a session are made with, env `i` to run `specs[i]`'s task first
+        (a list of tasks, one per env, where envs switch tasks on reset)."""
+        options = self.env_options(specs[0])
+        if self.task_reset_option is not None and len({spec.id for spec in specs}) > 1:
+            options[self.raw.get("task_option", "task")] = [spec.name for spec in specs]
+        return options
 
     def env_options(self, spec: TaskSpec) -> dict[str, Any]:
         """What the envs of a task's session are made with."""
@@ -244,8 +264,8 @@ def _tasks(name: str, decl: dict[str, Any], where: str) -> list[TaskSpec]:
     if ("entries" in decl) == ("entry" in decl):
         raise BenchmarkError(f"{where}: give either `entries` (one entry per task) or `entry` (with `tasks`)")
     if "entries" in decl:
-        if "tasks" in decl or "task_option" in decl:
-            raise BenchmarkError(f"{where}: `tasks`/`task_option` go with `entry`, not with `entries`")
+        if "tasks" in decl or "task_option" in decl or "task_reset_option" in decl:
+            raise BenchmarkError(f"{where}: `tasks`/`task_option`/`task_reset_option` go with `entry`, not with `entries`")
         entries = _str_list("entries", decl["entries"], where)
         if not entries:
             raise BenchmarkError(f"{where}: `entries` is empty")
@@ -268,7 +288,8 @@ def _tasks(name: str, decl: dict[str, Any], where: str) -> list[TaskSpec]:
     if len(set(map(str, names))) != len(names):
         raise BenchmarkError(f"{where}: `tasks` lists a task twice")
     return [
-        TaskSpec(id=f"{name}/{t}", entry=entry, options={option: t}, text=str(t), index=i) for i, t in enumerate(names)
+        TaskSpec(id=f"{name}/{t}", entry=entry, options={option: t}, text=str(t), index=i, name=t)
+        for i, t in enumerate(names)
     ]
 
 
@@ -341,6 +362,11 @@ def parse(name: str, decl: Any, entries: set[str] | None = None) -> Benchmark:
     python_env = decl.get("python_env")
     if python_env is not None and not isinstance(python_env, str):
         raise BenchmarkError(f"{where}: `python_env` must be a catalog Python environment name, not {python_env!r}")
+    reset_option = decl.get("task_reset_option")
+    if reset_option is not None and (not isinstance(reset_option, str) or not reset_option):
+        raise BenchmarkError(f"{where}: `task_reset_option` must be a reset option name, not {reset_option!r}")
+    if reset_option is not None and decl.get("tasks") is None:
+        raise BenchmarkError(f"{where}: `task_reset_option` switches between `tasks`; this benchmark lists none")
     description = decl.get("description", "")
     if not isinstance(description, str):
         raise BenchmarkError(f"{where}: `description` must be text")
@@ -362,4 +388,5 @@ def parse(name: str, decl: Any, entries: set[str] | None = None) -> Benchmark:
         python_env=python_env,
         source=str(decl.get("source", "")),
         raw=dict(decl),
+        task_reset_option=reset_option,
     )

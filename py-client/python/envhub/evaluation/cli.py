@@ -42,7 +42,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--video-failures-only", action="store_true", help="with --video: only failed episodes")
     p.add_argument("--video-fps", type=float, default=20.0)
     p.add_argument("--report", action="store_true", help="write --out/report.html")
-    p.add_argument("--record", metavar="DIR", help="record every episode as a LeRobot dataset (planned)")
+    p.add_argument("--record", metavar="DIR", help="record every episode as a LeRobot v3 dataset in DIR (appended to)")
+    p.add_argument("--record-fps", type=int, help="the dataset's fps (default: the env's render_fps)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
 
@@ -86,9 +87,6 @@ def main(argv: list[str] | None = None) -> int:
         if not args.benchmark:
             print("envhub eval: error: name a benchmark (--list shows them)", file=sys.stderr)
             return 2
-        if args.record:
-            print("envhub eval: error: --record is not implemented yet (planned: the recorder on each episode)", file=sys.stderr)
-            return 2
         if args.policy is None and args.server is None:
             print("envhub eval: error: give --policy module:function or --server URL", file=sys.stderr)
             return 2
@@ -116,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             video=args.video,
             video_failures_only=args.video_failures_only,
             video_fps=args.video_fps,
+            record=args.record,
+            record_fps=args.record_fps,
             report=args.report,
             step_timeout=args.step_timeout,
             progress=not args.quiet,

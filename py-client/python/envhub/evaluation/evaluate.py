@@ -113,13 +113,16 @@ def evaluate(
     video: bool = False,
     video_failures_only: bool = False,
     video_fps: float = 20.0,
+    record: str | os.PathLike[str] | None = None,
+    record_fps: int | None = None,
     report: bool = False,
     step_timeout: float | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Runs `policy` over `benchmark` (a catalog name, or a declaration dict) and returns the
     results dict (docs/eval.md); `out` gets `episodes.jsonl` as episodes finish, then
-    `results.json`, `results.csv` (and `videos/`, `report.html` when asked). `policy`:
+    `results.json`, `results.csv` (and `videos/`, `report.html` when asked); `record`: a
+    folder that gets every episode as a LeRobot dataset (docs/eval.md). `policy`:
     `function(observations, tasks) -> actions` (`per_task`: a factory `function(task) ->
     agent`), a `Policy`, or `module:function`; `server`: a policy server's URL instead.
     `resume`: episodes already in `out` are not run again (errored ones are)."""
@@ -154,13 +157,19 @@ def evaluate(
 
             videos = EpisodeVideos(folder, video_failures_only, video_fps)
 
-        def record(result: dict[str, Any]) -> None:
+        dataset = None
+        if record is not None:
+            from .dataset import EpisodeDataset
+
+            dataset = EpisodeDataset(record, fps=record_fps)
+
+        def log_result(result: dict[str, Any]) -> None:
             log.add(result)
             meter.episode(result.get("success"))
 
         runner = Runner(
-            bench, pol, record, num_envs=num_envs, workers=workers, hubs=hubs, registry=catalog.registry,
-            step_timeout=step_timeout, fail_fast=fail_fast, replan=replan, videos=videos,
+            bench, pol, log_result, num_envs=num_envs, workers=workers, hubs=hubs, registry=catalog.registry,
+            step_timeout=step_timeout, fail_fast=fail_fast, replan=replan, videos=videos, dataset=dataset,
         )
         started, t0 = _now(), time.monotonic()
         try:
@@ -168,8 +177,12 @@ def evaluate(
         finally:
             meter.close()
             log.close()
-            if videos is not None:
-                videos.close()
+            try:
+                if videos is not None:
+                    videos.close()
+            finally:
+                if dataset is not None:
+                    dataset.close()
         seconds = time.monotonic() - t0
         for t in task_plan:
             if t["id"] in runner.tasks:
@@ -198,6 +211,7 @@ def evaluate(
                 "host": socket.gethostname(),
                 "env_steps": runner.env_steps,
                 "out": os.path.abspath(folder),
+                "dataset": None if dataset is None else {"path": os.path.abspath(record), **dataset.stats},  # type: ignore[arg-type]
             },
             "summary": summary,
             "per_task": per_task_rows,

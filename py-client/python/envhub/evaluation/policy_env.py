@@ -1,10 +1,11 @@
 """A callable policy run in a catalog Python environment (`--policy-env NAME`): a child
 process of that environment's interpreter loads the policy, and the two speak a small pipe
 protocol: pickled `(command, args)` messages on the child's stdin, pickled replies on its
-stdout (the child's prints go to stderr). Observations travel pickled over the pipe (a copy
-per batch; shared memory is a later step).
+stdout (the child's prints go to stderr). Observations' arrays travel through shared memory
+(`arena.py`: written once into a memory file the child maps); the pipe carries
+where they are.
 
-    python -m envhub.evaluation.policy_env SPEC [--per-task]   # the child, run by EnvPolicy
+    python -m envhub.evaluation.policy_env SPEC --arena FD [--per-task]   # the child, run by EnvPolicy
 """
 
 from __future__ import annotations
@@ -39,10 +40,16 @@ class EnvPolicy:
 
     def __init__(self, spec: str, command: Sequence[str], per_task: bool = False, env_name: str | None = None) -> None:
         self.spec, self.env_name = spec, env_name
-        args = [*command, "-m", "envhub.evaluation.policy_env", spec] + (["--per-task"] if per_task else [])
+        from .arena import Arena
+
+        self.arena = Arena()
+        args = [*command, "-m", "envhub.evaluation.policy_env", spec, "--arena", str(self.arena.fd)]
+        args += ["--per-task"] if per_task else []
         # `-m` puts the current folder first on the child's path: the policy's module is found
         # where `--policy` names it, as in this process.
-        self.proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        self.proc = subprocess.Popen(
+            args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self.arena.fd,)
+        )
         self.info: dict[str, Any] = self._call("describe")
 
     def _call(self, command: str, *args: Any) -> Any:
@@ -64,7 +71,8 @@ class EnvPolicy:
         self._call("start", slot, episode)
 
     def act(self, requests: Sequence[Request]) -> list[np.ndarray]:
-        return self._call("act", list(requests))
+        packed, size = self.arena.put(requests)
+        return self._call("act", packed, size)
 
     def end(self, slot: int, episode: Episode, result: dict[str, Any]) -> None:
         self._call("end", slot, episode, result)
@@ -83,14 +91,18 @@ class EnvPolicy:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        self.arena.close()
 
 
-def child(spec: str, per_task: bool) -> int:
+def child(spec: str, per_task: bool, arena: int | None) -> int:
     reply = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)
     sys.stdout = sys.stderr
     requests = sys.stdin.buffer
+    from .arena import ArenaView
     from .callable import CallablePolicy, PerTask, load
+
+    view = ArenaView(arena) if arena is not None else None
 
     try:
         target = load(spec)
@@ -108,7 +120,8 @@ def child(spec: str, per_task: bool) -> int:
             if command == "describe":
                 value: Any = policy.describe()
             elif command == "act":
-                value = [np.asarray(a) for a in policy.act(args[0])]
+                batch = view.take(args[0], args[1]) if view is not None and len(args) > 1 else args[0]
+                value = [np.asarray(a) for a in policy.act(batch)]
             elif command == "start":
                 value = policy.start(*args)
             elif command == "end":
@@ -126,5 +139,9 @@ def child(spec: str, per_task: bool) -> int:
         reply.flush()
 
 
+def _arena_fd(argv: list[str]) -> int | None:
+    return int(argv[argv.index("--arena") + 1]) if "--arena" in argv else None
+
+
 if __name__ == "__main__":
-    sys.exit(child(sys.argv[1], "--per-task" in sys.argv[2:]))
+    sys.exit(child(sys.argv[1], "--per-task" in sys.argv[2:], _arena_fd(sys.argv[2:])))

@@ -2,7 +2,13 @@
 
 A task runs in a session of its entry (the task is a make option, so one session holds one
 task); sessions of several tasks run at once while the env budget (`num_envs`) allows: a
-task with fewer episodes left than free envs leaves the rest to the next tasks. Every env
+task with fewer episodes left than free envs leaves the rest to the next tasks. A benchmark
+whose adapter switches tasks on reset (`task_reset_option`) runs every task in one session
+instead (a session's start, workers that import the suite, is paid once): its episodes queue
+task by task in turn (each task's first, then each task's second, ...), so the first envs
+start on different tasks, and an env whose episode ends takes the next episode of the task
+it runs while there is one (a task's env is made once per env that runs it, as Meta-World's
+own MT10 vector env has one env per task), else the queue's first. Every env
 (slot, numbered across sessions) runs one episode at a time: a reset with the episode's
 initial condition, the settling steps with the protocol's fixed action, then policy steps
 (an action chunk is executed one action per step before the slot asks again) until success
@@ -38,6 +44,10 @@ class EvaluationStopped(RuntimeError):
     """`fail_fast`: an episode failed, and the evaluation stopped there."""
 
 
+#: An episode to run: its task and index.
+Job = tuple[TaskSpec, int]
+
+
 @dataclass
 class _Slot:
     episode: Episode | None = None
@@ -49,6 +59,7 @@ class _Slot:
     pos: int = 0
     t0: float = 0.0
     obs: Any = None
+    action: Any = None  # the last action the env got (a row of the batch sent)
     ended: bool = False
     frames: bool = False
 
@@ -58,16 +69,18 @@ class _Slot:
 
 
 class _Session:
-    """One task's session: its envs, their slots (global ids `ids[i]` for env `i`), and the
-    task's episodes not started yet."""
+    """A session: its envs, their slots (global ids `ids[i]` for env `i`), and the episodes
+    not started yet (one task's, or every task's where envs switch tasks on reset)."""
 
-    def __init__(self, spec: TaskSpec, envs: Any, ids: list[int], queue: deque[int], bench: Benchmark) -> None:
-        self.spec, self.envs, self.ids, self.queue = spec, envs, ids, queue
+    def __init__(self, envs: Any, ids: list[int], queue: deque[Job], bench: Benchmark, broken: int) -> None:
+        self.envs, self.ids, self.queue = envs, ids, queue
         self.space = envs.single_action_space
         self.observer = Observer(bench.observation, envs.single_observation_space)
         self.slots = [_Slot() for _ in ids]
-        self.started: set[int] = set()
+        self.tasks: list[str | None] = [None] * len(ids)  # the task each env last ran (its id)
         self.finished = 0  # episodes that ended without an error
+        self.broken = broken  # sessions of these episodes that broke before this one
+        self.sent: list[int] = []
         self.first = True
 
 
@@ -105,10 +118,12 @@ class Runner:
         fail_fast: bool = False,
         replan: int | None = None,
         videos: Any = None,
+        dataset: Any = None,
     ) -> None:
         self.bench, self.policy, self.record = bench, policy, record
         self.num_envs, self.workers, self.hubs, self.registry = num_envs, workers, hubs, registry
         self.step_timeout, self.fail_fast, self.replan, self.videos = step_timeout, fail_fast, replan, videos
+        self.dataset = dataset
         self.env_steps = 0
         self.tasks: dict[str, Task] = {}
         self.sessions: list[_Session] = []
@@ -121,29 +136,36 @@ class Runner:
 
         from ..wire.errors import EnvHubError
 
-        pending: deque[tuple[TaskSpec, deque[int], int]] = deque()
+        # Episodes that share sessions, with the count of their sessions that broke.
+        pending: deque[tuple[deque[Job], int]] = deque()
         for spec in self.bench.tasks:
-            todo = deque(k for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip)
+            todo = deque((spec, k) for k in range(self.bench.episodes_per_task) if f"{spec.id}#{k}" not in skip)
             if todo:
-                pending.append((spec, todo, 0))
+                pending.append((todo, 0))
+        if self.bench.task_reset_option is not None and pending:
+            # One session for every task, the tasks in turn.
+            jobs = [(k, spec.index, (spec, k)) for todo, _ in pending for spec, k in todo]
+            pending = deque([(deque(job for _, _, job in sorted(jobs, key=lambda j: j[:2])), 0)])
         free = list(range(self.num_envs))
         # Sessions start (workers spawn, suites import) and stop in threads while the others
         # step: a start takes seconds. Two at a time, so a small machine is not swamped.
         pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-start")
         self._stops = ThreadPoolExecutor(max_workers=2, thread_name_prefix="envhub-eval-stop")
-        starting: dict[Any, tuple[TaskSpec, deque[int], list[int], int]] = {}
+        starting: dict[Any, tuple[deque[Job], list[int], int]] = {}
         try:
             while pending or self.sessions or starting:
                 while pending and free:
-                    spec, todo, broken = pending.popleft()
+                    todo, broken = pending.popleft()
                     n = min(len(free), len(todo))
                     ids, free = free[:n], free[n:]
-                    starting[pool.submit(self._make, spec, n)] = (spec, todo, ids, broken)
+                    # Env i made with the task of the episode it runs first.
+                    first = [spec for spec, _ in list(todo)[:n]]
+                    starting[pool.submit(self._make, first, n)] = (todo, ids, broken)
                 if not self.sessions:  # nothing to step: wait for a start
                     wait(list(starting), return_when=FIRST_COMPLETED)
                 for future in [f for f in starting if f.done()]:
-                    spec, todo, ids, broken = starting.pop(future)
-                    started = self._started_session(future, spec, todo, ids, broken)
+                    todo, ids, broken = starting.pop(future)
+                    started = self._started_session(future, todo, ids, broken)
                     if started is not True:
                         free = sorted(free + ids)
                         if started is not False:
@@ -169,7 +191,7 @@ class Runner:
             pool.shutdown(wait=True, cancel_futures=True)
             self._stops.shutdown(wait=True)
 
-    def _make(self, spec: TaskSpec, n: int) -> Any:
+    def _make(self, specs: list[TaskSpec], n: int) -> Any:
         import os
 
         from ..client.factory import make_vec
@@ -178,7 +200,7 @@ class Runner:
         # one worker): sessions run side by side, and every worker is an interpreter to start.
         workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
         return make_vec(
-            spec.entry,
+            specs[0].entry,
             n,
             workers,
             "disabled",
@@ -186,12 +208,12 @@ class Runner:
             registry=self.registry,
             step_timeout=self.step_timeout,
             hubs=self.hubs,
-            **self.bench.env_options(spec),
+            **self.bench.session_options(specs),
         )
 
     def _started_session(
-        self, future: Any, spec: TaskSpec, todo: deque[int], ids: list[int], broken: int
-    ) -> bool | tuple[TaskSpec, deque[int], int]:
+        self, future: Any, todo: deque[Job], ids: list[int], broken: int
+    ) -> bool | tuple[deque[Job], int]:
         """The session a start gave, with its first episodes reset: True; False where the
         task cannot run (its episodes failed with the reason); or the task to start again
         when its first reset broke the session."""
@@ -200,15 +222,20 @@ class Runner:
         try:
             envs = future.result()
         except EnvHubError as e:
-            task = self.tasks.get(spec.id) or self.bench.task(spec)
-            for k in todo:
-                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            self._fail_all(todo, f"{type(e).__name__}: {e}")
             return False
-        s = _Session(spec, envs, ids, todo, self.bench)
-        s.broken = broken  # type: ignore[attr-defined]
+        if self.dataset is not None:
+            try:
+                self.dataset.session(envs, todo[0][0].id)
+            except BaseException:
+                envs.close()
+                raise
+        s = _Session(envs, ids, todo, self.bench, broken)
         self.sessions.append(s)
+        first = {i: s.queue.popleft() for i in range(len(ids))}
+        s.tasks = [spec.id for spec, _ in first.values()]  # as the envs were made
         try:
-            self._reset(s, {i: s.queue.popleft() for i in range(len(ids))})
+            self._reset(s, first)
         except EnvHubError as e:
             requeue = self._broken(s, e)
             return False if requeue is None else requeue
@@ -226,36 +253,43 @@ class Runner:
 
         self._stops.submit(close)
 
-    def _broken(self, s: _Session, e: Exception) -> tuple[TaskSpec, deque[int], int] | None:
+    def _broken(self, s: _Session, e: Exception) -> tuple[deque[Job], int] | None:
         """A session that broke (a worker died, a step timed out): its running episodes fail;
-        the task's other episodes go on in a new session, unless sessions of it keep breaking
-        with no episode finished."""
+        its other episodes go on in a new session, unless sessions of them keep breaking with
+        no episode finished."""
         for i, slot in enumerate(s.slots):
             if slot.running:
                 self._finish(s, i, error=f"{type(e).__name__}: {e}")
         self._close(s)
-        broken = 0 if s.finished else getattr(s, "broken", 0) + 1
+        broken = 0 if s.finished else s.broken + 1
         if not s.queue:
             return None
         if broken >= MAX_BROKEN:
-            task = self.tasks.get(s.spec.id) or self.bench.task(s.spec)
-            for k in s.queue:
-                self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), f"{type(e).__name__}: {e}")
+            self._fail_all(s.queue, f"{type(e).__name__}: {e}")
             return None
-        return s.spec, s.queue, broken
+        return s.queue, broken
+
+    def _fail_all(self, jobs: deque[Job], error: str) -> None:
+        """Fails episodes that never started (their sessions could not start or kept breaking)."""
+        for spec, k in jobs:
+            task = self.tasks.get(spec.id) or self.bench.task(spec)
+            self._fail_unstarted(Episode(task, k, self.bench.episode_init(k)), error)
 
     # Resets -------------------------------------------------------------------------------
 
-    def _reset(self, s: _Session, assign: dict[int, int]) -> None:
+    def _reset(self, s: _Session, assign: dict[int, Job]) -> None:
         """Resets the envs in `assign` for their episodes (grouped by reset options: one
-        reset takes one set of options for the envs it resets)."""
+        reset takes one set of options for the envs it resets; the options pick the
+        episode's initial condition and, in a session of every task, its task)."""
         n = len(s.slots)
-        inits = {i: self.bench.episode_init(k) for i, k in assign.items()}
+        inits = {i: self.bench.episode_init(k) for i, (_, k) in assign.items()}
         seeds: list[int | None] = [None] * n
         groups: dict[str, list[int]] = {}
         for i, init in inits.items():
             seeds[i] = init.get("seed")
             options = {k: v for k, v in init.items() if k != "seed"}
+            if s.tasks[i] != assign[i][0].id:  # switch the env's task
+                options.update(self.bench.reset_options(assign[i][0]))
             groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
         t0 = time.perf_counter()
         for key, group in groups.items():
@@ -269,16 +303,17 @@ class Runner:
                 obs, info = s.envs.reset(seed=seeds, options={**options, "reset_mask": mask})
             texts, has = info.get("language"), info.get("_language")
             for i in group:
+                spec = assign[i][0]
                 # A language-conditioned suite says the task's instruction in its reset info.
                 if texts is not None and (has is None or has[i]) and isinstance(texts[i], str):
-                    if s.spec.id not in self.tasks:
-                        self.tasks[s.spec.id] = self.bench.task(s.spec, texts[i])
+                    if spec.id not in self.tasks:
+                        self.tasks[spec.id] = self.bench.task(spec, texts[i])
                 s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
-        task = self.tasks.setdefault(s.spec.id, self.bench.task(s.spec))
-        for i, k in assign.items():
+        for i, (spec, k) in assign.items():
+            s.tasks[i] = spec.id
+            task = self.tasks.setdefault(spec.id, self.bench.task(spec))
             slot = s.slots[i]
             slot.episode = Episode(task, k, inits[i])
-            s.started.add(k)
             try:
                 self.policy.start(s.ids[i], slot.episode)
             except Exception as e:
@@ -287,15 +322,30 @@ class Runner:
             if slot.settle_left == 0:
                 self._frame(s, i)
 
+    def _next_job(self, s: _Session, i: int) -> Job:
+        """The next episode for env `i`: in a session of every task, the next one of the task
+        the env runs while there is one (no other task's env to make), else the queue's first."""
+        current = s.tasks[i]
+        if current is not None:
+            for n, job in enumerate(s.queue):
+                if job[0].id == current:
+                    del s.queue[n]
+                    return job
+        return s.queue.popleft()
+
     def _tick(self, s: _Session) -> None:
         """Receives the session's step (if sent), then starts the next episodes on the envs
         whose episode ended."""
-        if getattr(s, "sent", None):
+        if s.sent:
             self._recv(s)
         ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
         for i in ended:
             s.slots[i] = _Slot()
-        assign = {i: s.queue.popleft() for i in ended if s.queue}
+        assign: dict[int, Job] = {}
+        for i in ended:
+            if not s.queue:
+                break
+            assign[i] = self._next_job(s, i)
         if assign:
             self._reset(s, assign)
 
@@ -351,7 +401,7 @@ class Runner:
 
         for s in list(self.sessions):
             ids = [i for i, slot in enumerate(s.slots) if slot.running]
-            s.sent = ids  # type: ignore[attr-defined]
+            s.sent = ids
             if not ids:
                 continue
             actions = np.empty((len(ids), *s.space.shape), dtype=s.space.dtype)
@@ -361,16 +411,17 @@ class Runner:
                     actions[j] = self.bench.settle_action  # type: ignore[assignment]
                 else:
                     actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
+                    slot.action = actions[j]
                     slot.pos += 1
             try:
                 s.envs.send(actions, ids)
             except EnvHubError:
-                s.sent = []  # type: ignore[attr-defined]
+                s.sent = []
                 raise
 
     def _recv(self, s: _Session) -> None:
-        waiting = set(s.sent)  # type: ignore[attr-defined]
-        s.sent = []  # type: ignore[attr-defined]
+        waiting = set(s.sent)
+        s.sent = []
         self.env_steps += len(waiting)
         while waiting:
             obs, rewards, terminated, truncated, info = s.envs.recv()
@@ -392,6 +443,8 @@ class Runner:
             return
         slot.t += 1
         slot.ret += reward
+        if self.dataset is not None:
+            self.dataset.step(s.ids[i], slot.action, reward, terminated)
         self._frame(s, i)
         rule = self.bench.rule
         if rule == "any_step":
@@ -409,6 +462,9 @@ class Runner:
     # Episode ends -------------------------------------------------------------------------
 
     def _frame(self, s: _Session, i: int) -> None:
+        """Env `i` shows its policy a new observation (after settling, after each step)."""
+        if self.dataset is not None:
+            self.dataset.observe(s.ids[i], s.slots[i].obs)
         if self.videos is None:
             return
         frame = s.observer.frame(s.slots[i].obs)
@@ -444,6 +500,11 @@ class Runner:
                     result["video"] = self.videos.finish(slot_id, ep, bool(slot.success))
                 else:
                     self.videos.discard(slot_id)
+            if self.dataset is not None:
+                if error is None:
+                    self.dataset.finish(slot_id, ep.task.text or ep.task.id, result["success"])
+                else:
+                    self.dataset.discard(slot_id)
             try:
                 self.policy.end(slot_id, ep, result)
             except Exception as e:  # the episode's result stands; the policy's trouble is said

@@ -19,7 +19,7 @@ from typing import Any
 import gymnasium as gym
 
 from .base import EnvAdapter, missing_modules
-from .libero_spec import action_space, observation_space, outside, split_env_id, task_index
+from .libero_spec import action_space, control_rate, observation_space, outside, split_env_id, task_index
 
 # A file every LIBERO scene loads: present means the assets are installed.
 ASSET_MARKER = os.path.join("scenes", "libero_tabletop_base_style.xml")
@@ -213,6 +213,8 @@ class LiberoEnv(gym.Env):
 
     def __init__(self, env: Any, tasks: Any, index: int, init_state: int | None) -> None:
         self.env = env
+        # LIBERO's `ControlEnv` holds robosuite's env as `.env`: one step, one control period.
+        self.metadata = {**self.metadata, "render_fps": control_rate(getattr(env, "env", env))}
         self.task = tasks.get_task(index)
         self._tasks, self._index = tasks, index
         self._init_states: Any = None

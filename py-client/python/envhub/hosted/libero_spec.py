@@ -126,3 +126,11 @@ def outside(space: Any, obs: dict[str, Any]) -> list[str]:
     import numpy as np
 
     return [k for k, s in space.spaces.items() if not s.contains(np.asarray(obs[k]))]
+
+
+def control_rate(env: Any) -> int | float | None:
+    """robosuite's steps per second of simulated time (`control_freq`, 20 by default)."""
+    rate = getattr(env, "control_freq", None)
+    if not isinstance(rate, (int, float)) or rate <= 0:
+        return None
+    return int(rate) if float(rate).is_integer() else float(rate)

@@ -84,10 +84,12 @@ class RobosuiteEnv(gym.Env):
     def __init__(self, name: str, options: dict[str, Any]) -> None:
         import robosuite
 
-        from .libero_spec import action_space, observation_space, outside
+        from .libero_spec import action_space, control_rate, observation_space, outside
 
         kwargs, keys = make_kwargs(options)
         self.env = robosuite.make(name, **kwargs)
+        # One step is one control period: what a recording's timestamps count in.
+        self.metadata = {**self.metadata, "render_fps": control_rate(self.env)}
         obs = self.env.reset()
         if keys is not None:
             missing = sorted(set(keys) - set(obs))

@@ -136,3 +136,43 @@ INDEX_FEATURES = {
     "index": {"dtype": "int64", "shape": [1], "names": None},
     "task_index": {"dtype": "int64", "shape": [1], "names": None},
 }
+
+
+def features(columns: list[Column], fps: int, codec: str, extra_videos: dict[str, tuple[int, ...]] | None = None) -> dict[str, dict]:
+    """`info.json`'s `features` for a recording of `columns` (observation, action and step
+    columns; `codec` as `info.json` names it, `h264`) plus `extra_videos` (key: frame shape),
+    the index columns last."""
+    out: dict[str, dict] = {}
+    videos: dict[str, tuple[int, ...]] = {}
+    for c in columns:
+        if c.video:
+            videos[c.name] = c.shape
+        else:
+            out[c.name] = c.feature(fps)
+    videos.update(extra_videos or {})
+    for key, (h, w, ch) in videos.items():
+        out[key] = Column(key, (), np.dtype(np.uint8), (h, w, ch), True).feature(fps, codec, _pix_fmt(w, h))
+    return out | INDEX_FEATURES
+
+
+def frame_rate(declared: Any, fps: int | None) -> int:
+    """The dataset's fps: `fps` if given, else the env's `render_fps` (`declared`), which must
+    be a positive whole number (LeRobot's)."""
+    value = fps if fps is not None else declared
+    if value is None:
+        raise ValueError(
+            "the env declares no frame rate (`metadata[\"render_fps\"]`), which the dataset's "
+            "timestamps need\nhint: pass `fps=` (steps per second of env time)"
+        )
+    if float(value) <= 0 or not float(value).is_integer():
+        raise ValueError(
+            f"the dataset's fps must be a positive whole number (LeRobot's), got `{value}`\n"
+            "hint: pass `fps=` with the nearest whole number"
+        )
+    return int(value)
+
+
+def _pix_fmt(width: int, height: int) -> str:
+    from ._video import pix_fmt
+
+    return pix_fmt(width, height)

@@ -26,6 +26,9 @@ CODECS: dict[str, dict[str, str]] = {
     "libopenh264": {},
 }
 DEFAULT_CODEC = "libx264"
+#: Codec names as `info.json` has them (LeRobot writes FFmpeg's canonical names), both ways.
+CANONICAL = {"libx264": "h264", "libopenh264": "h264", "libsvtav1": "av1", "libaom-av1": "av1"}
+ENCODER = {"h264": "libx264", "av1": "libsvtav1"}
 DEFAULT_CRF = 18
 DEFAULT_GOP = 2
 

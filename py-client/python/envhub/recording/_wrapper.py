@@ -19,14 +19,10 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
-from ._features import INDEX_FEATURES, RENDER_KEY, STEP_COLUMNS, action_column, observation_columns
-from ._video import DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, check_codec, pix_fmt
+from ._features import RENDER_KEY, STEP_COLUMNS, action_column, features, frame_rate, observation_columns
+from ._video import CANONICAL, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, ENCODER, check_codec
 from ._writer import STOP, Reset, Step, Writer
 from .errors import DatasetLayoutError, QueueFullWarning, RecordingError, require
-
-# Codec names as `info.json` has them (LeRobot writes FFmpeg's canonical names), both ways.
-_CANONICAL = {"libx264": "h264", "libopenh264": "h264", "libsvtav1": "av1", "libaom-av1": "av1"}
-_ENCODER = {"h264": "libx264", "av1": "libsvtav1"}
 
 
 def _mode(env: VectorEnv) -> AutoresetMode:
@@ -174,54 +170,23 @@ class RecordEpisodes(VectorWrapper):
 
     @staticmethod
     def _fps(env: VectorEnv, fps: int | None) -> int:
-        value = fps if fps is not None else env.metadata.get("render_fps")
-        if value is None:
-            raise ValueError(
-                "the env declares no frame rate (`metadata[\"render_fps\"]`), which the dataset's "
-                "timestamps need\nhint: pass `fps=` (steps per second of env time)"
-            )
-        if float(value) <= 0 or not float(value).is_integer():
-            raise ValueError(
-                f"the dataset's fps must be a positive whole number (LeRobot's), got `{value}`\n"
-                "hint: pass `fps=` with the nearest whole number"
-            )
-        return int(value)
+        return frame_rate(env.metadata.get("render_fps"), fps)
 
     # Opening the dataset at the first reset ------------------------------------------------
 
     def _open(self, frames: list[np.ndarray] | None) -> None:
-        features: dict[str, dict] = {}
         codec = self._codec or DEFAULT_CODEC
-        video_shapes = {c.name: c.shape for c in self._obs_columns if c.video}
+        render: dict[str, tuple[int, ...]] = {}
         if self._render:
             if frames is None or any(f is None for f in frames):
                 raise RecordingError(
                     "the env was made with `render_mode=\"rgb_array\"` but `render()` gave no frame\n"
                     "hint: pass `video=False` to record without frames"
                 )
-            video_shapes[RENDER_KEY] = tuple(np.asarray(frames[0]).shape)
-        for c in [*self._obs_columns, self._action, *STEP_COLUMNS]:
-            if c.video:
-                continue
-            features[c.name] = c.feature(self.fps)
-        for key, (h, w, ch) in video_shapes.items():
-            features[key] = {
-                "dtype": "video",
-                "shape": [h, w, ch],
-                "names": ["height", "width", "channels"],
-                "info": {
-                    "video.height": h,
-                    "video.width": w,
-                    "video.codec": _CANONICAL[codec],
-                    "video.pix_fmt": pix_fmt(w, h),
-                    "video.is_depth_map": False,
-                    "video.fps": self.fps,
-                    "video.channels": ch,
-                    "has_audio": False,
-                },
-            }
-        features |= INDEX_FEATURES
-        dataset = Dataset(self.root, self.fps, features, self._robot_type, *self._sizes)
+            render[RENDER_KEY] = tuple(np.asarray(frames[0]).shape)
+        columns = [*self._obs_columns, self._action, *STEP_COLUMNS]
+        wanted = features(columns, self.fps, CANONICAL[codec], render)
+        dataset = Dataset(self.root, self.fps, wanted, self._robot_type, *self._sizes)
         try:
             codec = self._dataset_codec(dataset, codec)
             check_codec(codec)
@@ -246,11 +211,11 @@ class RecordEpisodes(VectorWrapper):
             if there is None or dataset.info["total_episodes"] == 0:
                 continue
             if self._codec is None:
-                return _ENCODER.get(there, codec)
-            if _CANONICAL[self._codec] != there:
+                return ENCODER.get(there, codec)
+            if CANONICAL[self._codec] != there:
                 raise DatasetLayoutError(
                     f"the dataset at `{dataset.root}` holds `{there}` videos, this recording "
-                    f"encodes `{_CANONICAL[self._codec]}` (`{self._codec}`)\n"
+                    f"encodes `{CANONICAL[self._codec]}` (`{self._codec}`)\n"
                     f"hint: leave `codec` out to append with the dataset's codec"
                 )
         return codec

@@ -1,0 +1,215 @@
+//! A default hub (no credentials, no endpoint: loopback only) against the other users of its
+//! machine, as one of them would try it: loopback is open to every uid, so the hub checks
+//! every link into it against this user's local credential, which only this user can read.
+//!
+//! - A Zenoh peer that reaches the hub's loopback port without the credential (as any
+//!   process of another user can, the port being in `/proc/net/tcp`) gets no link, no token
+//!   and no answer to `open`.
+//! - `envhub hubs` run as another uid (`nobody`), pointed at the hub's endpoint, lists nothing;
+//!   it cannot read the credential either. Needs root to run a process as another uid; without
+//!   it that part is skipped with the reason (CI runs as root).
+//! - This user's default client finds the hub (through the folder of local hubs) and one
+//!   given the endpoint reaches it: both present the credential.
+
+use envhub_e2e::binary;
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use zenoh::Wait;
+
+const NOBODY: u32 = 65534;
+
+struct DefaultHub {
+    child: Child,
+    name: String,
+    endpoint: String,
+    local: PathBuf,
+    dir: PathBuf,
+}
+
+impl Drop for DefaultHub {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn start() -> DefaultHub {
+    let pid = std::process::id();
+    let name = format!("uid-victim-{pid}");
+    let dir = std::env::temp_dir().join(format!("e2e-uid-{pid}"));
+    let local = dir.join("hubs");
+    std::fs::create_dir_all(&dir).unwrap();
+    let child = Command::new(binary("envhub"))
+        .args(["serve", "--name", &name, "--socket"])
+        .arg(dir.join("hub.sock"))
+        .env("ENVHUB_NAMESPACE", format!("e2e_uid_{pid}_"))
+        .env(envhub::local::ENVHUB_LOCAL_HUBS, &local)
+        .env(envhub::ENVHUB_MULTICAST, "0")
+        .env_remove(envhub::ENVHUB_CONNECT)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let endpoint = loop {
+        let entry = std::fs::read_dir(&local).ok().and_then(|d| {
+            d.filter_map(Result::ok)
+                .find(|e| e.file_name().to_string_lossy().ends_with(".json"))
+        });
+        if let Some(entry) = entry {
+            let v: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(entry.path()).unwrap()).unwrap();
+            break v["endpoint"].as_str().unwrap().to_string();
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the hub did not start within 20 s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    DefaultHub {
+        child,
+        name,
+        endpoint,
+        local,
+        dir,
+    }
+}
+
+/// `envhub hubs --json` as this user (`uid`: as that one), with `args`; its stdout.
+fn hubs(binary: &Path, local: &Path, args: &[&str], uid: Option<u32>) -> String {
+    let mut cmd = Command::new(binary);
+    cmd.args(["hubs", "--json"])
+        .args(args)
+        .env(envhub::local::ENVHUB_LOCAL_HUBS, local)
+        .env_remove(envhub::ENVHUB_MULTICAST)
+        .env_remove(envhub::ENVHUB_CONNECT)
+        .env_remove(envhub::env_vars::ENVHUB_HUB)
+        .stdin(Stdio::null());
+    if let Some(uid) = uid {
+        cmd.uid(uid).gid(uid).current_dir("/");
+    }
+    let out = cmd.output().unwrap();
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+#[test]
+fn another_user_on_this_machine_never_reaches_a_default_hub() {
+    let hub = start();
+    // A peer without the credential, on the hub's own loopback endpoint.
+    let mut config = zenoh::Config::default();
+    config
+        .insert_json5("connect/endpoints", &format!("[\"{}\"]", hub.endpoint))
+        .unwrap();
+    config
+        .insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    let intruder = zenoh::open(config)
+        .wait()
+        .expect("the intruder's peer opens");
+    std::thread::sleep(Duration::from_secs(2));
+    let peers: Vec<String> = intruder
+        .info()
+        .peers_zid()
+        .wait()
+        .map(|z| z.to_string())
+        .collect();
+    let tokens = intruder
+        .liveliness()
+        .get("envhub/**")
+        .timeout(Duration::from_secs(1))
+        .wait()
+        .unwrap()
+        .iter()
+        .count();
+    let answers = intruder
+        .get(format!("envhub/hub/{}/open", hub.name))
+        .payload(
+            serde_json::json!({
+                "id": "gym-cartpole", "config": {"num_envs": 1}, "client": "envhub/client/x",
+                "restart_on_crash": false, "step_timeout_ms": 1000
+            })
+            .to_string(),
+        )
+        .timeout(Duration::from_secs(2))
+        .wait()
+        .unwrap()
+        .iter()
+        .count();
+    drop(intruder);
+    assert!(
+        peers.is_empty(),
+        "a peer without the credential got a link to {peers:?}"
+    );
+    assert_eq!(tokens, 0, "a peer without the credential saw tokens");
+    assert_eq!(
+        answers, 0,
+        "a peer without the credential got an open answer"
+    );
+
+    // This user's clients: found through the folder, and reached through the endpoint.
+    let found = hubs(&binary("envhub"), &hub.local, &[], None);
+    assert!(
+        found.contains(&hub.name),
+        "this user's default client did not find the hub: {found}"
+    );
+    let reached = hubs(
+        &binary("envhub"),
+        &hub.local,
+        &["--connect", &hub.endpoint],
+        None,
+    );
+    assert!(
+        reached.contains(&hub.name),
+        "this user's client given the endpoint did not reach the hub: {reached}"
+    );
+
+    // Another uid, as a process of another user runs: no credential to read, no hub.
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("skipped the other-uid part: running a process as another uid needs root");
+        return;
+    }
+    let theirs = hub.dir.join("nobody");
+    std::fs::create_dir_all(theirs.join("bin")).unwrap();
+    std::fs::set_permissions(&hub.dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::set_permissions(&theirs, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::os::unix::fs::chown(&theirs, Some(NOBODY), Some(NOBODY)).unwrap();
+    let their_binary = theirs.join("bin").join("envhub");
+    std::fs::copy(binary("envhub"), &their_binary).unwrap();
+    std::fs::set_permissions(&their_binary, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let their_local = theirs.join("hubs");
+    let credential = hub.local.join("credential");
+    let read = Command::new("cat")
+        .arg(&credential)
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .output()
+        .unwrap();
+    assert!(
+        !read.status.success() && read.stdout.is_empty(),
+        "another uid read the credential"
+    );
+    let listed = hubs(
+        &their_binary,
+        &their_local,
+        &["--connect", &hub.endpoint],
+        Some(NOBODY),
+    );
+    assert!(
+        !listed.contains(&hub.name),
+        "another uid reached the default hub: {listed}"
+    );
+    // The same binary, run by this user with the endpoint, does reach it (the test can fail).
+    let control = hubs(
+        &their_binary,
+        &hub.local,
+        &["--connect", &hub.endpoint],
+        None,
+    );
+    assert!(control.contains(&hub.name), "{control}");
+}
