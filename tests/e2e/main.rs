@@ -8,6 +8,7 @@ mod cli;
 mod concurrency;
 mod daemon;
 mod failures;
+mod hub_bounds;
 mod lan_peer;
 mod lying_hub;
 mod other_user;
