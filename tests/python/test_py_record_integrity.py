@@ -470,7 +470,7 @@ def test_many_short_episodes_share_a_handful_of_files(tmp_path):
 def test_files_roll_at_the_declared_sizes(tmp_path):
     """With small `data_files_size_in_mb` / `video_files_size_in_mb` the files roll: each
     stays near the size (one commit past it at most), the dataset loads whole, and an append
-    continues the last file."""
+    continues the last file where it has room."""
     mujoco_or_skip(envhub)
     root = tmp_path / "rolled"
     sizes = {"data_files_size_in_mb": 0.02, "video_files_size_in_mb": 0.05}
@@ -479,8 +479,17 @@ def test_files_roll_at_the_declared_sizes(tmp_path):
     videos = sorted((root / "videos").glob("*/*/*.mp4"))
     assert len(data) >= 2 and len(videos) >= 2, (data, videos)
     last_video = videos[-1].stat().st_size
-    expected += _record_many(root, 4, seed=1, **sizes)  # a few frames: they fit the last file
-    assert sorted((root / "videos").glob("*/*/*.mp4")) == videos and videos[-1].stat().st_size > last_video
+    expected += _record_many(root, 4, seed=1, **sizes)
+    # The append goes on in the last file, unless adding to it would reach the size
+    # (LeRobot's rule): how full the first recording left it depends on how its episodes
+    # fell into commits, so either can happen, but a roll only where the size was reached.
+    after = sorted((root / "videos").glob("*/*/*.mp4"))
+    assert after[: len(videos)] == videos and len(after) <= len(videos) + 1, (videos, after)
+    if len(after) == len(videos):
+        assert videos[-1].stat().st_size > last_video
+    else:
+        both = videos[-1].stat().st_size + after[-1].stat().st_size
+        assert both / 2**20 >= sizes["video_files_size_in_mb"], (last_video, both)
     info = json.loads((root / "meta/info.json").read_text())
     assert info["data_files_size_in_mb"] == 0.02 and info["video_files_size_in_mb"] == 0.05
     summary, arrays = load(root)
