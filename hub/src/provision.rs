@@ -230,15 +230,21 @@ pub fn program_in(
     Ok((crate::python_host::environment_program(&env, args), env))
 }
 
-fn named_env(registry: &Registry, name: &str) -> Result<WorkerPython, String> {
+/// The catalog's declaration of the Python environment `name`, or an error naming those
+/// it declares.
+pub fn declared<'a>(registry: &'a Registry, name: &str) -> Result<&'a PythonEnvSpec, String> {
     let all = registry.python_envs().all();
-    let spec = all.get(name).ok_or_else(|| {
+    all.get(name).ok_or_else(|| {
         let known: Vec<&str> = all.keys().map(String::as_str).collect();
         format!(
             "no python env `{name}` in the catalog (defined: {})\nhint: `envhub env list` shows them",
             if known.is_empty() { "none".to_string() } else { known.join(", ") }
         )
-    })?;
+    })
+}
+
+fn named_env(registry: &Registry, name: &str) -> Result<WorkerPython, String> {
+    let spec = declared(registry, name)?;
     let store = store()?;
     let env = store.ensure(name, spec).map_err(|e| format!("{e:#}"))?;
     as_run(store, env).map_err(|e| e.to_string())

@@ -84,20 +84,8 @@ pub fn publish(name: &str, endpoint: &str) -> Result<Published, String> {
     ensure(&dir)?;
     let pid = std::process::id();
     let path = dir.join(format!("{pid}.json"));
-    let tmp = dir.join(format!(".{pid}.tmp"));
     let body = serde_json::json!({ "name": name, "endpoint": endpoint, "pid": pid }).to_string();
-    let write = || -> std::io::Result<()> {
-        use std::io::Write;
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .mode(0o600)
-            .open(&tmp)?;
-        f.write_all(body.as_bytes())?;
-        std::fs::rename(&tmp, &path)
-    };
-    write().map_err(|e| format!("cannot write `{}`: {e}", path.display()))?;
+    write_private(&dir, &path, &body, true)?;
     Ok(Published(path))
 }
 
@@ -171,7 +159,8 @@ fn read_private(path: &Path) -> Result<Option<String>, String> {
 /// linked to it only where there is none yet (a file another process made first stays).
 fn write_private(dir: &Path, path: &Path, body: &str, replace: bool) -> Result<(), String> {
     use std::io::Write;
-    let tmp = dir.join(format!(".credential-{}.tmp", std::process::id()));
+    let name = path.file_name().unwrap_or_default().to_string_lossy();
+    let tmp = dir.join(format!(".{name}-{}.tmp", std::process::id()));
     let write = || -> std::io::Result<()> {
         let mut f = std::fs::OpenOptions::new()
             .write(true)

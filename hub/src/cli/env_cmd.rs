@@ -206,6 +206,34 @@ fn megabytes(bytes: u64) -> String {
     format!("{:.0} MB", bytes as f64 / 1e6)
 }
 
+/// The named environments of the catalog with their declarations (all of them when none is
+/// named); `None`, said on stderr, when the catalog declares none.
+fn chosen<'a>(
+    registry: &'a Registry,
+    names: &'a [String],
+) -> anyhow::Result<Option<Vec<(&'a String, &'a envhub_pyenv::PythonEnvSpec)>>> {
+    let all = registry.python_envs().all();
+    if all.is_empty() {
+        eprintln!(
+            "the catalog declares no Python environments (`python_envs:` in a registry file)"
+        );
+        return Ok(None);
+    }
+    if names.is_empty() {
+        return Ok(Some(all.iter().collect()));
+    }
+    let chosen = names
+        .iter()
+        .map(|name| {
+            Ok((
+                name,
+                provision::declared(registry, name).map_err(anyhow::Error::msg)?,
+            ))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(Some(chosen))
+}
+
 fn lock(
     registry: &Registry,
     store: &envhub_pyenv::Store,
@@ -216,25 +244,12 @@ fn lock(
     use std::collections::BTreeMap;
     use std::path::PathBuf;
     let envs = registry.python_envs();
-    let all = envs.all();
-    if all.is_empty() {
-        eprintln!(
-            "the catalog declares no Python environments (`python_envs:` in a registry file)"
-        );
+    let Some(chosen) = chosen(registry, names)? else {
         return Ok(Outcome::NotFound);
-    }
-    let chosen: Vec<&String> = if names.is_empty() {
-        all.keys().collect()
-    } else {
-        names.iter().collect()
     };
     let mut files: BTreeMap<PathBuf, LockFile> = BTreeMap::new();
     let mut failed = Vec::new();
-    for name in chosen {
-        let spec = all.get(name).with_context(|| {
-            let known: Vec<&str> = all.keys().map(String::as_str).collect();
-            format!("no python env `{name}` in the catalog (defined: {})\nhint: `envhub env list` shows them", known.join(", "))
-        })?;
+    for (name, spec) in chosen {
         let path = envs.lock_file(name).with_context(|| {
             format!(
                 "python env `{name}` is declared by the built-in catalog, whose lock file lives in an envhub checkout\nhint: run `envhub env lock` from the checkout's root (the folder holding configs/env_registry.yaml), then rebuild envhub"
@@ -305,24 +320,11 @@ fn sync(
     store: &envhub_pyenv::Store,
     names: &[String],
 ) -> anyhow::Result<Outcome> {
-    let all = registry.python_envs().all();
-    if all.is_empty() {
-        eprintln!(
-            "the catalog declares no Python environments (`python_envs:` in a registry file)"
-        );
+    let Some(chosen) = chosen(registry, names)? else {
         return Ok(Outcome::NotFound);
-    }
-    let chosen: Vec<&String> = if names.is_empty() {
-        all.keys().collect()
-    } else {
-        names.iter().collect()
     };
     let mut failed = Vec::new();
-    for name in chosen {
-        let spec = all.get(name).with_context(|| {
-            let known: Vec<&str> = all.keys().map(String::as_str).collect();
-            format!("no python env `{name}` in the catalog (defined: {})\nhint: `envhub env list` shows them", known.join(", "))
-        })?;
+    for (name, spec) in chosen {
         let start = std::time::Instant::now();
         match store.ensure(name, spec) {
             Ok(env) => println!(
