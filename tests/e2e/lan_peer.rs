@@ -92,35 +92,11 @@ fn a_peer_on_the_lan_never_reaches_a_default_hub_and_a_default_client_ignores_it
     let listed = String::from_utf8_lossy(&out.stdout).to_string();
     // Scouting runs for seconds: give a hub that scouts (or answers scouts) time to do it.
     std::thread::sleep(Duration::from_secs(4));
-    let tokens: Vec<String> = peer
-        .liveliness()
-        .get("envhub/**")
-        .timeout(Duration::from_secs(1))
-        .wait()
-        .unwrap()
-        .iter()
-        .filter_map(|r| r.result().ok().map(|s| s.key_expr().to_string()))
-        .collect();
-    let open_replies = peer
-        .get(format!("envhub/hub/{name}/open"))
-        .payload(
-            serde_json::json!({
-                "id": "gym-cartpole", "config": {"num_envs": 1}, "client": "envhub/client/x",
-                "restart_on_crash": false, "step_timeout_ms": 1000
-            })
-            .to_string(),
-        )
-        .timeout(Duration::from_secs(2))
-        .wait()
-        .unwrap()
-        .iter()
-        .count();
-    let peers: Vec<String> = peer
-        .info()
-        .peers_zid()
-        .wait()
-        .map(|z| z.to_string())
-        .collect();
+    let envhub_e2e::intruder::Seen {
+        peers,
+        tokens,
+        open_answers: open_replies,
+    } = envhub_e2e::intruder::probe(&peer, &name);
     let _ = hub.kill();
     let _ = hub.wait();
     let _ = std::fs::remove_dir_all(&dir);

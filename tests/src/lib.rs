@@ -1,5 +1,6 @@
 //! Helpers for envhub's end-to-end tests: an isolated hub per test and the built binaries.
 
+pub mod intruder;
 pub mod remote;
 
 use envhub::{Hub, HubError, Registry, SessionOptions};
