@@ -19,14 +19,13 @@ and LIBERO's control frequency, as `render_fps`), which the dataset's timestamps
 from __future__ import annotations
 
 import json
-import os
 
 import gymnasium as gym
 import numpy as np
 import pytest
 from conftest import import_envhub
 from test_eval import policies  # noqa: F401 (a fixture: the test policies' file)
-from test_py_record import load
+from test_py_record import _recording_deps, load  # noqa: F401 (an autouse fixture: pyarrow and PyAV, or a skip)
 from test_py_suites import suite_python
 
 envhub = import_envhub()
@@ -34,7 +33,6 @@ envhub = import_envhub()
 from envhub.evaluation import evaluate  # noqa: E402
 from envhub.recording import RecordingError  # noqa: E402
 
-REQUIRED = bool(os.environ.get("ENVHUB_RECORD_REQUIRED"))
 CAMERAS = ["agentview_image", "robot0_eye_in_hand_image"]
 MEAN_ABS_TOLERANCE = 5.0  # levels of 255, as test_py_record.py allows x264 at CRF 18
 
@@ -47,17 +45,6 @@ PENDULUM = {
     "settle": {"steps": 4, "action": [0.5]},
     "success": "none",
 }
-
-
-@pytest.fixture(autouse=True)
-def _recording_deps() -> None:
-    try:
-        import av  # noqa: F401
-        import pyarrow  # noqa: F401
-    except ImportError as e:
-        if REQUIRED:
-            pytest.fail(f"recording needs pyarrow and PyAV ({e}), and ENVHUB_RECORD_REQUIRED is set")
-        pytest.skip(f"recording needs pyarrow and PyAV ({e}); `pip install 'envhub[record]'`")
 
 
 def swing(observations, tasks):

@@ -59,12 +59,16 @@ class Arena:
     def put(self, requests: Sequence[Any]) -> tuple[list[Any], int]:
         """The requests with their observations' arrays written here (replaced by `Ref`s),
         and the arena's size the reader must map."""
-        arrays: list[np.ndarray] = []
+        placed: list[tuple[np.ndarray, int]] = []
+        end = 0
 
         def place(value: Any) -> Any:
+            nonlocal end
             if isinstance(value, np.ndarray) and not value.dtype.hasobject:
-                arrays.append(value)
-                return ("__arena__", len(arrays) - 1)
+                placed.append((value, end))
+                ref = Ref(end, value.dtype.str, tuple(value.shape))
+                end = _round(end + value.nbytes, ALIGN)
+                return ref
             if isinstance(value, dict):
                 return {k: place(v) for k, v in value.items()}
             if isinstance(value, (list, tuple)):
@@ -72,30 +76,13 @@ class Arena:
             return value
 
         shaped = [place(r.observation) for r in requests]
-        offsets, end = [], 0
-        for a in arrays:
-            offsets.append(end)
-            end = _round(end + a.nbytes, ALIGN)
         if end > self.capacity:
             self._grow(end)
         assert self._map is not None
-        refs = []
-        for a, offset in zip(arrays, offsets):
+        for a, offset in placed:
             if a.nbytes:
-                target = np.frombuffer(self._map, a.dtype, a.size, offset).reshape(a.shape)
-                target[...] = a
-            refs.append(Ref(offset, a.dtype.str, tuple(a.shape)))
-
-        def swap(value: Any) -> Any:
-            if isinstance(value, tuple) and len(value) == 2 and value[0] == "__arena__":
-                return refs[value[1]]
-            if isinstance(value, dict):
-                return {k: swap(v) for k, v in value.items()}
-            if isinstance(value, (list, tuple)):
-                return type(value)(swap(v) for v in value)
-            return value
-
-        return [replace(r, observation=swap(s)) for r, s in zip(requests, shaped)], self.capacity
+                np.frombuffer(self._map, a.dtype, a.size, offset).reshape(a.shape)[...] = a
+        return [replace(r, observation=o) for r, o in zip(requests, shaped)], self.capacity
 
     def close(self) -> None:
         if self._map is not None:
