@@ -18,6 +18,8 @@ cd "$root"
 export RUSTC_BOOTSTRAP=1
 # envhub's own build flags (path remapping) would only rebuild the fuzz crate's dependencies.
 unset RUSTFLAGS
+# Nor clippy-driver, which the Makefile compiles the workspace with (the lints are for `make lint`).
+unset RUSTC_WORKSPACE_WRAPPER CLIPPY_ARGS
 
 if ! cargo fuzz --version 2>/dev/null | grep -q " $CARGO_FUZZ_VERSION"; then
     echo "fuzz: installing cargo-fuzz $CARGO_FUZZ_VERSION"

@@ -157,14 +157,22 @@ pub fn open_hub(
         })?;
     let default_listener = config.get_json("listen/endpoints").ok()
         == Some(format!("[\"{}\"]", crate::LOOPBACK_LISTENER));
+    if exposure.local_credential {
+        check_local_credential(&mut config)?;
+    }
+    present_local_credential(&mut config, net)?;
     if !default_listener {
         let session = zenoh::open(config)
             .wait()
             .map_err(|e| open_failed(net, e))?;
+        let local = exposure
+            .local_credential
+            .then(|| publish_local(name, &exposure.listen))
+            .flatten();
         return Ok(HubSession {
             session,
             notice: exposure.notice,
-            local: None,
+            local,
         });
     }
     // Loopback on a port of its own choosing, so it can tell local clients which: a port
@@ -189,42 +197,52 @@ pub fn open_hub(
                 what: "zenoh config",
                 reason: format!("`listen/endpoints`: {e}"),
             })?;
-        // Loopback is open to every user of the machine: links into this hub must present
-        // this user's local credential, which only this user's processes can read.
-        let credential = crate::local::credential().map_err(|e| HubError::Network {
-            reason: format!("cannot make this user's local credential: {e}"),
-            hint: "check that the folder of local hubs (`ENVHUB_LOCAL_HUBS`, \
-                   `$XDG_RUNTIME_DIR/envhub-hubs`) is this user's; or give credentials \
-                   (docs/security.md)"
-                .into(),
-        })?;
-        config
-            .insert_json5(
-                "transport/auth/usrpwd/dictionary_file",
-                &serde_json::to_string(&credential.dictionary.to_string_lossy())
-                    .expect("strings serialize"),
-            )
-            .map_err(|e| HubError::InvalidConfig {
-                what: "zenoh config",
-                reason: format!("`transport/auth/usrpwd/dictionary_file`: {e}"),
-            })?;
         match zenoh::open(config).wait() {
             Ok(session) => {
-                let local = crate::local::publish(name, &endpoint)
-                    .inspect_err(|e| {
-                        tracing::warn!("this machine's clients will not find this hub without `--connect {endpoint}`: {e}")
-                    })
-                    .ok();
                 return Ok(HubSession {
                     session,
                     notice: exposure.notice,
-                    local,
+                    local: publish_local(name, std::slice::from_ref(&endpoint)),
                 });
             }
             Err(e) if tries >= 3 => return Err(open_failed(net, e)),
             Err(e) => tracing::debug!(%endpoint, error = %e, "loopback port taken: another"),
         }
     }
+}
+
+/// Loopback is open to every user of the machine: links into this hub must present this
+/// user's local credential, which only this user's processes can read.
+fn check_local_credential(config: &mut zenoh::Config) -> Result<(), HubError> {
+    let credential = crate::local::credential().map_err(|e| HubError::Network {
+        reason: format!("cannot make this user's local credential: {e}"),
+        hint: "check that the folder of local hubs (`ENVHUB_LOCAL_HUBS`, \
+               `$XDG_RUNTIME_DIR/envhub-hubs`) is this user's; or give credentials \
+               (docs/security.md)"
+            .into(),
+    })?;
+    config
+        .insert_json5(
+            "transport/auth/usrpwd/dictionary_file",
+            &serde_json::to_string(&credential.dictionary.to_string_lossy())
+                .expect("strings serialize"),
+        )
+        .map_err(|e| HubError::InvalidConfig {
+            what: "zenoh config",
+            reason: format!("`transport/auth/usrpwd/dictionary_file`: {e}"),
+        })
+}
+
+/// Tells this user's clients where the hub listens (they present the local credential there).
+fn publish_local(name: &str, endpoints: &[String]) -> Option<crate::local::Published> {
+    crate::local::publish(name, endpoints)
+        .inspect_err(|e| {
+            tracing::warn!(
+                "this machine's clients will not find this hub without `--connect {}`: {e}",
+                endpoints.join(",")
+            )
+        })
+        .ok()
 }
 
 fn open_failed(net: &NetConfig, e: zenoh::Error) -> HubError {

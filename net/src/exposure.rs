@@ -31,6 +31,13 @@ pub(crate) struct Exposure {
     pub notice: Option<String>,
     /// The hub listens on loopback only (local clients find it through [`crate::local`]).
     pub loopback_only: bool,
+    /// Links into the hub must present this user's local credential ([`crate::local`]):
+    /// loopback is open to every user of the machine, so a hub there without credentials of
+    /// its own admits only its user's processes (unless `--insecure-listen` on a listener
+    /// it was given).
+    pub local_credential: bool,
+    /// The endpoints the hub listens on.
+    pub listen: Vec<String>,
 }
 
 /// The credentials a Zenoh config carries.
@@ -116,6 +123,12 @@ pub(crate) fn guard(
         );
     }
     exposure.loopback_only = listen.iter().all(|e| is_loopback(e));
+    // A user/password dictionary of the operator's leaves no room for the local one (Zenoh
+    // checks one); mTLS covers `tls/` listeners only.
+    let uncredentialed = !credentials.usrpwd_in && listen.iter().any(|e| !credentials.covers_in(e));
+    let assigned = listen == [LOOPBACK_LISTENER];
+    exposure.local_credential = exposure.loopback_only && uncredentialed && (assigned || !insecure);
+    exposure.listen = listen.clone();
     let exposed: Vec<&String> = listen
         .iter()
         .filter(|e| !is_loopback(e) && !credentials.covers_in(e))
@@ -126,7 +139,13 @@ pub(crate) fn guard(
         )
         .collect();
     if insecure {
-        if !exposed.is_empty() {
+        if exposed.is_empty() && exposure.loopback_only && uncredentialed && !assigned {
+            exposure.notice = Some(format!(
+                "warning: this hub listens on {} without credentials (`--insecure-listen`): \
+                 every user of this machine can run envs here; see docs/security.md",
+                quoted(&listen.iter().collect::<Vec<_>>())
+            ));
+        } else if !exposed.is_empty() {
             exposure.notice = Some(format!(
                 "warning: this hub is open without credentials on {} (`--insecure-listen`): any \
                  peer that reaches it can run envs here and read or steer every session; see \
@@ -311,6 +330,33 @@ mod tests {
             err.contains("multicast") && err.contains("loopback only"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn loopback_without_credentials_admits_only_this_users_processes() {
+        let mut c = config("mode = \"peer\"");
+        assert!(guard(&mut c, false, None).unwrap().local_credential);
+        assert!(guard(&mut c, true, None).unwrap().local_credential);
+        // A listener it was given, too: other users of the machine reach loopback.
+        let given = "listen/endpoints = [\"tcp/127.0.0.1:7447\"]";
+        let mut c = config(given);
+        let exposure = guard(&mut c, false, None).unwrap();
+        assert!(exposure.local_credential);
+        assert_eq!(exposure.listen, ["tcp/127.0.0.1:7447"]);
+        let mut c = config(given);
+        let exposure = guard(&mut c, true, None).unwrap();
+        assert!(!exposure.local_credential, "`--insecure-listen` shares it");
+        let warning = exposure.notice.expect("a warning");
+        assert!(
+            warning.contains("tcp/127.0.0.1:7447") && warning.contains("every user"),
+            "{warning}"
+        );
+        // The operator's credentials, or a listener beyond loopback: not a local hub.
+        let usrpwd = "transport/auth/usrpwd/dictionary_file = \"/etc/envhub/users.txt\"";
+        let mut c = config(&format!("{given}\n{usrpwd}"));
+        assert!(!guard(&mut c, false, None).unwrap().local_credential);
+        let mut c = config("listen/endpoints = [\"tcp/0.0.0.0:7447\"]");
+        assert!(!guard(&mut c, true, None).unwrap().local_credential);
     }
 
     #[test]

@@ -78,13 +78,13 @@ impl Drop for Published {
     }
 }
 
-/// Writes that hub `name` listens on `endpoint` (mode 0600, in the private folder).
-pub fn publish(name: &str, endpoint: &str) -> Result<Published, String> {
+/// Writes that hub `name` listens on `endpoints` (mode 0600, in the private folder).
+pub fn publish(name: &str, endpoints: &[String]) -> Result<Published, String> {
     let dir = dir();
     ensure(&dir)?;
     let pid = std::process::id();
     let path = dir.join(format!("{pid}.json"));
-    let body = serde_json::json!({ "name": name, "endpoint": endpoint, "pid": pid }).to_string();
+    let body = serde_json::json!({ "name": name, "endpoints": endpoints, "pid": pid }).to_string();
     write_private(&dir, &path, &body, true)?;
     Ok(Published(path))
 }
@@ -219,9 +219,16 @@ pub fn endpoints() -> Vec<String> {
                 let _ = std::fs::remove_file(e.path());
                 return None;
             }
-            let endpoint = v["endpoint"].as_str()?.to_string();
-            crate::exposure::is_loopback(&endpoint).then_some(endpoint)
+            let listed = v["endpoints"].as_array()?;
+            let endpoints: Vec<String> = listed
+                .iter()
+                .filter_map(|e| e.as_str())
+                .filter(|e| crate::exposure::is_loopback(e))
+                .map(String::from)
+                .collect();
+            Some(endpoints)
         })
+        .flatten()
         .collect();
     found.sort();
     found.dedup();
@@ -245,26 +252,26 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         // SAFETY: this test alone reads the variable in this process.
         unsafe { std::env::set_var(ENVHUB_LOCAL_HUBS, &dir) };
-        let hub = publish("a", "tcp/127.0.0.1:17001").unwrap();
+        let hub = publish("a", &["tcp/127.0.0.1:17001".to_string()]).unwrap();
         assert_eq!(endpoints(), vec!["tcp/127.0.0.1:17001".to_string()]);
         let mode = std::fs::metadata(&dir).unwrap().mode() & 0o777;
         assert_eq!(mode, 0o700);
         // A dead process's entry and a non-loopback endpoint are not listed.
         std::fs::write(
             dir.join("999999999.json"),
-            r#"{"name":"x","endpoint":"tcp/127.0.0.1:1","pid":999999999}"#,
+            r#"{"name":"x","endpoints":["tcp/127.0.0.1:1"],"pid":999999999}"#,
         )
         .unwrap();
         std::fs::write(
             dir.join("1.json"),
-            r#"{"name":"y","endpoint":"tcp/192.0.2.7:7447","pid":1}"#,
+            r#"{"name":"y","endpoints":["tcp/192.0.2.7:7447"],"pid":1}"#,
         )
         .unwrap();
         assert_eq!(endpoints(), vec!["tcp/127.0.0.1:17001".to_string()]);
         drop(hub);
         assert!(endpoints().is_empty());
         // A folder others may enter is not believed.
-        let _again = publish("a", "tcp/127.0.0.1:17001").unwrap();
+        let _again = publish("a", &["tcp/127.0.0.1:17001".to_string()]).unwrap();
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
         assert!(endpoints().is_empty());
         unsafe { std::env::remove_var(ENVHUB_LOCAL_HUBS) };

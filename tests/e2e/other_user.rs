@@ -1,6 +1,7 @@
-//! A default hub (no credentials, no endpoint: loopback only) against the other users of its
-//! machine, as one of them would try it: loopback is open to every uid, so the hub checks
-//! every link into it against this user's local credential, which only this user can read.
+//! A hub without credentials on loopback (by default, or on a loopback `--listen` it was given)
+//! against the other users of its machine, as one of them would try it: loopback is open to
+//! every uid, so the hub checks every link into it against this user's local credential,
+//! which only this user can read.
 //!
 //! - A Zenoh peer that reaches the hub's loopback port without the credential (as any
 //!   process of another user can, the port being in `/proc/net/tcp`) gets no link, no token
@@ -21,7 +22,7 @@ use zenoh::Wait;
 
 const NOBODY: u32 = 65534;
 
-struct DefaultHub {
+struct LoopbackHub {
     child: Child,
     name: String,
     endpoint: String,
@@ -29,7 +30,7 @@ struct DefaultHub {
     dir: PathBuf,
 }
 
-impl Drop for DefaultHub {
+impl Drop for LoopbackHub {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
@@ -37,16 +38,18 @@ impl Drop for DefaultHub {
     }
 }
 
-fn start() -> DefaultHub {
+/// Starts hub `uid-<tag>-<pid>`, with `args` added to `serve`.
+fn start(tag: &str, args: &[&str]) -> LoopbackHub {
     let pid = std::process::id();
-    let name = format!("uid-victim-{pid}");
-    let dir = std::env::temp_dir().join(format!("e2e-uid-{pid}"));
+    let name = format!("uid-{tag}-{pid}");
+    let dir = std::env::temp_dir().join(format!("e2e-uid-{tag}-{pid}"));
     let local = dir.join("hubs");
     std::fs::create_dir_all(&dir).unwrap();
     let child = Command::new(binary("envhub"))
         .args(["serve", "--name", &name, "--socket"])
         .arg(dir.join("hub.sock"))
-        .env("ENVHUB_NAMESPACE", format!("e2e_uid_{pid}_"))
+        .args(args)
+        .env("ENVHUB_NAMESPACE", format!("e2e_uid_{tag}_{pid}_"))
         .env(envhub::local::ENVHUB_LOCAL_HUBS, &local)
         .env(envhub::ENVHUB_MULTICAST, "0")
         .env_remove(envhub::ENVHUB_CONNECT)
@@ -63,7 +66,7 @@ fn start() -> DefaultHub {
         if let Some(entry) = entry {
             let v: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(entry.path()).unwrap()).unwrap();
-            break v["endpoint"].as_str().unwrap().to_string();
+            break v["endpoints"][0].as_str().unwrap().to_string();
         }
         assert!(
             Instant::now() < deadline,
@@ -71,7 +74,7 @@ fn start() -> DefaultHub {
         );
         std::thread::sleep(Duration::from_millis(50));
     };
-    DefaultHub {
+    LoopbackHub {
         child,
         name,
         endpoint,
@@ -99,7 +102,22 @@ fn hubs(binary: &Path, local: &Path, args: &[&str], uid: Option<u32>) -> String 
 
 #[test]
 fn another_user_on_this_machine_never_reaches_a_default_hub() {
-    let hub = start();
+    never_reached_by_another_user(start("default", &[]));
+}
+
+#[test]
+fn another_user_never_reaches_a_hub_given_a_loopback_listener() {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let hub = start("listen", &["--listen", &format!("tcp/127.0.0.1:{port}")]);
+    assert_eq!(hub.endpoint, format!("tcp/127.0.0.1:{port}"));
+    never_reached_by_another_user(hub);
+}
+
+fn never_reached_by_another_user(hub: LoopbackHub) {
     // A peer without the credential, on the hub's own loopback endpoint.
     let mut config = zenoh::Config::default();
     config

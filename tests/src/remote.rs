@@ -1,6 +1,9 @@
 //! Hub processes on loopback for the remote-hub tests: each with its own iceoryx2 namespace,
 //! multicast off and explicit endpoints, so nothing can shortcut through local shared memory
-//! or reach beyond 127.0.0.1.
+//! or reach beyond 127.0.0.1. They stand for hubs on other machines, which no local
+//! credential reaches: each is shared with `--insecure-listen` (a hub given a loopback
+//! listener otherwise admits only its user's processes that present the local credential,
+//! as `other_user` tests; the tests' raw Zenoh peers present none).
 
 use crate::binary;
 use envhub::{Hub, NetConfig, Registry, SessionOptions};
@@ -48,7 +51,13 @@ impl RemoteHub {
         let mut child = Command::new(binary("envhub"))
             .args(["serve", "--socket"])
             .arg(dir.join("hub.sock"))
-            .args(["--name", name, "--listen", endpoint.as_str()])
+            .args([
+                "--name",
+                name,
+                "--listen",
+                endpoint.as_str(),
+                "--insecure-listen",
+            ])
             .args(args)
             .env("ENVHUB_NAMESPACE", &namespace)
             .env(envhub::ENVHUB_MULTICAST, "0")

@@ -15,12 +15,15 @@ pub(crate) struct Args {
     #[arg(long)]
     name: Option<String>,
     /// Zenoh endpoint to listen on (`tcp/127.0.0.1:7447`); repeat for several. Default:
-    /// loopback on a free port (found by multicast scouting) unless the Zenoh config gives
-    /// credentials. An address beyond loopback without credentials needs `--insecure-listen`.
+    /// loopback on a free port (this user's clients find it in the folder of local hubs)
+    /// unless the Zenoh config gives credentials. On loopback without credentials the hub
+    /// admits only this user's processes; an address beyond loopback without credentials
+    /// needs `--insecure-listen`.
     #[arg(long, value_name = "ENDPOINT")]
     listen: Vec<String>,
-    /// Listen (or connect) beyond loopback without credentials: anyone who reaches the hub
-    /// can run envs on it and read or steer every session. Prints a warning.
+    /// Listen (or connect) beyond loopback without credentials, or share a loopback
+    /// `--listen` with every user of this machine: anyone who reaches the hub can run envs
+    /// on it. Prints a warning.
     #[arg(long)]
     insecure_listen: bool,
     /// Stay off the network: serve only this machine's clients on the Unix socket.

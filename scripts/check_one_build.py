@@ -1,0 +1,58 @@
+"""Checks that `make build` (what the demo and the Python package need) and `make lint`'s
+build of every target compile each shared crate the same way, so the second reuses the first.
+
+Cargo resolves features per build: a feature that only a dev-dependency turns on changes that
+crate, and every crate above it, in the build of the tests, and they are compiled twice
+(tests/Cargo.toml asks for those features in the normal build too). This compares the two unit
+graphs (`cargo build --unit-graph`, unstable: RUSTC_BOOTSTRAP=1) and names each crate whose
+features differ.
+
+    python scripts/check_one_build.py -- --release --workspace --features envhub-worker/mujoco
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+
+def unit_features(args: list[str]) -> dict[tuple, set[tuple]]:
+    env = dict(os.environ, RUSTC_BOOTSTRAP="1")
+    out = subprocess.run(
+        ["cargo", "build", *args, "--unit-graph", "-Z", "unstable-options"],
+        env=env,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    units: dict[tuple, set[tuple]] = {}
+    for unit in json.loads(out)["units"]:
+        key = (unit["pkg_id"], unit["target"]["name"], unit["mode"], tuple(unit["target"]["kind"]))
+        units.setdefault(key, set()).add(tuple(sorted(unit["features"])))
+    return units
+
+
+def main() -> int:
+    args = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
+    build = unit_features(args)
+    every = unit_features([*args, "--all-targets"])
+    differ = []
+    for key, features in sorted(build.items()):
+        # A unit only the tests build is new there, not a second compile: only what the
+        # build has and the tests' build has otherwise counts.
+        if key in every and not features <= every[key]:
+            differ.append(f"  {key[0].split('#')[-1]} ({key[1]}): build {sorted(features)}, tests {sorted(every[key] - features)}")
+    if differ:
+        print(
+            "check_one_build: these crates are compiled with other features for the tests, so "
+            "they and every crate above them are compiled twice; ask for the tests' features in "
+            "tests/Cargo.toml:\n" + "\n".join(differ),
+            file=sys.stderr,
+        )
+        return 1
+    print(f"one build: {len(build)} units of `make build` reused by the tests' build")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
