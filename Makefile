@@ -76,7 +76,7 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: fuzz help demo test lint fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
+.PHONY: fuzz help demo test lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -95,16 +95,23 @@ help:
 # of the repo (CI's) installs in seconds and takes almost no disk (torch alone is 6 GB).
 UV := $(VENV)/bin/uv
 UV_PIP := $(UV) pip install --quiet --python $(VPY)
-$(VENV_STAMP): requirements-dev.txt
+# The interpreter and uv come first; then the mujoco wheel, whose libmujoco the build needs;
+# then the rest, while cargo compiles (`make demo` and `make test` run both at once).
+VENV_BASE := $(VENV)/.uv-installed
+$(VENV_BASE): requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --disable-pip-version-check "$$(grep -E '^uv==' requirements-dev.txt)"
+	touch $@
+
+$(VENV_STAMP): requirements-dev.txt $(MUJOCO_LIB)
 	$(UV_PIP) -r requirements-dev.txt
 	touch $@
 
 venv: $(VENV_STAMP)
 
 # libmujoco from the wheel, under both names the linker and the loader look for.
-$(MUJOCO_LIB): $(VENV_STAMP)
+$(MUJOCO_LIB): $(VENV_BASE)
+	$(UV_PIP) "$$(grep -E '^mujoco==' requirements-dev.txt)"
 	mkdir -p $(MUJOCO_LIB_DIR)
 	src=$$($(VPY) -c 'import mujoco, os; print(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so.$(MUJOCO_VERSION)"))'); \
 	test -f "$$src" || { echo "error: $$src not found; the mujoco wheel should ship it (requirements-dev.txt pins mujoco==$(MUJOCO_VERSION))" >&2; exit 1; }; \
@@ -130,7 +137,7 @@ setup: $(VENV_STAMP) $(MUJOCO_LIB) $(MESA_STAMP)
 # Debian's Chromium for the evaluation report's browser test (Playwright drives it; its own
 # browser download is not used), installed only where missing and only by root, as Mesa.
 BROWSER_STAMP := .build/chromium.installed
-$(BROWSER_STAMP):
+$(BROWSER_STAMP): $(MESA_STAMP)
 	mkdir -p $(dir $@)
 	if command -v chromium >/dev/null; then \
 		touch $@; \
@@ -179,7 +186,7 @@ libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
 	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
 	touch $(LIBERO_READY)
 
-$(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_STAMP)
+$(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_BASE)
 	rm -rf $(LEROBOT_VENV)
 	$(PYTHON) -m venv $(LEROBOT_VENV)
 	$(UV) pip install --quiet --python $(LEROBOT_VENV)/bin/python -r requirements-lerobot.txt
@@ -187,25 +194,32 @@ $(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_STAMP)
 
 lerobot: $(LEROBOT_STAMP)
 
-build: setup
-	$(CARGO) build $(PROFILE) --workspace $(FEATURES)
+# MAKEFLAGS cleared: under `make -j` cargo would take make's job slots (one) for its own.
+build: $(MUJOCO_LIB) $(MESA_STAMP)
+	MAKEFLAGS= $(CARGO) build $(PROFILE) --workspace $(FEATURES)
 
-demo: build py-install
+# The build and the Python tools' install at once (one compiles, the other downloads). Each
+# rollout is a few seconds: long enough for a steady steps/s (`envhub bench` measures).
+demo:
+	$(MAKE) --no-print-directory -j2 build venv
+	$(MAKE) --no-print-directory py-install
 	./target/release/envhub match "balance a pole on a cart"
-	./target/release/envhub run gym-cartpole --num-envs 64 --steps 1000000
-	./target/release/envhub run gym-pendulum --num-envs 8 --steps 200000
-	./target/release/envhub run mujoco-ant --num-envs 8 --workers 1 --steps 40000
+	./target/release/envhub run gym-cartpole --num-envs 64 --steps 300000
+	./target/release/envhub run gym-pendulum --num-envs 8 --steps 100000
+	./target/release/envhub run mujoco-ant --num-envs 8 --workers 1 --steps 16000
 	$(VPY) py-client/examples/rollout.py
 
-# Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
-# tests below reuse the build.
-lint: setup
+lint: setup lint-rust
 	$(VPY) scripts/check_layers.py
 	$(VPY) -m ruff check py-client tests scripts
+
+# Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
+# tests reuse the build.
+lint-rust: $(MUJOCO_LIB) $(MESA_STAMP)
 	$(CARGO) fmt --all -- --check
 	$(VPY) scripts/check_one_build.py -- $(PROFILE) --workspace $(FEATURES)
 	@test -n "$(CLIPPY_DRIVER)" || { echo "error: make lint needs clippy: rustup component add clippy" >&2; exit 1; }
-	$(CARGO) build $(PROFILE) --workspace --all-targets $(FEATURES) --message-format=json-diagnostic-rendered-ansi | $(VPY) scripts/deny_warnings.py
+	MAKEFLAGS= $(CARGO) build $(PROFILE) --workspace --all-targets $(FEATURES) --message-format=json-diagnostic-rendered-ansi | $(VPY) scripts/deny_warnings.py
 
 fmt:
 	$(CARGO) fmt --all
@@ -233,7 +247,7 @@ PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["pure
 # loads in every CPython from 3.9 on, the venvs provisioned for suites included (a copy named
 # for one interpreter, `_envhub.cpython-311-*.so`, would win over it there and is removed).
 PY_EXT_SUFFIX := .abi3.so
-py-install: build
+py-install: build $(VENV_STAMP)
 	rm -f py-client/python/envhub/_envhub.cpython-*.so
 	cp target/release/lib_envhub.so py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
 	mv -f py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp py-client/python/envhub/_envhub$(PY_EXT_SUFFIX)
@@ -265,12 +279,17 @@ py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider --durations=10; \
 	fi
 
-test: lint rust-test py-test
+# The build of every target while the Python tools, LeRobot's loader and Chromium download;
+# then the checks and the tests, one after the other.
+test:
+	$(MAKE) --no-print-directory -j4 lint-rust venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
+	$(MAKE) --no-print-directory lint rust-test py-test
 
 # Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
-# cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. Opt-in: its
-# AddressSanitizer build of the targets takes minutes; `make test` runs the quick tier
-# (hub/src/fuzz.rs) and checks the seed corpora (protocol/tests/fuzz_seeds.rs).
+# cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. CI runs it after
+# `make test` (.ci/run, 5 s each); not in `make test`, as its AddressSanitizer build of the
+# targets takes minutes: `make test` runs the quick tier (hub/src/fuzz.rs) and checks the seed
+# corpora (protocol/tests/fuzz_seeds.rs).
 FUZZ_SECONDS ?= 10
 fuzz:
 	scripts/fuzz.sh $(FUZZ_SECONDS)

@@ -6,7 +6,7 @@
 # Installs the pinned cargo-fuzz first if it is missing. Exits non-zero on any finding; the
 # input that found it is in fuzz/artifacts/<target>/ (docs/fuzzing.md says how to replay it).
 #
-#   scripts/fuzz.sh          # 10 s per target (what `make test` runs)
+#   scripts/fuzz.sh          # 10 s per target (CI runs 5 s: .ci/run, `make fuzz FUZZ_SECONDS=5`)
 #   scripts/fuzz.sh 120      # a longer run
 #   FUZZ_TARGETS="frames wire_request" scripts/fuzz.sh 30
 set -euo pipefail
