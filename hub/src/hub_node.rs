@@ -23,6 +23,7 @@ pub struct HubNode {
     name: String,
     _session: zenoh::Session,
     _token: zenoh::liveliness::LivelinessToken,
+    _id_token: zenoh::liveliness::LivelinessToken,
     _queryables: Vec<zenoh::query::Queryable<()>>,
     _requests: zenoh::pubsub::Subscriber<()>,
     _clients: zenoh::pubsub::Subscriber<()>,
@@ -216,6 +217,12 @@ pub fn join(
             .wait()
             .map_err(zerr("declare echo"))?
     };
+    // The identity first: a client that sees the name can then tell this hub's answers.
+    let id_token = session
+        .liveliness()
+        .declare_token(keys::hub_id_token(name, &session.zid().to_string()))
+        .wait()
+        .map_err(zerr("declare identity token"))?;
     let token = session
         .liveliness()
         .declare_token(keys::hub_token(name))
@@ -225,6 +232,7 @@ pub fn join(
         name: name.to_string(),
         _session: session,
         _token: token,
+        _id_token: id_token,
         _queryables: queryables,
         _requests: requests,
         _clients: clients,

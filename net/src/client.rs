@@ -3,12 +3,17 @@
 //! asks hubs for their info, catalog and adapters, and opens sessions on them.
 //!
 //! The client holds its own token (`envhub/client/<id>`): hubs end its sessions when it goes.
+//!
+//! Each hub also holds an identity token naming its Zenoh id (`envhub/hub/<name>/zid/<zid>`):
+//! the client takes answers to its queries of a hub only from that id, so a peer that declares
+//! a queryable under a live hub's name is not answered in its place (docs/security.md says
+//! what this does and does not stop).
 
 use crate::config::{self, NetConfig};
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -24,9 +29,67 @@ const SETTLE: Duration = Duration::from_millis(300);
 /// The live hubs and who waits on news of them.
 #[derive(Default)]
 struct Liveness {
-    alive: Mutex<HashMap<String, Instant>>,
+    seen: Mutex<Seen>,
     changed: Condvar,
     inboxes: Mutex<Vec<Weak<Inbox>>>,
+}
+
+/// What the hubs' tokens say.
+#[derive(Default)]
+struct Seen {
+    /// The hubs holding their token, with when it showed up.
+    alive: HashMap<String, Instant>,
+    /// The Zenoh ids of each hub's live identity tokens (one, unless two claim a name).
+    ids: HashMap<String, BTreeSet<String>>,
+}
+
+impl Seen {
+    /// Notes a token's coming (`put`) or going; whether the key was a hub's.
+    fn note(&mut self, key: &str, put: bool) -> bool {
+        if let Some(name) = keys::hub_of_token(key) {
+            if put {
+                self.alive.insert(name.to_string(), Instant::now());
+            } else {
+                tracing::warn!(hub = name, "hub lost");
+                self.alive.remove(name);
+            }
+            return true;
+        }
+        let Some((name, zid)) = keys::hub_id_of_token(key) else {
+            return false;
+        };
+        if put {
+            self.ids
+                .entry(name.to_string())
+                .or_default()
+                .insert(zid.to_string());
+        } else if let Some(ids) = self.ids.get_mut(name) {
+            ids.remove(zid);
+            if ids.is_empty() {
+                self.ids.remove(name);
+            }
+        }
+        true
+    }
+
+    /// The one Zenoh id hub `name` answers from; `None` while its identity token is unseen.
+    fn id_of(&self, name: &str) -> Result<Option<String>, HubError> {
+        let Some(ids) = self.ids.get(name) else {
+            return Ok(None);
+        };
+        let ids: Vec<&str> = ids.iter().map(String::as_str).collect();
+        match ids[..] {
+            [] => Ok(None),
+            [id] => Ok(Some(id.to_string())),
+            _ => Err(HubError::Network {
+                reason: format!(
+                    "hub `{name}` is claimed by more than one Zenoh peer (ids {}); its answers cannot be told from an impostor's",
+                    ids.join(" and ")
+                ),
+                hint: "only one hub of a name runs on a network: stop the other, or find the peer that holds a token in its name".into(),
+            }),
+        }
+    }
 }
 
 /// This process's presence on the network.
@@ -76,23 +139,15 @@ impl Network {
             let liveness = liveness.clone();
             session
                 .liveliness()
-                .declare_subscriber(keys::ALL_HUBS)
+                .declare_subscriber(keys::ALL_HUB_TOKENS)
                 .history(true)
                 .callback(move |sample| {
-                    let Some(name) = keys::hub_of_token(sample.key_expr().as_str()) else {
+                    let put = sample.kind() == zenoh::sample::SampleKind::Put;
+                    let mut seen = liveness.seen.lock().unwrap_or_else(|e| e.into_inner());
+                    if !seen.note(sample.key_expr().as_str(), put) {
                         return;
-                    };
-                    let mut alive = liveness.alive.lock().unwrap_or_else(|e| e.into_inner());
-                    match sample.kind() {
-                        zenoh::sample::SampleKind::Put => {
-                            alive.insert(name.to_string(), Instant::now());
-                        }
-                        zenoh::sample::SampleKind::Delete => {
-                            tracing::warn!(hub = name, "hub lost");
-                            alive.remove(name);
-                        }
                     }
-                    drop(alive);
+                    drop(seen);
                     liveness.changed.notify_all();
                     let inboxes = liveness.inboxes.lock().unwrap_or_else(|e| e.into_inner());
                     for inbox in inboxes.iter().filter_map(Weak::upgrade) {
@@ -124,24 +179,21 @@ impl Network {
 
     /// Whether hub `name` holds its token.
     pub fn is_alive(&self, name: &str) -> bool {
-        self.alive_lock().contains_key(name)
+        self.seen().alive.contains_key(name)
     }
 
-    fn alive_lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, Instant>> {
-        self.liveness
-            .alive
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+    fn seen(&self) -> std::sync::MutexGuard<'_, Seen> {
+        self.liveness.seen.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Names of the live hubs, sorted. Right after the network opens, waits (up to
     /// `discovery`) for the hubs to show up and settle.
     pub fn live_hubs(&self, discovery: Duration) -> Vec<String> {
         let deadline = self.opened + discovery;
-        let mut alive = self.alive_lock();
+        let mut seen = self.seen();
         loop {
             let now = Instant::now();
-            let newest = alive.values().max().copied();
+            let newest = seen.alive.values().max().copied();
             let settled = newest.is_some_and(|t| now.duration_since(t) >= SETTLE);
             if settled || now >= deadline {
                 break;
@@ -150,14 +202,14 @@ impl Network {
                 Some(t) => (t + SETTLE).saturating_duration_since(now),
                 None => deadline - now,
             };
-            alive = self
+            seen = self
                 .liveness
                 .changed
-                .wait_timeout(alive, wait.max(Duration::from_millis(1)))
+                .wait_timeout(seen, wait.max(Duration::from_millis(1)))
                 .unwrap_or_else(|e| e.into_inner())
                 .0;
         }
-        let mut names: Vec<String> = alive.keys().cloned().collect();
+        let mut names: Vec<String> = seen.alive.keys().cloned().collect();
         names.sort();
         names
     }
@@ -166,22 +218,22 @@ impl Network {
     /// an error naming the live hubs and the closest names.
     pub fn wait_for(&self, names: &[String], timeout: Duration) -> Result<(), HubError> {
         let deadline = Instant::now() + timeout;
-        let mut alive = self.alive_lock();
+        let mut seen = self.seen();
         loop {
-            let missing = names.iter().find(|n| !alive.contains_key(*n));
+            let missing = names.iter().find(|n| !seen.alive.contains_key(*n));
             let Some(missing) = missing else {
                 return Ok(());
             };
             let now = Instant::now();
             if now >= deadline {
-                let mut live: Vec<String> = alive.keys().cloned().collect();
+                let mut live: Vec<String> = seen.alive.keys().cloned().collect();
                 live.sort();
                 return Err(unknown_hub(missing, &live));
             }
-            alive = self
+            seen = self
                 .liveness
                 .changed
-                .wait_timeout(alive, deadline - now)
+                .wait_timeout(seen, deadline - now)
                 .unwrap_or_else(|e| e.into_inner())
                 .0;
         }
@@ -202,7 +254,44 @@ impl Network {
         Ok(infos)
     }
 
-    /// Asks hub `hub` a query; its `{"ok": ...}` reply, or the error it sent.
+    /// The Zenoh id hub `name` answers from, as its identity token says. Waits up to `wait`
+    /// for the token (a hub reached through `--connect` right after the network opened); two
+    /// ids for one name are an error naming both.
+    pub fn hub_id(&self, name: &str, wait: Duration) -> Result<String, HubError> {
+        let deadline = Instant::now() + wait;
+        let mut seen = self.seen();
+        loop {
+            if let Some(id) = seen.id_of(name)? {
+                return Ok(id);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                if !seen.alive.contains_key(name) {
+                    let mut live: Vec<String> = seen.alive.keys().cloned().collect();
+                    live.sort();
+                    return Err(unknown_hub(name, &live));
+                }
+                return Err(HubError::Network {
+                    reason: format!(
+                        "hub `{name}` holds no identity token (`{}`), so its answers cannot be told from an impostor's",
+                        keys::hub_id_token(name, "<zenoh id>")
+                    ),
+                    hint: "the hub runs an older envhub than this client: update it".into(),
+                });
+            }
+            seen = self
+                .liveness
+                .changed
+                .wait_timeout(seen, deadline - now)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+    }
+
+    /// Asks hub `hub` a query; its `{"ok": ...}` reply, or the error it sent. Only an answer
+    /// from the hub's Zenoh id ([`Network::hub_id`]) is taken, the first one, as soon as it
+    /// comes: answers of other peers are dropped, and the query's end is not waited for (a
+    /// query waiting for every answerer stalled opens across a veth until the link's lease).
     pub fn query<T: DeserializeOwned>(
         &self,
         hub: &str,
@@ -210,13 +299,20 @@ impl Network {
         payload: Option<Vec<u8>>,
         timeout: Duration,
     ) -> Result<T, HubError> {
+        let from = self.hub_id(hub, DISCOVERY)?;
         let lost = |why: String| HubError::HubLost {
             hub: hub.to_string(),
             envs: "-".into(),
             why,
         };
         let (tx, rx) = std::sync::mpsc::channel();
-        let mut get = self.session.get(key).timeout(timeout);
+        // No consolidation: each answer is handed over as it arrives (the default keeps them
+        // all until the query ends).
+        let mut get = self
+            .session
+            .get(key)
+            .timeout(timeout)
+            .consolidation(zenoh::query::ConsolidationMode::None);
         if let Some(p) = payload {
             get = get.payload(p);
         }
@@ -225,16 +321,32 @@ impl Network {
         })
         .wait()
         .map_err(|e| lost(format!("query failed: {e}")))?;
-        // The first answer; the channel closes (Err) when the query ends without one.
-        let reply = rx
-            .recv_timeout(timeout + Duration::from_secs(1))
-            .map_err(|_| lost(format!("no answer to `{key}` within {timeout:?}")))?;
-        read_reply(hub, &reply)
+        let deadline = Instant::now() + timeout + Duration::from_secs(1);
+        loop {
+            // The channel closes (Err) when the query ends.
+            let reply = rx
+                .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+                .map_err(|_| {
+                    lost(format!(
+                        "no answer to `{key}` from the hub's Zenoh id {from} within {timeout:?}"
+                    ))
+                })?;
+            let replier = reply.replier_id().map(|id| id.zid().to_string());
+            if replier.as_deref() == Some(from.as_str()) {
+                return read_reply(hub, &reply);
+            }
+            tracing::debug!(
+                hub,
+                key,
+                replier = replier.as_deref().unwrap_or("none"),
+                expected = %from,
+                "dropped an answer that is not from the hub's Zenoh id"
+            );
+        }
     }
 
-    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`). The first
-    /// answer is taken: a peer answering under a live hub's name is not told apart (a query
-    /// waiting for every answerer stalled opens across a veth; see docs/security.md).
+    /// Opens a session on `hub` (starting its workers takes up to `start_timeout`), with the
+    /// first answer from the hub's Zenoh id ([`Network::query`]).
     pub(crate) fn open_session(
         &self,
         hub: &str,
@@ -480,6 +592,28 @@ mod tests {
         assert!(err.contains("closest: lab-a, lab-b"), "{err}");
         let none = unknown_hub("x", &[]).to_string();
         assert!(none.contains("live hubs: none"), "{none}");
+    }
+
+    #[test]
+    fn a_hub_answers_from_the_one_id_its_identity_token_names() {
+        let mut seen = Seen::default();
+        assert!(seen.note(&keys::hub_token("lab"), true));
+        assert_eq!(seen.id_of("lab").unwrap(), None, "no identity token yet");
+        assert!(seen.note(&keys::hub_id_token("lab", "a1"), true));
+        assert!(
+            !seen.note("envhub/hub/lab/open", true),
+            "not a token of a hub"
+        );
+        assert_eq!(seen.id_of("lab").unwrap().as_deref(), Some("a1"));
+        // A second identity in the name: neither is believed, and the error names both.
+        seen.note(&keys::hub_id_token("lab", "b2"), true);
+        let err = seen.id_of("lab").unwrap_err().to_string();
+        assert!(err.contains("a1 and b2") && err.contains("`lab`"), "{err}");
+        seen.note(&keys::hub_id_token("lab", "b2"), false);
+        assert_eq!(seen.id_of("lab").unwrap().as_deref(), Some("a1"));
+        seen.note(&keys::hub_id_token("lab", "a1"), false);
+        assert_eq!(seen.id_of("lab").unwrap(), None);
+        assert!(seen.alive.contains_key("lab"), "the name token is apart");
     }
 
     #[test]

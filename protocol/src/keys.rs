@@ -1,6 +1,7 @@
 //! Zenoh key expressions of envhub, in one place.
 //!
 //! - `envhub/hub/<name>`: a hub's liveliness token (alive while the hub is).
+//! - `envhub/hub/<name>/zid/<zid>`: its identity token, the Zenoh id its answers come from.
 //! - `envhub/hub/<name>/{info,catalog,adapters,open}`: its queryables.
 //! - `envhub/hub/<name>/echo/{req,rep}`: its echo (raw Zenoh round trips for benchmarks).
 //! - `envhub/client/<id>`: a client's liveliness token; its sessions end when it goes.
@@ -10,12 +11,20 @@ use crate::error::HubError;
 
 /// Every hub's token.
 pub const ALL_HUBS: &str = "envhub/hub/*";
+/// Every hub's token and identity token.
+pub const ALL_HUB_TOKENS: &str = "envhub/hub/**";
 /// Every client's token.
 pub const ALL_CLIENTS: &str = "envhub/client/*";
 
 /// A hub's liveliness token.
 pub fn hub_token(name: &str) -> String {
     format!("envhub/hub/{name}")
+}
+
+/// A hub's identity token: the Zenoh id (`Session::zid()`) that answers its queries. Clients
+/// take answers to their queries of hub `name` only from that id.
+pub fn hub_id_token(name: &str, zid: &str) -> String {
+    format!("envhub/hub/{name}/zid/{zid}")
 }
 
 /// A hub's info queryable.
@@ -81,6 +90,12 @@ pub fn hub_of_token(key: &str) -> Option<&str> {
     key.strip_prefix("envhub/hub/").filter(|s| !s.contains('/'))
 }
 
+/// The hub and Zenoh id named by an identity token's key.
+pub fn hub_id_of_token(key: &str) -> Option<(&str, &str)> {
+    let (name, zid) = key.strip_prefix("envhub/hub/")?.split_once("/zid/")?;
+    (!name.contains('/') && !zid.is_empty() && !zid.contains('/')).then_some((name, zid))
+}
+
 /// A hub name must be one key chunk: no `/`, no wildcards, not empty.
 pub fn check_name(name: &str) -> Result<(), HubError> {
     let bad = name.is_empty()
@@ -108,6 +123,13 @@ mod tests {
         assert_eq!(session_of("a", "envhub/session/ab/s1/req"), None);
         assert_eq!(session_of("a", "envhub/session/a/x/y/req"), None);
         assert_eq!(hub_of_token(&hub_token("box-1")), Some("box-1"));
+        assert_eq!(hub_of_token(&hub_id_token("box-1", "ab12")), None);
+        assert_eq!(
+            hub_id_of_token(&hub_id_token("box-1", "ab12")),
+            Some(("box-1", "ab12"))
+        );
+        assert_eq!(hub_id_of_token(&hub_token("box-1")), None);
+        assert_eq!(hub_id_of_token("envhub/hub/a/zid/b/c"), None);
         assert!(check_name("box-1.lab").is_ok());
         assert!(check_name("a/b").is_err() && check_name("").is_err() && check_name("*").is_err());
     }

@@ -69,6 +69,7 @@ fn response(seq: u64, status: u32, n: u32, rows: &[u8], info: &[u8]) -> Vec<u8> 
 struct Liar {
     _session: zenoh::Session,
     _token: zenoh::liveliness::LivelinessToken,
+    _id_token: zenoh::liveliness::LivelinessToken,
     _open: zenoh::query::Queryable<()>,
     _requests: zenoh::pubsub::Subscriber<()>,
 }
@@ -137,6 +138,15 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
             .wait()
             .unwrap()
     };
+    // A liar is still the hub of its name: its answers come from the id it announces.
+    let id_token = session
+        .liveliness()
+        .declare_token(envhub_protocol::keys::hub_id_token(
+            name,
+            &session.zid().to_string(),
+        ))
+        .wait()
+        .unwrap();
     let token = session
         .liveliness()
         .declare_token(format!("envhub/hub/{name}"))
@@ -145,6 +155,7 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
     Liar {
         _session: session,
         _token: token,
+        _id_token: id_token,
         _open: open,
         _requests: requests,
     }

@@ -15,6 +15,7 @@ mod other_user;
 mod python_worker;
 mod rapier_rollouts;
 mod remote_hubs;
+mod remote_impostor;
 mod remote_netns;
 mod rendering;
 mod serve_defaults;

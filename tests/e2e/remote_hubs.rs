@@ -13,7 +13,11 @@ fn hubs(names: &[&RemoteHub]) -> Placement {
 
 /// Steps `remote` and `local` (same id, config, seeds, actions) side by side and asserts
 /// every result is equal bit for bit.
-fn assert_same_rollout(remote: &mut envhub::VecEnv, local: &mut envhub::VecEnv, steps: usize) {
+pub(crate) fn assert_same_rollout(
+    remote: &mut envhub::VecEnv,
+    local: &mut envhub::VecEnv,
+    steps: usize,
+) {
     let a = remote.reset(Some(11)).unwrap();
     let (obs, infos) = (
         a.obs.to_vec(),
