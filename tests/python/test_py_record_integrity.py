@@ -287,9 +287,6 @@ def _record_pendulums(root, episodes: int, seed: int) -> None:
                   height=32, seed=seed)
 
 
-# slow: a recorder process is killed at each of a commit's renames and after the last, and
-# LeRobot's loader (torch) opens the dataset after each: about a minute on two cores.
-@pytest.mark.slow
 def test_a_crash_between_any_two_renames_leaves_the_last_commit(tmp_path):
     """A commit's renames, each one the last thing a process does (`os._exit` from the rename
     hook): the dataset loads, and equals the last commit (meta files, stats included, change
