@@ -32,6 +32,13 @@ else:
 # The tests must not pick up a developer's own registry or daemon.
 os.environ.pop("ENVHUB_REGISTRY", None)
 os.environ.pop("ENVHUB_HUB", None)
+# The interpreters the tests start (hubs' workers in the suites' environments, LeRobot's
+# loader, the references) keep the bytecode they compile, as Python does by default: with
+# PYTHONDONTWRITEBYTECODE set (as on some machines), each of them compiled torch, robosuite
+# or LIBERO from source again, about half of a LeRobot load's CPU and 3 s of a LIBERO worker's
+# start. uv installs without bytecode, so the first interpreter writes it, the next ones read
+# it (where the folder cannot be written, Python goes on without).
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 

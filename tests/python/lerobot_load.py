@@ -4,14 +4,25 @@ Runs in the LeRobot interpreter (`.venv-lerobot/`, with `lerobot-dataset` and to
 envhub's: `python lerobot_load.py ROOT OUT.npz`. Writes, per feature, the values of every
 frame as `ds[i]` returns them (videos decoded by the loader, as uint8 `(h, w, 3)`), the raw
 columns of `ds.hf_dataset` as stored (`raw/<key>`), the task text of every frame, and a JSON summary.
+
+`python lerobot_load.py --serve` does the same for each `ROOT\tOUT` line on stdin and answers
+each with a JSON line (`{"ok": true}`, or `{"ok": false, "error": traceback}`). Importing torch
+and LeRobot takes about 8 s of CPU, loading a test's dataset well under one: a test process
+keeps one server for all its loads. Every load makes a new `LeRobotDataset`, and nothing of one
+dataset is kept for the next (LeRobot's one in-process cache, torchcodec's video decoders by
+path, is emptied after each load; `datasets`' cache on disk is keyed by the files' mtimes, as it
+is across processes).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
+import traceback
 
 import numpy as np
+from ledataset.datasets import video_utils
 from ledataset.datasets.lerobot_dataset import LeRobotDataset
 
 
@@ -51,5 +62,27 @@ def main(root: str, out: str) -> None:
     np.savez(out, summary=np.array(json.dumps(summary)), **arrays)
 
 
+def serve() -> None:
+    # The answers go to the original stdout; anything else printed (by the libraries, in
+    # Python or C) goes to stderr, so that it cannot be taken for an answer.
+    answers = os.fdopen(os.dup(1), "w")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    for line in sys.stdin:
+        root, out = line.rstrip("\n").split("\t")
+        try:
+            main(root, out)
+            answer = {"ok": True}
+        except Exception:
+            answer = {"ok": False, "error": traceback.format_exc()}
+        finally:
+            video_utils._default_decoder_cache.clear()
+        answers.write(json.dumps(answer) + "\n")
+        answers.flush()
+
+
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    if sys.argv[1:] == ["--serve"]:
+        serve()
+    else:
+        main(sys.argv[1], sys.argv[2])

@@ -59,16 +59,70 @@ def lerobot_python() -> str:
     return path
 
 
+class _Loader:
+    """LeRobot's loader (`lerobot_load.py --serve`), one interpreter for all the loads of this
+    test process: importing torch and LeRobot costs about 8 s of CPU, a test's dataset well
+    under one. Each load is a new `LeRobotDataset` (see `lerobot_load.py`). Started on first
+    use, started again if it died; it ends when this process does (its stdin closes)."""
+
+    def __init__(self) -> None:
+        import atexit
+
+        self.proc: subprocess.Popen | None = None
+        self.log = None
+        atexit.register(self.close)
+
+    def close(self) -> None:
+        if self.proc is not None:
+            self.proc.stdin.close()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+            self.proc = None
+
+    def _start(self) -> subprocess.Popen:
+        import tempfile
+
+        self.log = tempfile.TemporaryFile()
+        self.proc = subprocess.Popen(
+            [lerobot_python(), str(REPO_ROOT / "tests" / "python" / "lerobot_load.py"), "--serve"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self.log, text=True)
+        return self.proc
+
+    def _stderr(self) -> str:
+        self.log.seek(0)
+        return self.log.read()[-4000:].decode(errors="replace")
+
+    def load(self, root: Path, out: Path, timeout: float = 600) -> None:
+        import select
+
+        proc = self.proc if self.proc is not None and self.proc.poll() is None else self._start()
+        try:
+            proc.stdin.write(f"{root}\t{out}\n")
+            proc.stdin.flush()
+        except BrokenPipeError:
+            pass  # it died: the read below says so
+        ready, _, _ = select.select([proc.stdout], [], [], timeout)
+        line = proc.stdout.readline() if ready else ""
+        if not line:
+            proc.kill()
+            proc.wait()
+            self.proc = None
+            reason = f"no answer in {timeout} s" if not ready else f"it exited ({proc.returncode})"
+            raise AssertionError(f"LeRobot's loader failed on {root}: {reason}\n{self._stderr()}")
+        answer = json.loads(line)
+        assert answer["ok"], f"LeRobot's loader failed on {root}:\n{answer['error'][-4000:]}"
+
+
+_LOADER = _Loader()
+
+
 def load(root: Path) -> tuple[dict, dict[str, np.ndarray]]:
     """The dataset at `root` as LeRobot's loader gives it (see `lerobot_load.py`)."""
     out = root.parent / f"{root.name}-loaded.npz"
-    proc = subprocess.run(
-        [lerobot_python(), str(REPO_ROOT / "tests" / "python" / "lerobot_load.py"), str(root), str(out)],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, f"LeRobot's loader failed on {root}:\n{proc.stderr[-4000:]}"
+    _LOADER.load(root, out)
     data = np.load(out, allow_pickle=False)
     return json.loads(str(data["summary"])), {k: data[k] for k in data.files if k != "summary"}
 
