@@ -194,9 +194,12 @@ $(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_BASE)
 
 lerobot: $(LEROBOT_STAMP)
 
+# What the demo and the Python package run: the CLI, the workers and the extension module
+# (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py).
 # MAKEFLAGS cleared: under `make -j` cargo would take make's job slots (one) for its own.
+BUILD_PACKAGES := -p envhub -p envhub-worker -p envhub-py
 build: $(MUJOCO_LIB) $(MESA_STAMP)
-	MAKEFLAGS= $(CARGO) build $(PROFILE) --workspace $(FEATURES)
+	MAKEFLAGS= $(CARGO) build $(PROFILE) $(BUILD_PACKAGES) $(FEATURES)
 
 # The build and the Python tools' install at once (one compiles, the other downloads). Each
 # rollout is a few seconds: long enough for a steady steps/s (`envhub bench` measures).
@@ -217,7 +220,7 @@ lint: setup lint-rust
 # tests reuse the build.
 lint-rust: $(MUJOCO_LIB) $(MESA_STAMP)
 	$(CARGO) fmt --all -- --check
-	$(VPY) scripts/check_one_build.py -- $(PROFILE) --workspace $(FEATURES)
+	$(VPY) scripts/check_one_build.py -- $(PROFILE) $(BUILD_PACKAGES) $(FEATURES)
 	@test -n "$(CLIPPY_DRIVER)" || { echo "error: make lint needs clippy: rustup component add clippy" >&2; exit 1; }
 	MAKEFLAGS= $(CARGO) build $(PROFILE) --workspace --all-targets $(FEATURES) --message-format=json-diagnostic-rendered-ansi | $(VPY) scripts/deny_warnings.py
 

@@ -1,13 +1,14 @@
-"""Checks that `make build` (what the demo and the Python package need) and `make lint`'s
-build of every target compile each shared crate the same way, so the second reuses the first.
+"""Checks that `make build` (what the demo and the Python package need, its arguments given
+here) and `make lint`'s build of every target of the workspace compile each shared crate the
+same way, so the second reuses the first.
 
 Cargo resolves features per build: a feature that only a dev-dependency turns on changes that
 crate, and every crate above it, in the build of the tests, and they are compiled twice
-(tests/Cargo.toml asks for those features in the normal build too). This compares the two unit
+(hub/Cargo.toml asks for those features in the normal build too). This compares the two unit
 graphs (`cargo build --unit-graph`, unstable: RUSTC_BOOTSTRAP=1) and names each crate whose
 features differ.
 
-    python scripts/check_one_build.py -- --release --workspace --features envhub-worker/mujoco
+    python scripts/check_one_build.py -- --release -p envhub -p envhub-worker -p envhub-py --features envhub-worker/mujoco
 """
 
 import json
@@ -32,10 +33,23 @@ def unit_features(args: list[str]) -> dict[tuple, set[tuple]]:
     return units
 
 
+def without_packages(args: list[str]) -> list[str]:
+    """`args` without its package selection (`-p NAME`, `--workspace`)."""
+    kept, skip = [], False
+    for arg in args:
+        if skip:
+            skip = False
+        elif arg in ("-p", "--package"):
+            skip = True
+        elif arg != "--workspace" and not arg.startswith(("-p=", "--package=")):
+            kept.append(arg)
+    return kept
+
+
 def main() -> int:
     args = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else sys.argv[1:]
     build = unit_features(args)
-    every = unit_features([*args, "--all-targets"])
+    every = unit_features([*without_packages(args), "--workspace", "--all-targets"])
     differ = []
     for key, features in sorted(build.items()):
         # A unit only the tests build is new there, not a second compile: only what the
@@ -46,7 +60,7 @@ def main() -> int:
         print(
             "check_one_build: these crates are compiled with other features for the tests, so "
             "they and every crate above them are compiled twice; ask for the tests' features in "
-            "tests/Cargo.toml:\n" + "\n".join(differ),
+            "hub/Cargo.toml:\n" + "\n".join(differ),
             file=sys.stderr,
         )
         return 1
