@@ -186,6 +186,19 @@ impl Network {
         self.liveness.seen.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// Waits up to `wait` for a hub to come or go; what is seen then.
+    fn seen_after<'a>(
+        &'a self,
+        seen: std::sync::MutexGuard<'a, Seen>,
+        wait: Duration,
+    ) -> std::sync::MutexGuard<'a, Seen> {
+        self.liveness
+            .changed
+            .wait_timeout(seen, wait)
+            .unwrap_or_else(|e| e.into_inner())
+            .0
+    }
+
     /// Names of the live hubs, sorted. Right after the network opens, waits (up to
     /// `discovery`) for the hubs to show up and settle.
     pub fn live_hubs(&self, discovery: Duration) -> Vec<String> {
@@ -202,12 +215,7 @@ impl Network {
                 Some(t) => (t + SETTLE).saturating_duration_since(now),
                 None => deadline - now,
             };
-            seen = self
-                .liveness
-                .changed
-                .wait_timeout(seen, wait.max(Duration::from_millis(1)))
-                .unwrap_or_else(|e| e.into_inner())
-                .0;
+            seen = self.seen_after(seen, wait.max(Duration::from_millis(1)));
         }
         let mut names: Vec<String> = seen.alive.keys().cloned().collect();
         names.sort();
@@ -230,12 +238,7 @@ impl Network {
                 live.sort();
                 return Err(unknown_hub(missing, &live));
             }
-            seen = self
-                .liveness
-                .changed
-                .wait_timeout(seen, deadline - now)
-                .unwrap_or_else(|e| e.into_inner())
-                .0;
+            seen = self.seen_after(seen, deadline - now);
         }
     }
 
@@ -279,12 +282,7 @@ impl Network {
                     hint: "the hub runs an older envhub than this client: update it".into(),
                 });
             }
-            seen = self
-                .liveness
-                .changed
-                .wait_timeout(seen, deadline - now)
-                .unwrap_or_else(|e| e.into_inner())
-                .0;
+            seen = self.seen_after(seen, deadline - now);
         }
     }
 

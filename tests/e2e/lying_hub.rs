@@ -32,18 +32,7 @@ enum Lie {
 const OBS: usize = 16; // CartPole: four float32
 
 fn cartpole_reply(observation_space: serde_json::Value) -> serde_json::Value {
-    json!({"ok": {
-        "session": "s1-1",
-        "spec": {
-            "observation_space": observation_space,
-            "action_space": {"type": "discrete", "n": 2, "start": 0},
-            "max_episode_steps": 500,
-            "pid": 1,
-        },
-        "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
-        "workers": 1,
-        "key": KEY,
-    }})
+    envhub_e2e::intruder::cartpole_open_reply("s1-1", observation_space, KEY)
 }
 
 /// The session key the liar gives (a hub that lies still seals: it is the session's hub).

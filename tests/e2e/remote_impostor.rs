@@ -8,7 +8,6 @@ use crate::remote_hubs::assert_same_rollout;
 use envhub::{EnvConfig, NetConfig, Placement};
 use envhub_e2e::TestHub;
 use envhub_e2e::remote::{RemoteHub, client, free_port};
-use serde_json::json;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -23,19 +22,9 @@ struct Caught {
 
 /// The impostor's open answer: a well-formed session of its own on CartPole.
 fn lure(observation_space: &serde_json::Value) -> String {
-    json!({"ok": {
-        "session": "rogue-1",
-        "spec": {
-            "observation_space": observation_space,
-            "action_space": {"type": "discrete", "n": 2, "start": 0},
-            "max_episode_steps": 500,
-            "pid": 1,
-        },
-        "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
-        "workers": 1,
-        "key": "cdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcdcd",
-    }})
-    .to_string()
+    let key = "cd".repeat(32);
+    envhub_e2e::intruder::cartpole_open_reply("rogue-1", observation_space.clone(), &key)
+        .to_string()
 }
 
 #[test]

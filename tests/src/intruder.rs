@@ -55,3 +55,24 @@ pub fn probe(peer: &zenoh::Session, hub: &str) -> Seen {
         open_answers,
     }
 }
+
+/// A well-formed answer to a `gym-cartpole` open, as a fake hub gives it: session `session`,
+/// observation space `observation_space`, sealing key `key` (64 hex digits).
+pub fn cartpole_open_reply(
+    session: &str,
+    observation_space: serde_json::Value,
+    key: &str,
+) -> serde_json::Value {
+    serde_json::json!({"ok": {
+        "session": session,
+        "spec": {
+            "observation_space": observation_space,
+            "action_space": {"type": "discrete", "n": 2, "start": 0},
+            "max_episode_steps": 500,
+            "pid": 1,
+        },
+        "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
+        "workers": 1,
+        "key": key,
+    }})
+}
