@@ -72,6 +72,13 @@ impl Seen {
         true
     }
 
+    /// The names of the hubs holding their token, sorted.
+    fn names(&self) -> Vec<String> {
+        let mut names: Vec<String> = self.alive.keys().cloned().collect();
+        names.sort();
+        names
+    }
+
     /// The one Zenoh id hub `name` answers from; `None` while its identity token is unseen.
     fn id_of(&self, name: &str) -> Result<Option<String>, HubError> {
         let Some(ids) = self.ids.get(name) else {
@@ -217,9 +224,7 @@ impl Network {
             };
             seen = self.seen_after(seen, wait.max(Duration::from_millis(1)));
         }
-        let mut names: Vec<String> = seen.alive.keys().cloned().collect();
-        names.sort();
-        names
+        seen.names()
     }
 
     /// Waits up to `timeout` for every hub of `names` to be live; the first missing one is
@@ -234,9 +239,7 @@ impl Network {
             };
             let now = Instant::now();
             if now >= deadline {
-                let mut live: Vec<String> = seen.alive.keys().cloned().collect();
-                live.sort();
-                return Err(unknown_hub(missing, &live));
+                return Err(unknown_hub(missing, &seen.names()));
             }
             seen = self.seen_after(seen, deadline - now);
         }
@@ -270,9 +273,7 @@ impl Network {
             let now = Instant::now();
             if now >= deadline {
                 if !seen.alive.contains_key(name) {
-                    let mut live: Vec<String> = seen.alive.keys().cloned().collect();
-                    live.sort();
-                    return Err(unknown_hub(name, &live));
+                    return Err(unknown_hub(name, &seen.names()));
                 }
                 return Err(HubError::Network {
                     reason: format!(

@@ -28,16 +28,7 @@ fn threads_and_rss(pid: u32) -> (u64, u64) {
 }
 
 fn rollout(env: &mut envhub::VecEnv, steps: usize) -> Vec<Vec<u8>> {
-    let mut out = vec![env.reset(Some(3)).unwrap().obs.to_vec()];
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-    for _ in 0..steps {
-        let actions = env.sample_actions(&mut rng);
-        let b = env.step(&actions).unwrap();
-        let mut row = b.obs.to_vec();
-        row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
-        out.push(row);
-    }
-    out
+    envhub_e2e::rollout_bytes(env, 3, 5, steps)
 }
 
 #[test]

@@ -305,19 +305,7 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     let mut net = net_to(&[&a]);
     net.connect.push(spy_endpoint);
     let hub = Hub::new(envhub::Registry::builtin()).with_network(net);
-    let rollout = |env: &mut envhub::VecEnv| -> Vec<Vec<u8>> {
-        let mut out = vec![env.reset(Some(1)).unwrap().obs.to_vec()];
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        for _ in 0..STEPS {
-            let actions = env.sample_actions(&mut rng);
-            let b = env.step(&actions).unwrap();
-            let mut row = b.obs.to_vec();
-            row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
-            row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
-            out.push(row);
-        }
-        out
-    };
+    let rollout = |env: &mut envhub::VecEnv| envhub_e2e::rollout_bytes(env, 1, 9, STEPS);
     // The session nobody attacks.
     let mut quiet = hub
         .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &hubs(&[&a]))

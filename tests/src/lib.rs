@@ -233,3 +233,26 @@ pub fn kill_worker_expect_died(
     };
     (err, why)
 }
+
+/// A rollout of `env` as bytes, one row per step (the reset's observations first, then each
+/// step's observations, rewards and done flags): reset with `reset_seed`, actions sampled
+/// from `action_seed`. Two runs compare bit for bit.
+pub fn rollout_bytes(
+    env: &mut envhub::VecEnv,
+    reset_seed: u64,
+    action_seed: u64,
+    steps: usize,
+) -> Vec<Vec<u8>> {
+    use rand::SeedableRng;
+    let mut out = vec![env.reset(Some(reset_seed)).unwrap().obs.to_vec()];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(action_seed);
+    for _ in 0..steps {
+        let actions = env.sample_actions(&mut rng);
+        let b = env.step(&actions).unwrap();
+        let mut row = b.obs.to_vec();
+        row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
+        row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
+        out.push(row);
+    }
+    out
+}
