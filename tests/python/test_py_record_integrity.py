@@ -649,9 +649,37 @@ LEROBOT_DATALOADER = textwrap.dedent(
 )
 
 
+def test_nothing_is_encoded_once_max_episodes_are_kept(tmp_path, null_registry, monkeypatch):
+    """Once `max_episodes` are kept, no episode in flight can be kept: the writer opens no
+    more encoders (it used to encode every later episode and throw it away, which doubled
+    the 10,000-episode recording below)."""
+    from envhub.recording import _writer
+
+    opened = []
+
+    class Counted(_writer.EpisodeVideo):
+        def __init__(self, *args, **kwargs):
+            opened.append(args[0])
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(_writer, "EpisodeVideo", Counted)
+    env = envhub.make_vec("null-env", 8, registry=null_registry, frame=[16, 16, 3], max_episode_steps=2)
+    rec = envhub.RecordEpisodes(_two_cameras(env), str(tmp_path / "d"), fps=30, task="nothing", max_episodes=4)
+    try:
+        rec.reset(seed=0)
+        for _ in range(40):  # about 100 episodes of 2 steps (and a reset step each)
+            rec.step(np.zeros(8, np.int64))
+    finally:
+        rec.close()
+    assert rec.stats["episodes_written"] == 4
+    # The first episode of each of the 8 envs: the 4 kept, and 4 in flight when the 4th ended.
+    assert len(opened) == 8 * 2, len(opened)
+    assert rec.stats["episodes_beyond"] > 80, rec.stats  # still counted
+
+
 # slow: the issue's scale (10,000 episodes, two cameras, a DataLoader with 4 workers under
-# 1,024 open files) is what the test is about: about 70 s on two cores. Measured (cProfile of
-# the writer thread): ~45 s is the recorder itself, one x264 encoder and MP4 per episode and
+# 1,024 open files) is what the test is about: about 50 s on two cores. Measured (cProfile of
+# the writer thread): ~28 s is the recorder itself, one x264 encoder and MP4 per episode and
 # camera (20,000) joined at each commit; ~20 s the DataLoader's 2,000 random reads (fewer would
 # not reach the open-file limit if each read leaked its two files: 500 reads per worker).
 @pytest.mark.slow

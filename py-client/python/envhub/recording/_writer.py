@@ -213,7 +213,7 @@ class Writer:
         recording = s.valid & self._live
         for i in np.flatnonzero(recording & (self._start == t)):
             self._task[i] = s.task
-        if self.video_keys:
+        if self.video_keys and not self._full():
             self._encode(np.flatnonzero(recording), s)
         for i in np.flatnonzero(recording & done):
             self._end(i, t, s.success[i] if s.success is not None else None)
@@ -260,7 +260,7 @@ class Writer:
             self._abandon(i)
             self.stats["episodes_filtered"] += 1
             return
-        if self.max_episodes is not None and self.stats["episodes_kept"] >= self.max_episodes:
+        if self._full():
             self._abandon(i)
             self.stats["episodes_beyond"] += 1
             return
@@ -281,6 +281,12 @@ class Writer:
         self._pending.append(Episode(length, columns, videos, video_stats, self._task[i], success))
         self.stats["frames_kept"] += length
         self.stats["episodes_kept"] += 1
+        if self._full():  # no episode in flight can be kept: nothing more to encode
+            for j in range(self.n):
+                self._abandon(j)
+
+    def _full(self) -> bool:
+        return self.max_episodes is not None and self.stats["episodes_kept"] >= self.max_episodes
 
     def _commit(self) -> None:
         start = time.monotonic()
