@@ -88,7 +88,25 @@ fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() 
             .wait()
             .unwrap()
     };
-    std::thread::sleep(Duration::from_millis(300));
+    // The flaps count only once the witness's subscription has reached the attacker (a fixed
+    // sleep was too short on a loaded machine: the witness then saw 858 of 100,000): a probe
+    // token flaps until the witness sees its deletion, within a bounded time.
+    let ready_by = Instant::now() + Duration::from_secs(20);
+    while carried.load(Ordering::Relaxed) == 0 {
+        assert!(
+            Instant::now() < ready_by,
+            "the witness saw no token of the attacker's within 20 s"
+        );
+        let probe = attacker
+            .liveliness()
+            .declare_token("envhub/client/probe")
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        drop(probe);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    carried.store(0, Ordering::Relaxed);
     let release = Arc::new(AtomicBool::new(false));
     let _stalled = {
         let release = release.clone();
