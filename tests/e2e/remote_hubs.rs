@@ -394,12 +394,7 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
                 spy.put(key, bytes).wait().unwrap();
             }
         }
-        let actions = victim.sample_actions(&mut rng);
-        let b = victim.step(&actions).unwrap();
-        let mut row = b.obs.to_vec();
-        row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
-        row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
-        got.push(row);
+        got.push(envhub_e2e::step_bytes(&mut victim, &mut rng));
     }
     let forged = forged.load(std::sync::atomic::Ordering::Relaxed);
     assert!(

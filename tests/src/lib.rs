@@ -247,12 +247,18 @@ pub fn rollout_bytes(
     let mut out = vec![env.reset(Some(reset_seed)).unwrap().obs.to_vec()];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(action_seed);
     for _ in 0..steps {
-        let actions = env.sample_actions(&mut rng);
-        let b = env.step(&actions).unwrap();
-        let mut row = b.obs.to_vec();
-        row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
-        row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
-        out.push(row);
+        out.push(step_bytes(env, &mut rng));
     }
     out
+}
+
+/// One step with actions drawn from `rng`, as the bytes `rollout_bytes` keeps of it
+/// (observations, rewards, done flags).
+pub fn step_bytes(env: &mut envhub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<u8> {
+    let actions = env.sample_actions(rng);
+    let b = env.step(&actions).unwrap();
+    let mut row = b.obs.to_vec();
+    row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
+    row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
+    row
 }
