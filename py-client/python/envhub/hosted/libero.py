@@ -190,6 +190,11 @@ class LiberoAdapter(EnvAdapter):
         from libero.libero.benchmark.libero_suite_task_map import libero_task_map
         from libero.libero.envs import OffScreenRenderEnv
 
+        from . import render_contexts
+
+        # Hard resets (LIBERO's evaluation's) rebuild the same scene: its textures uploaded once.
+        render_contexts.install()
+
         # Suites LIBERO can make (its benchmark dict also lists `libero_100`, which has no tasks).
         known = {s: libero_task_map[s] for s in benchmark.get_benchmark_dict() if s in libero_task_map}
         index = task_index(suite, task, known)

@@ -42,6 +42,12 @@ class RobosuiteAdapter(SuiteAdapter):
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
         import robosuite
 
+        from . import compiled_models, render_contexts
+
+        # Hard resets (the default) rebuild the same scene: compiled and uploaded once.
+        compiled_models.install()
+        render_contexts.install()
+
         if env_id not in robosuite.ALL_ENVIRONMENTS:
             names = sorted(robosuite.ALL_ENVIRONMENTS)
             raise unknown_id("robosuite", env_id, names, f"robosuite's envs: {', '.join(names)}")
