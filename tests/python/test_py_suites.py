@@ -258,6 +258,62 @@ def test_entry_runs_bit_for_bit_like_the_suite(c, tmp_path):
     )
 
 
+def hard_resets(suite: str, task: str) -> dict[str, Any]:
+    """tests/python/hard_resets.py's `task` in the interpreter of the catalog's Python
+    environment `suite`, plain and cached: the same observations, camera images included."""
+    python = suite_python(suite)
+    runs = {}
+    for mode in ("plain", "cached"):
+        done = subprocess.run(
+            [python, str(HERE / "hard_resets.py"), task, mode],
+            capture_output=True,
+            text=True,
+            timeout=RUN_TIMEOUT_S,
+            env=WITH_ENVHUB,
+        )
+        assert done.returncode == 0, f"{suite} {task}, {mode}: failed\n{done.stderr[-4000:]}"
+        runs[mode] = json.loads(done.stdout.strip().splitlines()[-1])
+    assert runs["cached"]["digest"] == runs["plain"]["digest"], f"{suite} {task}: observations differ with the caches"
+    return runs
+
+
+# slow (this and the next two): robosuite's scene built, and its cameras rendered, at every
+# reset of two runs.
+@pytest.mark.slow
+def test_robosuite_hard_resets_compile_a_repeated_scene_once():
+    """robosuite 1.5 with the worker's cache of compiled models against robosuite without it:
+    over four resets of a scene that does not change, each XML compiled twice (met once, an
+    XML is not kept), not five times; its render contexts are robosuite's own."""
+    runs = hard_resets(SUITES["robosuite"], "stack")
+    # robosuite.make builds the scene once and each of the 4 resets again: robot and scene.
+    assert runs["plain"] == {**runs["plain"], "contexts": 5, "compiles": 10}
+    assert runs["cached"] == {**runs["cached"], "contexts": 5, "compiles": 4}
+
+
+def libero_python() -> str:
+    if not LIBERO_ENV:
+        pytest.skip("the catalog names no Python environment for LIBERO")
+    return LIBERO_ENV
+
+
+@pytest.mark.slow
+def test_libero_robosuite_hands_a_repeated_scenes_render_context_on():
+    """robosuite 1.4 (LIBERO's interpreter) with the worker's caches: over four resets of a
+    scene that does not change, its render context built twice, not five times."""
+    runs = hard_resets(libero_python(), "stack")
+    assert runs["plain"]["contexts"] == 5 and runs["cached"]["contexts"] == 2, runs
+
+
+@pytest.mark.slow
+def test_render_contexts_dropped_from_the_pool_leave_the_others_whole():
+    """Five scenes that repeat, interleaved, with a pool of four (robosuite 1.4): a context
+    dropped is freed under its own GL context, and the images stay bit for bit (freed under
+    the current one, MuJoCo would delete that one's textures: the images of its next use
+    would differ)."""
+    runs = hard_resets(libero_python(), "lift")
+    assert runs["plain"]["contexts"] == 16 and runs["cached"]["contexts"] == 12, runs
+
+
 def test_nested_infos_arrive_with_their_dtypes():
     """MyoSuite's infos: dicts of numpy arrays and scalars, as the suite gives them."""
     c = case("myo-elbow-pose", 1, 3)

@@ -1,4 +1,4 @@
-"""Offscreen render contexts kept across robosuite's hard resets of the same scene.
+"""Offscreen render contexts kept across robosuite 1.4's hard resets of the same scene (LIBERO).
 
 A hard reset (robosuite's default, and LIBERO's evaluation's) frees the simulation and its
 render context and builds both again: a new EGL context, and a `MjrContext` that uploads every
@@ -12,29 +12,45 @@ which builds a context at every reset: bit for bit.
 
 A context is handed on only when nothing changed it: not resized (`update_offscreen_size`) and
 no texture uploaded since (robosuite's texture randomisation); otherwise it is freed as before.
-At most `MAX_KEPT` contexts wait for a simulation at once (one per env hosted is the usual).
+Only contexts of a scene built more than once wait (robosuite's Lift draws its cube's size into
+the XML at every reset), at most `MAX_KEPT` at once (one per env hosted is the usual). One
+dropped from the pool is freed under its own GL context, made current for that (MuJoCo frees
+textures and buffers in the current context: freed under another, they would be that one's),
+just before a simulation's context is made current, as robosuite would make a new one.
 """
 
 from __future__ import annotations
 
+import atexit
 import hashlib
+from collections import OrderedDict
 from typing import Any
 
 #: Contexts waiting for the next simulation of their scene, at most.
 MAX_KEPT = 4
+#: How many scenes' build counts are remembered.
+MAX_SCENES = 64
 
 _kept: list[Any] = []
+_dropped: list[Any] = []
+_builds: OrderedDict[Any, int] = OrderedDict()
 _installed = False
+_exit_registered = False
 
 
-def install() -> None:
-    """Routes robosuite's simulations and offscreen contexts through the pool (idempotent; for
-    robosuite 1.4, LIBERO's, and 1.5)."""
+def install() -> bool:
+    """Routes robosuite's simulations and offscreen contexts through the pool (idempotent), in
+    robosuite 1.4 (LIBERO's) only: its hard reset frees the old simulation, and with it the
+    context, which is then current. robosuite 1.5 drops the old simulation instead, and the
+    garbage collector frees its context whenever it runs, under whichever context is current
+    then: handed on, a context could lose its textures that way. False where not installed."""
     global _installed
     if _installed:
-        return
-    import atexit
+        return True
+    import robosuite
 
+    if not robosuite.__version__.startswith("1.4."):
+        return False
     import robosuite.environments.base as base
     from robosuite.utils import binding_utils
 
@@ -47,14 +63,14 @@ def install() -> None:
 
     def from_xml_string(cls: Any, xml: str) -> Any:
         sim = compile_sim(cls, xml)
-        sim._envhub_scene = hashlib.sha256(xml.encode()).digest()
+        sim._envhub_scene = scene = hashlib.sha256(xml.encode()).digest()
+        _builds[scene] = _builds.pop(scene, 0) + 1
+        while len(_builds) > MAX_SCENES:
+            _builds.popitem(last=False)
         return sim
 
     def free(sim: Any) -> None:
-        context = getattr(sim, "_render_context_offscreen", None)
-        if context is not None and _reusable(context):
-            sim._render_context_offscreen = None
-            _keep(context)
+        _release(sim)
         free_sim(sim)
 
     def uploaded(context: Any, tex_id: int) -> None:
@@ -63,6 +79,7 @@ def install() -> None:
 
     def offscreen_context(sim: Any, device_id: int, max_width: int = 640, max_height: int = 480) -> Any:
         scene = getattr(sim, "_envhub_scene", None)
+        _free_dropped()
         key = None if scene is None else (scene, device_id, max_width, max_height)
         context = _take(key, sim) if key is not None else None
         if context is None:
@@ -77,24 +94,54 @@ def install() -> None:
     sim_class.free = free
     context_class.upload_texture = uploaded
     base.MjRenderContextOffscreen = offscreen_context
-    # Freed while the interpreter is whole (at its finalisation, EGL's bindings may be gone).
-    atexit.register(_kept.clear)
     _installed = True
+    return True
+
+
+def _release(sim: Any) -> None:
+    """Takes the context of a simulation being dropped into the pool, if it can serve again."""
+    context = getattr(sim, "_render_context_offscreen", None)
+    if context is not None and _reusable(context):
+        sim._render_context_offscreen = None
+        _keep(context)
 
 
 def _reusable(context: Any) -> bool:
+    key = getattr(context, "_envhub_key", None)
     return (
-        getattr(context, "_envhub_key", None) is not None
+        key is not None
+        and _builds.get(key[0], 0) > 1
         and not getattr(context, "_envhub_changed", False)
         and (context.con.offWidth, context.con.offHeight) == context._envhub_size
     )
 
 
 def _keep(context: Any) -> None:
+    global _exit_registered
+    if not _exit_registered:
+        # Freed before robosuite terminates EGL at exit (its handler, registered when it made
+        # its first context, runs after this one).
+        atexit.register(_free_all)
+        _exit_registered = True
     context.sim = context.model = context.data = None
     _kept.append(context)
     while len(_kept) > MAX_KEPT:
-        _kept.pop(0)  # freed as robosuite frees it (`__del__`)
+        _dropped.append(_kept.pop(0))
+
+
+def _free_all() -> None:
+    _dropped.extend(_kept)
+    _kept.clear()
+    _free_dropped()
+
+
+def _free_dropped() -> None:
+    while _dropped:
+        context = _dropped.pop()
+        context.gl_ctx.make_current()
+        context.con.free()
+        # The last reference: robosuite's `__del__` frees the GL context (current: it unbinds it).
+        del context
 
 
 def _take(key: Any, sim: Any) -> Any:

@@ -42,11 +42,10 @@ class RobosuiteAdapter(SuiteAdapter):
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
         import robosuite
 
-        from . import compiled_models, render_contexts
+        from . import compiled_models
 
-        # Hard resets (the default) rebuild the same scene: compiled and uploaded once.
+        # Hard resets (the default) compile the same robot, and often the same scene, again.
         compiled_models.install()
-        render_contexts.install()
 
         if env_id not in robosuite.ALL_ENVIRONMENTS:
             names = sorted(robosuite.ALL_ENVIRONMENTS)
