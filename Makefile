@@ -76,7 +76,7 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: fuzz help demo test lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
+.PHONY: fuzz help demo test suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -282,10 +282,20 @@ py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider --durations=10; \
 	fi
 
-# The build of every target while the Python tools, LeRobot's loader and Chromium download;
-# then the checks and the tests, one after the other.
+# The suites' Python environments (the catalog's `python_envs:`, LIBERO's 7 GB among them),
+# built while the rest of the workspace compiles: mostly downloads and disk writes, which the
+# suites' tests would otherwise wait for, one test holding an environment's lock and the other
+# test process waiting on it. Not fatal here: a test that needs an environment builds it and
+# says why it cannot be (ENVHUB_PYENV_REQUIRED and ENVHUB_SUITES_REQUIRED make that a failure).
+suite-envs: build $(VENV_STAMP)
+	./target/release/envhub env sync || echo "note: envhub env sync failed; the suites' tests say why" >&2
+
+# What the demo builds while the Python tools, LeRobot's loader and Chromium download; then the
+# build of every other target while the suites' environments are built; then the checks and
+# the tests, one after the other.
 test:
-	$(MAKE) --no-print-directory -j4 lint-rust venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
+	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
+	$(MAKE) --no-print-directory -j2 lint-rust suite-envs
 	$(MAKE) --no-print-directory lint rust-test py-test
 
 # Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
