@@ -198,7 +198,15 @@ lerobot: $(LEROBOT_STAMP)
 # (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py).
 # MAKEFLAGS cleared: under `make -j` cargo would take make's job slots (one) for its own.
 BUILD_PACKAGES := -p envhub -p envhub-worker -p envhub-py
-build: $(MUJOCO_LIB) $(MESA_STAMP)
+# The crates (Cargo.lock's pins) are downloaded while .venv/ and libmujoco are set up, which the
+# build waits for (mujoco-rs's build script checks the library): 4 s of a fresh machine's demo.
+CARGO_FETCHED := .build/cargo-fetched
+$(CARGO_FETCHED): Cargo.lock
+	mkdir -p $(dir $@)
+	MAKEFLAGS= $(CARGO) fetch
+	touch $@
+
+build: $(MUJOCO_LIB) $(MESA_STAMP) $(CARGO_FETCHED)
 	MAKEFLAGS= $(CARGO) build $(PROFILE) $(BUILD_PACKAGES) $(FEATURES)
 
 # The build and the Python tools' install at once (one compiles, the other downloads). Each
