@@ -222,6 +222,7 @@ demo:
 
 lint: setup lint-rust
 	$(VPY) scripts/check_layers.py
+	$(VPY) scripts/check_untested_targets.py
 	$(VPY) -m ruff check py-client tests scripts
 
 # Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
