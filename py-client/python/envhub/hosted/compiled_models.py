@@ -60,7 +60,7 @@ class CompiledModels:
         return model
 
     def _keep(self, xml: str, model: Any) -> None:
-        size = int(getattr(model, "nbuffer", 0)) + len(xml)
+        size = _size(xml, model)
         key = hash(xml)
         with self._lock:
             self.compiles += 1
@@ -74,8 +74,12 @@ class CompiledModels:
             self._models[xml] = copy.copy(model)
             self._bytes += size
             while self._bytes > self._max_bytes:
-                old_xml, old = self._models.popitem(last=False)
-                self._bytes -= int(getattr(old, "nbuffer", 0)) + len(old_xml)
+                self._bytes -= _size(*self._models.popitem(last=False))
+
+
+def _size(xml: str, model: Any) -> int:
+    """What a kept model counts against the bound: its buffer and its XML key."""
+    return int(getattr(model, "nbuffer", 0)) + len(xml)
 
 
 _installed: CompiledModels | None = None
