@@ -13,9 +13,10 @@ use zenoh::Wait;
 
 const FLAPS: usize = 100_000;
 
-/// `Threads` and `VmRSS` (KiB) of process `pid`, from `/proc/<pid>/status`.
-fn threads_and_rss(pid: u32) -> (u64, u64) {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
+/// `Threads` and `VmRSS` (KiB) of process `pid`, from `/proc/<pid>/status`; `None` once it
+/// is gone.
+fn threads_and_rss(pid: u32) -> Option<(u64, u64)> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let field = |name: &str| {
         status
             .lines()
@@ -24,7 +25,76 @@ fn threads_and_rss(pid: u32) -> (u64, u64) {
             .and_then(|v| v.parse().ok())
             .unwrap_or(0)
     };
-    (field("Threads:"), field("VmRSS:"))
+    Some((field("Threads:"), field("VmRSS:")))
+}
+
+/// A peer in a process of its own that subscribes to every session's key on the hub at
+/// `endpoint` and never returns from its callback, until the test ends (it is killed then, or
+/// exits when its stdin closes). A process of its own, as a real peer is: in the test's
+/// process, its blocked callbacks would hold Zenoh's RX threads, which every session of a
+/// process shares, and stall the victim's own session (seen in CI: a step unanswered for 60 s).
+struct StalledPeer(std::process::Child);
+
+impl StalledPeer {
+    fn start(endpoint: &str) -> StalledPeer {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", "hub_bounds::stalled_peer_process", "--nocapture"])
+            .env("E2E_STALLED_PEER_OF", endpoint)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
+        let mut said = String::new();
+        // Bounded: the child's own test harness ends it if it never subscribes.
+        for _ in 0..20 {
+            let mut line = String::new();
+            if out.read_line(&mut line).unwrap() == 0 || line.starts_with("ready") {
+                said.push_str(&line);
+                break;
+            }
+            said.push_str(&line);
+        }
+        assert!(said.contains("ready"), "the stalled peer said {said:?}");
+        StalledPeer(child)
+    }
+}
+
+impl Drop for StalledPeer {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The stalled peer of the test above; does nothing in a normal run.
+#[test]
+fn stalled_peer_process() {
+    let Ok(endpoint) = std::env::var("E2E_STALLED_PEER_OF") else {
+        return;
+    };
+    let net = envhub::NetConfig {
+        connect: vec![endpoint],
+        multicast: Some(false),
+        ..envhub::NetConfig::default()
+    };
+    let peer = zenoh::open(net.zenoh_config(false).unwrap())
+        .wait()
+        .unwrap();
+    let _stalled = peer
+        .declare_subscriber("envhub/session/**")
+        .callback(|_| {
+            loop {
+                std::thread::sleep(Duration::from_secs(1));
+            }
+        })
+        .wait()
+        .unwrap();
+    println!("ready");
+    // Until the test closes its end (or it is killed).
+    let _ = std::io::Read::read_to_end(&mut std::io::stdin(), &mut Vec::new());
+    std::process::exit(0);
 }
 
 fn rollout(env: &mut envhub::VecEnv, steps: usize) -> Vec<Vec<u8>> {
@@ -46,18 +116,12 @@ fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() 
         .unwrap();
     victim.reset(Some(0)).unwrap();
     std::thread::sleep(Duration::from_millis(500));
-    let before = threads_and_rss(a.pid());
+    let before = threads_and_rss(a.pid()).expect("the hub runs");
 
-    // The attacker: peers on the hub's network. One subscribes to every session's answers
-    // and never returns from its callback (it never reads another sample); the other flaps
-    // client tokens and sends oversized requests.
-    let open_peer = || {
-        zenoh::open(net_to(&[&a]).zenoh_config(false).unwrap())
-            .wait()
-            .unwrap()
-    };
+    // The attacker: peers on the hub's network. One (`StalledPeer`, below) subscribes to every
+    // session's answers and never returns from its callback (it never reads another sample);
+    // the other flaps client tokens and sends oversized requests.
     let attacker_endpoint = format!("tcp/127.0.0.1:{}", envhub_e2e::remote::free_port());
-    let stalled_peer = open_peer();
     let attacker = {
         let mut net = net_to(&[&a]);
         net.listen = vec![attacker_endpoint.clone()];
@@ -107,26 +171,16 @@ fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() 
         std::thread::sleep(Duration::from_millis(100));
     }
     carried.store(0, Ordering::Relaxed);
-    let release = Arc::new(AtomicBool::new(false));
-    let _stalled = {
-        let release = release.clone();
-        stalled_peer
-            .declare_subscriber("envhub/session/**")
-            .callback(move |_| {
-                while !release.load(Ordering::Relaxed) {
-                    std::thread::sleep(Duration::from_millis(50));
-                }
-            })
-            .wait()
-            .unwrap()
-    };
+    let stalled = StalledPeer::start(&a.endpoint);
     let peak = Arc::new(std::sync::Mutex::new(before));
     let sampling = Arc::new(AtomicBool::new(true));
     let sampler = {
         let (peak, sampling, pid) = (peak.clone(), sampling.clone(), a.pid());
         std::thread::spawn(move || {
             while sampling.load(Ordering::Relaxed) {
-                let (t, r) = threads_and_rss(pid);
+                let Some((t, r)) = threads_and_rss(pid) else {
+                    break;
+                };
                 let mut p = peak.lock().unwrap();
                 *p = (p.0.max(t), p.1.max(r));
                 drop(p);
@@ -178,11 +232,11 @@ fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() 
     std::thread::sleep(Duration::from_secs(3));
     stepping.store(false, Ordering::Relaxed);
     let (mut victim, victim_steps) = steps.join().unwrap();
-    let after = threads_and_rss(a.pid());
+    let after = threads_and_rss(a.pid()).expect("the hub runs");
     sampling.store(false, Ordering::Relaxed);
     sampler.join().unwrap();
     let peak = *peak.lock().unwrap();
-    release.store(true, Ordering::Relaxed);
+    drop(stalled);
     // The victim's session is still right: a rollout from a reset is the quiet one's.
     assert_eq!(rollout(&mut victim, 200), expected);
     victim.close();
