@@ -76,7 +76,7 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 
-.PHONY: fuzz help demo test suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
+.PHONY: fuzz help demo test build-all suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -195,7 +195,8 @@ $(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_BASE)
 lerobot: $(LEROBOT_STAMP)
 
 # What the demo and the Python package run: the CLI, the workers and the extension module
-# (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py).
+# (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py;
+# rapier's worker is part of the rest: `make build-all`).
 # MAKEFLAGS cleared: under `make -j` cargo would take make's job slots (one) for its own.
 BUILD_PACKAGES := -p envhub -p envhub-worker -p envhub-py
 # The crates (Cargo.lock's pins) are downloaded while .venv/ and libmujoco are set up, which the
@@ -210,6 +211,12 @@ $(CARGO_FETCHED): Cargo.lock
 
 build: $(MUJOCO_LIB) $(MESA_STAMP) $(CARGO_FETCHED)
 	MAKEFLAGS= $(CARGO) build $(PROFILE) $(BUILD_PACKAGES) $(FEATURES)
+
+# Every binary, rapier's worker (`envhub-worker-rapier`, which `envhub-worker` hands rapier's
+# jobs to) included: rapier3d is about a tenth of the release build and the demo runs none of
+# it, so `make build` leaves it out (`make test` builds it with the tests).
+build-all: build
+	MAKEFLAGS= $(CARGO) build $(PROFILE) $(BUILD_PACKAGES) -p envhub-worker-rapier $(FEATURES)
 
 # The build and the Python tools' install at once (one compiles, the other downloads). Each
 # rollout is a few seconds: long enough for a steady steps/s (`envhub bench` measures).
@@ -258,7 +265,9 @@ rust-test: setup py-install
 # The Python package `envhub` into .venv/, editable: the extension module `make build`
 # compiled goes next to the pure-Python sources, which a .pth file puts on the venv's path,
 # and the release binaries go into its bin/, as in the wheel (`make wheel`).
-PY_BINARIES := envhub envhub-worker envhub-worker-mujoco
+# envhub-worker-rapier only once built (`make build-all`, `make test`): without it, rapier's
+# envs say how to get it.
+PY_BINARIES := envhub envhub-worker envhub-worker-mujoco envhub-worker-rapier
 PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 # The module is built for the stable ABI (pyo3's `abi3-py39`): one file, `_envhub.abi3.so`,
 # loads in every CPython from 3.9 on, the venvs provisioned for suites included (a copy named
@@ -273,12 +282,14 @@ py-install: build $(VENV_STAMP)
 	echo "$(abspath py-client/python)" > $(PY_SITE)/envhub.pth
 	mkdir -p py-client/python/envhub/bin
 	for b in $(PY_BINARIES); do \
-		cp target/release/$$b py-client/python/envhub/bin/$$b.tmp && mv -f py-client/python/envhub/bin/$$b.tmp py-client/python/envhub/bin/$$b; \
+		if [ -f target/release/$$b ]; then \
+			cp target/release/$$b py-client/python/envhub/bin/$$b.tmp && mv -f py-client/python/envhub/bin/$$b.tmp py-client/python/envhub/bin/$$b; \
+		else rm -f py-client/python/envhub/bin/$$b; fi; \
 	done
 
 # The wheel: the package, the extension module and the binaries of `make build`, zipped by
 # py-client/build_wheel.py (no second compile, unlike `maturin build`; see the script).
-wheel: build
+wheel: build-all
 	$(VPY) py-client/build_wheel.py --out dist
 
 # Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt

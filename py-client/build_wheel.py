@@ -7,7 +7,7 @@ flags, so CI would compile the whole dependency tree (iceoryx2, mujoco-rs, rapie
 second time, and it would not build the `envhub` and worker binaries the wheel must carry. A
 wheel is a zip file with a `.dist-info` folder (PEP 427), so this script writes one from the
 single release build: the pure-Python package, `target/release/lib_envhub.so` as the
-extension module, and the `envhub`, `envhub-worker`, `envhub-worker-mujoco` binaries in
+extension module, and the `envhub`, `envhub-worker`, `envhub-worker-mujoco`, `envhub-worker-rapier` binaries in
 `envhub/bin/`. Metadata comes from `pyproject.toml` (the one maturin reads too) and the
 version from the workspace's `Cargo.toml`.
 
@@ -38,7 +38,7 @@ import tomllib
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "py-client" / "python" / "envhub"
-BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco")
+BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco", "envhub-worker-rapier")
 # Zip entries get a fixed date, so the same build gives the same wheel (SOURCE_DATE_EPOCH wins).
 EPOCH = (1980, 1, 1, 0, 0, 0)
 

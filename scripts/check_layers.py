@@ -31,7 +31,7 @@ LAYERS: list[list[str]] = [
     ["envhub-core"],
     ["envhub-shm", "envhub-catalog", "envhub-classic", "envhub-mujoco", "envhub-rapier", "envhub-conformance"],
     ["envhub-protocol", "envhub-worker", "envhub-pyenv"],
-    ["envhub-session"],
+    ["envhub-session", "envhub-worker-rapier"],
     ["envhub-net"],
     ["envhub"],
     ["envhub-py", "envhub-e2e"],
@@ -46,6 +46,8 @@ FORBIDDEN: dict[str, list[str]] = {
     "envhub-session": ["zenoh", "pyo3", "numpy", "mujoco-rs", "rapier3d"],
     "envhub-net": ["pyo3", "numpy", "mujoco-rs", "rapier3d"],
     "envhub-pyenv": HEAVY,
+    # The worker the demo runs builds without rapier: `envhub-worker-rapier` hosts it.
+    "envhub-worker": ["envhub-rapier", "rapier3d"],
 }
 
 

@@ -22,4 +22,5 @@ mod serve_defaults;
 mod session_owner;
 mod small_shm;
 mod tls;
+mod worker_binaries;
 mod worker_lifetime;

@@ -23,7 +23,7 @@ import pytest
 from conftest import REPO_ROOT
 
 TARGET = REPO_ROOT / "target" / "release"
-BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco")
+BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco", "envhub-worker-rapier")
 SITE = Path(sysconfig.get_paths()["purelib"])
 CARGO_HOME = Path(os.environ.get("CARGO_HOME", Path.home() / ".cargo"))
 
@@ -156,6 +156,14 @@ def test_cli_runs_mujoco_ant(venv):
     done = run(venv, tmp, "envhub", "run", "mujoco-ant", "--num-envs", "4", "--steps", "200")
     assert done.returncode == 0, done.stdout + done.stderr
     assert "mujoco" in done.stdout, done.stdout
+
+
+def test_cli_runs_a_rapier_task(venv):
+    """rapier's worker is a binary of its own in the wheel: `envhub-worker` hands over to it."""
+    venv, tmp = venv
+    done = run(venv, tmp, "envhub", "run", "rapier-arm-reach", "--num-envs", "2", "--steps", "200")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "rapier-arm-reach: 200 steps" in done.stdout, done.stdout
 
 
 def test_python_make_vec_steps_mujoco_ant(venv):

@@ -8,14 +8,14 @@ use std::sync::OnceLock;
 const TEST_ADAPTERS_VAR: &str = "ENVHUB_TEST_ADAPTERS";
 
 /// The adapters users see, given the two MuJoCo ones (real or [`crate::Unlinked`], as the
-/// binary can host them). Adding one is one line here.
+/// binary can host them). Adding one is one line here. Those another binary hosts
+/// ([`crate::delegated`], rapier's) come on top of every binary's list.
 pub fn native(mujoco: [Box<dyn EnvAdapter>; 2]) -> Vec<Box<dyn EnvAdapter>> {
     let [mujoco, custom_mjcf] = mujoco;
     vec![
         Box::new(envhub_classic::ClassicControl),
         mujoco,
         custom_mjcf,
-        Box::new(envhub_rapier::Rapier),
     ]
 }
 
@@ -30,8 +30,24 @@ pub fn set_adapters(all: impl Fn() -> Vec<Box<dyn EnvAdapter>> + Send + Sync + '
     let _ = ALL.set(Box::new(all));
 }
 
+/// The binary's own adapters, then those another binary hosts that it does not.
 fn all() -> Vec<Box<dyn EnvAdapter>> {
+    let mut list = own();
+    for info in crate::delegated::ALL {
+        if !list.iter().any(|a| a.name() == info.name) {
+            list.push(Box::new(crate::delegated::Delegated(info)));
+        }
+    }
+    list
+}
+
+fn own() -> Vec<Box<dyn EnvAdapter>> {
     ALL.get().map(|all| all()).unwrap_or_default()
+}
+
+/// Whether this binary hosts adapter `name` itself (not through another binary).
+pub fn hosts_itself(name: &str) -> bool {
+    own().iter().any(|a| a.name() == name)
 }
 
 /// Adapters for tests and benches only: served when a job names them, listed only when

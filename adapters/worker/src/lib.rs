@@ -9,8 +9,12 @@
 //! Otherwise it hosts the rest itself and the MuJoCo adapters report what is missing. The
 //! trade-off: a second binary, against a loader error that would take every native adapter
 //! down with MuJoCo (a library a binary links must be found before `main` runs).
+//!
+//! rapier's adapter runs in a third binary, `envhub-worker-rapier`, which the other two hand
+//! its jobs to ([`delegated`]): the binaries the demo runs build without rapier3d.
 
 mod adapters;
+pub mod delegated;
 mod inproc;
 pub mod libmujoco;
 mod null_env;
@@ -73,6 +77,12 @@ enum Command {
 pub fn run() -> ExitCode {
     envhub_core::init_logging();
     let cli = Cli::parse();
+    if let Command::Serve { job } | Command::Inproc { job, .. } = &cli.command
+        && let Err(err) = hand_over(job)
+    {
+        eprintln!("envhub-worker: error: {err:#}");
+        return ExitCode::from(2);
+    }
     let result = match cli.command {
         Command::Describe => describe(),
         Command::Serve { job } => serve::run(&job),
@@ -100,6 +110,21 @@ pub fn run() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Hands `job` over to the binary that hosts its adapter, where another one does (see
+/// [`delegated`]); returns when this binary serves it. A job it cannot read is left to the
+/// command, which says what is wrong with it.
+fn hand_over(job: &str) -> anyhow::Result<()> {
+    #[derive(serde::Deserialize)]
+    struct Adapter {
+        adapter: String,
+    }
+    let Ok(Adapter { adapter }) = serde_json::from_str::<Adapter>(job) else {
+        return Ok(());
+    };
+    delegated::hand_over(&adapter, adapters::hosts_itself(&adapter))
+        .map_err(|e| anyhow::anyhow!("cannot start the worker for adapter `{adapter}`: {e}"))
 }
 
 fn describe() -> anyhow::Result<()> {
