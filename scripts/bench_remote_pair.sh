@@ -2,7 +2,8 @@
 # Remote round trip (null-small x1) and CartPole x1024 remote throughput, `envhub bench --hub`,
 # for two builds back to back on one machine (before and after a change):
 #   scripts/bench_remote_pair.sh /path/to/checkout-before /path/to/checkout-after
-# Each root needs its installed binaries (py-client/python/envhub/bin/envhub).
+# Each root needs its installed binaries (py-client/python/envhub/bin/envhub). The client reads
+# the hub's loopback credential from the same ENVHUB_LOCAL_HUBS folder (docs/security.md).
 set -u
 i=0
 for root in "$@"; do
@@ -16,7 +17,7 @@ for root in "$@"; do
   sleep 3
   for args in "null-small --num-envs 1" "gym-cartpole --num-envs 1024"; do
     echo "== $side $args"
-    ENVHUB_TEST_ADAPTERS=1 ENVHUB_MULTICAST=0 timeout 120 $bin --registry @default --registry $root/configs/bench/data_plane.yaml \
+    ENVHUB_TEST_ADAPTERS=1 ENVHUB_MULTICAST=0 ENVHUB_LOCAL_HUBS=/tmp/bench-local-$side timeout 120 $bin --registry @default --registry $root/configs/bench/data_plane.yaml \
       --connect tcp/127.0.0.1:$port bench $args --workers 1 --hub bench$side --json 2>&1 | tail -c 3000
   done
   kill $hub; wait $hub 2>/dev/null
