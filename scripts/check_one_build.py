@@ -26,11 +26,33 @@ def unit_features(args: list[str]) -> dict[tuple, set[tuple]]:
         capture_output=True,
         text=True,
     ).stdout
-    units: dict[tuple, set[tuple]] = {}
-    for unit in json.loads(out)["units"]:
-        key = (unit["pkg_id"], unit["target"]["name"], unit["mode"], tuple(unit["target"]["kind"]))
-        units.setdefault(key, set()).add(tuple(sorted(unit["features"])))
-    return units
+    units = json.loads(out)["units"]
+    host = for_host(units)
+    features: dict[tuple, set[tuple]] = {}
+    for i, unit in enumerate(units):
+        # A crate compiled for build scripts and proc macros and again for the binaries is two
+        # units: each is compared with its own kind, else the host copy's features would hide
+        # a target copy compiled twice.
+        key = (unit["pkg_id"], unit["target"]["name"], unit["mode"], tuple(unit["target"]["kind"]), host[i])
+        features.setdefault(key, set()).add(tuple(sorted(unit["features"])))
+    return features
+
+
+def for_host(units: list[dict]) -> list[bool]:
+    """Whether each unit runs on the build machine: build scripts, proc macros and what they
+    depend on (the unit graph's `platform` is null for both kinds without `--target`)."""
+    host = [False] * len(units)
+    stack = [
+        i
+        for i, u in enumerate(units)
+        if "proc-macro" in u["target"]["kind"] or (u["target"]["kind"] == ["custom-build"] and u["mode"] == "build")
+    ]
+    while stack:
+        i = stack.pop()
+        if not host[i]:
+            host[i] = True
+            stack.extend(d["index"] for d in units[i]["dependencies"])
+    return host
 
 
 def without_packages(args: list[str]) -> list[str]:
