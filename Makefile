@@ -312,7 +312,8 @@ py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
 # suites' tests would otherwise wait for, one test holding an environment's lock and the other
 # test process waiting on it. Not fatal here: a test that needs an environment builds it and
 # says why it cannot be (ENVHUB_PYENV_REQUIRED and ENVHUB_SUITES_REQUIRED make that a failure).
-suite-envs: build $(VENV_STAMP)
+# After py-install: an environment gets the `envhub` package of .venv/ on its path.
+suite-envs: py-install
 	./target/release/envhub env sync || echo "note: envhub env sync failed; the suites' tests say why" >&2
 
 # What the demo builds while the Python tools, LeRobot's loader and Chromium download; then the
