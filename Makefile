@@ -85,6 +85,7 @@ help:
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
 	@echo "make fuzz   coverage-guided fuzzing of the parsers (cargo-fuzz, FUZZ_SECONDS each)"
+	@echo "make build-all  every binary, rapier's worker included (make demo builds only what it runs)"
 	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
