@@ -70,3 +70,41 @@ fn without_rapier_s_worker_its_envs_say_how_to_get_it() {
         "{text}"
     );
 }
+
+#[test]
+fn a_rapier_worker_that_cannot_start_is_an_answer_naming_it() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(format!("envhub-e2e-bad-rapier-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let worker = dir.join("envhub-worker");
+    std::fs::copy(binary("envhub-worker"), &worker).unwrap();
+    // There, but not executable: the hand-over's `exec` fails.
+    let rapier = dir.join("envhub-worker-rapier");
+    std::fs::write(&rapier, b"not a program").unwrap();
+    std::fs::set_permissions(&rapier, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let out = Command::new(binary("envhub"))
+        .args([
+            "run",
+            "rapier-arm-reach",
+            "--num-envs",
+            "2",
+            "--steps",
+            "10",
+        ])
+        .env("ENVHUB_WORKER", &worker)
+        .env(
+            "ENVHUB_NAMESPACE",
+            format!("e2e_badrapier_{}_", std::process::id()),
+        )
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let text =
+        String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
+    assert!(!out.status.success(), "{text}");
+    assert!(
+        text.contains("the worker for adapter `rapier`: cannot start `")
+            && text.contains("envhub-worker-rapier`: Permission denied"),
+        "{text}"
+    );
+}

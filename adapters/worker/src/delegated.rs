@@ -134,7 +134,7 @@ impl EnvAdapter for Delegated {
 /// is installed; returns when this binary should go on with the job itself (it hosts the
 /// adapter, no binary does, or the binary is missing: the job then fails with
 /// [`Delegated`]'s reason), or with the error of an `exec` that failed.
-pub fn hand_over(adapter: &str, hosted_here: bool) -> Result<(), std::io::Error> {
+pub fn hand_over(adapter: &str, hosted_here: bool) -> Result<(), String> {
     let Some(info) = ALL.iter().find(|info| info.name == adapter) else {
         return Ok(());
     };
@@ -142,7 +142,11 @@ pub fn hand_over(adapter: &str, hosted_here: bool) -> Result<(), std::io::Error>
     if hosted_here || !path.is_file() {
         return Ok(());
     }
-    Err(std::process::Command::new(&path)
+    let err = std::process::Command::new(&path)
         .args(std::env::args_os().skip(1))
-        .exec())
+        .exec();
+    Err(format!(
+        "cannot start `{}`: {err}\nhint: it must be an executable beside `envhub-worker`: rebuild it (`make build-all`) or reinstall envhub",
+        path.display()
+    ))
 }

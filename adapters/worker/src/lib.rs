@@ -80,7 +80,12 @@ pub fn run() -> ExitCode {
     if let Command::Serve { job } | Command::Inproc { job, .. } = &cli.command
         && let Err(err) = hand_over(job)
     {
-        eprintln!("envhub-worker: error: {err:#}");
+        let message = format!("{err:#}");
+        // A served job's answer goes to the hub on stdout, as any job that cannot be served.
+        if matches!(cli.command, Command::Serve { .. }) && serve::refuse(message.clone()).is_ok() {
+            return ExitCode::SUCCESS;
+        }
+        eprintln!("envhub-worker: error: {message}");
         return ExitCode::from(2);
     }
     let result = match cli.command {
@@ -124,7 +129,7 @@ fn hand_over(job: &str) -> anyhow::Result<()> {
         return Ok(());
     };
     delegated::hand_over(&adapter, adapters::hosts_itself(&adapter))
-        .map_err(|e| anyhow::anyhow!("cannot start the worker for adapter `{adapter}`: {e}"))
+        .map_err(|e| anyhow::anyhow!("the worker for adapter `{adapter}`: {e}"))
 }
 
 fn describe() -> anyhow::Result<()> {

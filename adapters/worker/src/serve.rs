@@ -56,6 +56,11 @@ fn reply(line: &WorkerReply) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Answers the hub that the job cannot be served, as a job whose envs cannot be made is.
+pub(crate) fn refuse(message: String) -> anyhow::Result<()> {
+    reply(&WorkerReply::Error(message))
+}
+
 pub(crate) fn run(job_json: &str) -> anyhow::Result<()> {
     let job: WorkerJob = serde_json::from_str(job_json).context("invalid job")?;
     let span = tracing::info_span!("worker", adapter = %job.adapter, env_id = %job.env_id, pid = std::process::id());
