@@ -171,17 +171,8 @@ fn dead_clients_leave_nothing_behind() {
         .unwrap();
     let pid = client.id();
     // Wait until the child's session is up (it prints its worker's pid), then kill it hard.
-    let mut out = std::io::BufReader::new(client.stdout.take().unwrap());
-    let mut said = String::new();
-    for _ in 0..20 {
-        let mut line = String::new();
-        if std::io::BufRead::read_line(&mut out, &mut line).unwrap() == 0 || line.contains("ready")
-        {
-            said.push_str(&line);
-            break;
-        }
-        said.push_str(&line);
-    }
+    let said =
+        envhub_e2e::lines_until_ready(&mut std::io::BufReader::new(client.stdout.take().unwrap()));
     let worker: u32 = said
         .lines()
         .find_map(|l| l.strip_prefix("ready "))

@@ -37,7 +37,6 @@ struct StalledPeer(std::process::Child);
 
 impl StalledPeer {
     fn start(endpoint: &str) -> StalledPeer {
-        use std::io::BufRead;
         let mut child = std::process::Command::new(std::env::current_exe().unwrap())
             .args(["--exact", "hub_bounds::stalled_peer_process", "--nocapture"])
             .env("E2E_STALLED_PEER_OF", endpoint)
@@ -45,17 +44,9 @@ impl StalledPeer {
             .stdout(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        let mut out = std::io::BufReader::new(child.stdout.take().unwrap());
-        let mut said = String::new();
-        // Bounded: the child's own test harness ends it if it never subscribes.
-        for _ in 0..20 {
-            let mut line = String::new();
-            if out.read_line(&mut line).unwrap() == 0 || line.starts_with("ready") {
-                said.push_str(&line);
-                break;
-            }
-            said.push_str(&line);
-        }
+        let said = envhub_e2e::lines_until_ready(&mut std::io::BufReader::new(
+            child.stdout.take().unwrap(),
+        ));
         assert!(said.contains("ready"), "the stalled peer said {said:?}");
         StalledPeer(child)
     }

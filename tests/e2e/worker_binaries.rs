@@ -34,17 +34,24 @@ fn every_worker_lists_rapier_as_its_own_binary_does() {
     assert_eq!(rapier_entry(&binary("envhub-worker")), own);
 }
 
-#[test]
-fn without_rapier_s_worker_its_envs_say_how_to_get_it() {
-    let dir = std::env::temp_dir().join(format!("envhub-e2e-no-rapier-{}", std::process::id()));
+/// `envhub-worker` copied alone into a folder of its own (named after `test`), with `rapier`
+/// (bytes, mode) beside it if given; then `envhub run rapier-arm-reach` through it. Returns the
+/// lone worker's `rapier` entry, whether the run succeeded and what it printed.
+fn run_rapier_beside(
+    test: &str,
+    rapier: Option<(&[u8], u32)>,
+) -> (serde_json::Value, bool, String) {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = std::env::temp_dir().join(format!("envhub-e2e-{test}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let worker = dir.join("envhub-worker");
     std::fs::copy(binary("envhub-worker"), &worker).unwrap();
+    if let Some((bytes, mode)) = rapier {
+        let path = dir.join("envhub-worker-rapier");
+        std::fs::write(&path, bytes).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
     let entry = rapier_entry(&worker);
-    assert_eq!(entry["availability"]["status"], "unavailable", "{entry}");
-    let reason = entry["availability"]["reason"].as_str().unwrap();
-    assert!(reason.contains("no `envhub-worker-rapier` at"), "{reason}");
-    // Through the CLI, as a user would meet it.
     let out = Command::new(binary("envhub"))
         .args([
             "run",
@@ -57,14 +64,24 @@ fn without_rapier_s_worker_its_envs_say_how_to_get_it() {
         .env("ENVHUB_WORKER", &worker)
         .env(
             "ENVHUB_NAMESPACE",
-            format!("e2e_norapier_{}_", std::process::id()),
+            format!("e2e_{test}_{}_", std::process::id()),
         )
         .output()
         .unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     let text =
         String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
-    assert!(!out.status.success(), "{text}");
+    (entry, out.status.success(), text)
+}
+
+#[test]
+fn without_rapier_s_worker_its_envs_say_how_to_get_it() {
+    let (entry, ok, text) = run_rapier_beside("norapier", None);
+    assert_eq!(entry["availability"]["status"], "unavailable", "{entry}");
+    let reason = entry["availability"]["reason"].as_str().unwrap();
+    assert!(reason.contains("no `envhub-worker-rapier` at"), "{reason}");
+    // Through the CLI, as a user would meet it.
+    assert!(!ok, "{text}");
     assert!(
         text.contains("envhub-worker-rapier") && text.contains("make build-all"),
         "{text}"
@@ -73,35 +90,9 @@ fn without_rapier_s_worker_its_envs_say_how_to_get_it() {
 
 #[test]
 fn a_rapier_worker_that_cannot_start_is_an_answer_naming_it() {
-    use std::os::unix::fs::PermissionsExt;
-    let dir = std::env::temp_dir().join(format!("envhub-e2e-bad-rapier-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let worker = dir.join("envhub-worker");
-    std::fs::copy(binary("envhub-worker"), &worker).unwrap();
     // There, but not executable: the hand-over's `exec` fails.
-    let rapier = dir.join("envhub-worker-rapier");
-    std::fs::write(&rapier, b"not a program").unwrap();
-    std::fs::set_permissions(&rapier, std::fs::Permissions::from_mode(0o644)).unwrap();
-    let out = Command::new(binary("envhub"))
-        .args([
-            "run",
-            "rapier-arm-reach",
-            "--num-envs",
-            "2",
-            "--steps",
-            "10",
-        ])
-        .env("ENVHUB_WORKER", &worker)
-        .env(
-            "ENVHUB_NAMESPACE",
-            format!("e2e_badrapier_{}_", std::process::id()),
-        )
-        .output()
-        .unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
-    let text =
-        String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
-    assert!(!out.status.success(), "{text}");
+    let (_, ok, text) = run_rapier_beside("badrapier", Some((b"not a program", 0o644)));
+    assert!(!ok, "{text}");
     assert!(
         text.contains("the worker for adapter `rapier`: cannot start `")
             && text.contains("envhub-worker-rapier`: Permission denied"),

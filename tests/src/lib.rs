@@ -189,6 +189,22 @@ impl Drop for PyModule {
     }
 }
 
+/// The lines a helper child (this test binary run again) prints on `out`, up to and with the
+/// first that contains `ready`, at most 20 lines (bounded: a child that never says it reads
+/// as end of output, and the caller's assertion names what it said instead).
+pub fn lines_until_ready(out: &mut impl std::io::BufRead) -> String {
+    let mut said = String::new();
+    for _ in 0..20 {
+        let mut line = String::new();
+        if out.read_line(&mut line).unwrap() == 0 || line.contains("ready") {
+            said.push_str(&line);
+            break;
+        }
+        said.push_str(&line);
+    }
+    said
+}
+
 /// Sends SIGKILL to `pid`.
 pub fn sigkill(pid: u32) {
     let status = std::process::Command::new("kill")
