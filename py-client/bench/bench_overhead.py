@@ -8,7 +8,7 @@ ratios; and the per-env-step overhead of envhub with 1 worker over in-process st
 
 Random actions from a pre-drawn pool; Gymnasium's default next_step autoreset everywhere;
 each peer measured `--rounds` times in alternation, best round kept (the machine may be
-shared). With `--policy`, a policy-in-the-loop figure as well: a small numpy MLP (obs → 64 →
+shared). With `--policy`, a policy-in-the-loop figure as well (the first env whose actions are a Box): a small numpy MLP (obs → 64 →
 64 → action, tanh) evaluated on the batch's observations between steps, as a PPO rollout
 does, in-process `SyncVectorEnv` against envhub with 2 workers.
 
@@ -97,11 +97,14 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--seconds", type=float, default=2.0)
     p.add_argument("--rounds", type=int, default=2)
-    p.add_argument("--policy", action="store_true", help="also the policy-in-the-loop figure (first env)")
+    p.add_argument(
+        "--policy", action="store_true", help="also the policy-in-the-loop figure (first env with a Box action space)"
+    )
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
     n = args.envs
     rows = []
+    policy_env = next((e for e in args.env if isinstance(gymnasium.make(e).action_space, gymnasium.spaces.Box)), None)
     for env_id in args.env:
         fns = [lambda env_id=env_id: gymnasium.make(env_id)] * n
         probe = gymnasium.make(env_id)
@@ -119,7 +122,7 @@ def main() -> None:
         row["envhub_1/in_process"] = round(r["envhub_1"] / r["in_process"], 2)
         row["envhub_2/in_process"] = round(r["envhub_2"] / r["in_process"], 2)
         row["envhub_2/gymnasium_async"] = round(r["envhub_2"] / r["gymnasium_async"], 2)
-        if args.policy and env_id == args.env[0]:
+        if args.policy and env_id == policy_env:
             space = probe.action_space
             policy = Mlp(int(np.prod(probe.observation_space.shape)), int(np.prod(space.shape)), space.low, space.high)
             pr = best(
