@@ -5,6 +5,8 @@ hard resets installed (`envhub.hosted.compiled_models`, `render_contexts`), with
   with seeds 1 to 3, again, and 3 to 1, the pool cut to two contexts: more scenes that repeat
   than contexts the pool keeps, so a context is dropped and freed between the renders of
   others, which are handed on after.
+Modes: `plain`, `cached`, and `repeat` (cached, every scene taken to be built again, as LIBERO's
+adapter installs the pool: a context waits from its scene's first build on).
 A step after each reset. Prints JSON: a digest of every observation, and how many models were
 compiled and render contexts built."""
 
@@ -22,13 +24,14 @@ import mujoco
 import numpy as np
 
 
-def main(task: str, cached: bool) -> None:
+def main(task: str, mode: str) -> None:
+    cached = mode in ("cached", "repeat")
     compile_xml = mujoco.MjModel.from_xml_string
     if cached:
         from envhub.hosted import compiled_models, render_contexts
 
         compiled_models.install()
-        render_contexts.install()
+        render_contexts.install(scenes_repeat=mode == "repeat")
         render_contexts.MAX_KEPT = 2
     import robosuite
     from robosuite.utils import binding_utils
@@ -79,4 +82,6 @@ def main(task: str, cached: bool) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2] == "cached")
+    if sys.argv[2] not in ("plain", "cached", "repeat"):
+        sys.exit(f"unknown mode {sys.argv[2]!r}: plain, cached or repeat")
+    main(sys.argv[1], sys.argv[2])

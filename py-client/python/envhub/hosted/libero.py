@@ -192,8 +192,9 @@ class LiberoAdapter(EnvAdapter):
 
         from . import render_contexts
 
-        # Hard resets (LIBERO's evaluation's) rebuild the same scene: its textures uploaded once.
-        render_contexts.install()
+        # Hard resets (LIBERO's evaluation's, and the one that follows making the env) rebuild
+        # the task's scene: its textures uploaded once.
+        render_contexts.install(scenes_repeat=True)
 
         # Suites LIBERO can make (its benchmark dict also lists `libero_100`, which has no tasks).
         known = {s: libero_task_map[s] for s in benchmark.get_benchmark_dict() if s in libero_task_map}

@@ -13,7 +13,9 @@ which builds a context at every reset: bit for bit.
 A context is handed on only when nothing changed it: not resized (`update_offscreen_size`) and
 no texture uploaded since (robosuite's texture randomisation); otherwise it is freed as before.
 Only contexts of a scene built more than once wait (robosuite's Lift draws its cube's size into
-the XML at every reset), at most `MAX_KEPT` at once (one per env hosted is the usual). One
+the XML at every reset), at most `MAX_KEPT` at once (one per env hosted is the usual); where
+every scene is rebuilt as it is (LIBERO: `install(scenes_repeat=True)`), a scene's first context
+waits too, so the reset that follows making an env reuses the context the env was made with. One
 dropped from the pool is freed under its own GL context, made current for that (MuJoCo frees
 textures and buffers in the current context: freed under another, they would be that one's),
 just before a simulation's context is made current, as robosuite would make a new one.
@@ -36,15 +38,21 @@ _dropped: list[Any] = []
 _builds: OrderedDict[Any, int] = OrderedDict()
 _installed = False
 _exit_registered = False
+#: Builds of a scene before its contexts wait for the next one (1 where scenes repeat).
+_builds_to_keep = 2
 
 
-def install() -> bool:
+def install(scenes_repeat: bool = False) -> bool:
     """Routes robosuite's simulations and offscreen contexts through the pool (idempotent), in
     robosuite 1.4 (LIBERO's) only: its hard reset frees the old simulation, and with it the
     context, which is then current. robosuite 1.5 drops the old simulation instead, and the
     garbage collector frees its context whenever it runs, under whichever context is current
-    then: handed on, a context could lose its textures that way. False where not installed."""
-    global _installed
+    then: handed on, a context could lose its textures that way. False where not installed.
+    `scenes_repeat`: every scene built is built again (LIBERO's hard resets rebuild the scene of
+    the env's task), so a context waits from the scene's first build on."""
+    global _installed, _builds_to_keep
+    if scenes_repeat:
+        _builds_to_keep = 1
     if _installed:
         return True
     import robosuite
@@ -110,7 +118,7 @@ def _reusable(context: Any) -> bool:
     key = getattr(context, "_envhub_key", None)
     return (
         key is not None
-        and _builds.get(key[0], 0) > 1
+        and _builds.get(key[0], 0) >= _builds_to_keep
         and not getattr(context, "_envhub_changed", False)
         and (context.con.offWidth, context.con.offHeight) == context._envhub_size
     )
