@@ -133,16 +133,51 @@ def _leaf(obs, path: tuple[str, ...], i: int) -> np.ndarray:
     return np.array(obs[i], copy=True)
 
 
-def drive(rec, steps: int, act, *, seed: int, same_step: bool = False, frames: bool = False,
+class FrameTap:
+    """Between an env and its recorder: keeps what each `render()` of the env returned, and
+    the env's calls in order, so that a test gets the frame the env rendered right after each
+    reset and step (the frame of that observation) without rendering it a second time."""
+
+    def __init__(self, env) -> None:
+        import gymnasium
+
+        class Tap(gymnasium.vector.VectorWrapper):
+            def reset(inner, **kwargs):
+                self.calls.append("reset")
+                return inner.env.reset(**kwargs)
+
+            def step(inner, actions):
+                self.calls.append("step")
+                return inner.env.step(actions)
+
+            def render(inner):
+                frames = inner.env.render()
+                self.calls.append("render")
+                self.shown = [np.array(f, copy=True) for f in frames]
+                return frames
+
+        self.env = Tap(env)
+        self.calls: list[str] = []
+        self.shown: list[np.ndarray] = []
+
+    def after(self, call: str) -> list[np.ndarray]:
+        """The frames rendered after `call`, which must be the env's last calls: `call`, then
+        one `render()`."""
+        assert self.calls == [call, "render"], f"the recorder called {self.calls} for one {call}"
+        self.calls = []
+        return self.shown
+
+
+def drive(rec, steps: int, act, *, seed: int, same_step: bool = False, frames: FrameTap | None = None,
           paths: dict[str, tuple[str, ...]] | None = None) -> list[dict[str, list]]:
     """Steps `rec` and returns the episodes that ended, in the order they ended (by step, then
     env), each as lists of what the session returned: per frame the observation leaves
     (`paths`: feature -> keys into the observation), the action, reward, flags and (with
-    `frames`) the `render()` frame of that observation."""
+    `frames`, the tap under `rec`) the frame the env rendered for that observation."""
     paths = paths or {"observation.state": ()}
     obs, _ = rec.reset(seed=seed)
     n = rec.num_envs
-    shown = list(rec.render()) if frames else None
+    shown = frames.after("reset") if frames else None
     current: list[dict[str, list]] = [{} for _ in range(n)]
     fresh = np.zeros(n, dtype=bool)
     ended = []
@@ -168,7 +203,7 @@ def drive(rec, steps: int, act, *, seed: int, same_step: bool = False, frames: b
         done = np.logical_or(term, trunc)
         fresh = np.zeros(n, dtype=bool) if same_step else done
         obs = nobs
-        shown = list(rec.render()) if frames else None
+        shown = frames.after("step") if frames else None
     return ended
 
 
@@ -225,7 +260,8 @@ def check_against(summary: dict, arrays: dict[str, np.ndarray], expected: list[d
 
 
 # slow: 60 steps of three Hoppers, each step rendered (MuJoCo offscreen through Mesa's software
-# EGL here); the 60 steps give the six episodes of different lengths the test checks.
+# EGL here, about 40 ms a frame); the 60 steps give the six episodes of different lengths the
+# test checks.
 @pytest.mark.slow
 def test_native_mujoco_with_render_frames(tmp_path):
     """A native MuJoCo env (Hopper, three envs, `next_step` autoreset) with `rgb_array`
@@ -235,10 +271,11 @@ def test_native_mujoco_with_render_frames(tmp_path):
     env = envhub.make_vec("mujoco-hopper", 3, num_workers=1, render_mode="rgb_array",
                           max_episode_steps=25, width=64, height=48)
     root = tmp_path / "hopper"
-    rec = envhub.RecordEpisodes(env, str(root), commit_every=0.05)
+    tap = FrameTap(env)
+    rec = envhub.RecordEpisodes(tap.env, str(root), commit_every=0.05)
     rng = np.random.default_rng(0)
     try:
-        expected = drive(rec, 60, lambda obs: rng.uniform(-1, 1, (3, 3)).astype(np.float32), seed=1, frames=True)
+        expected = drive(rec, 60, lambda obs: rng.uniform(-1, 1, (3, 3)).astype(np.float32), seed=1, frames=tap)
     finally:
         rec.close()
     assert len(expected) >= 6 and len({len(ep["action"]) for ep in expected}) > 1
@@ -258,10 +295,11 @@ def test_python_hosted_env_same_step(tmp_path):
     `same_step` autoreset."""
     env = envhub.make_vec("gym-cartpole", 2, num_workers=1, autoreset_mode="same_step", render_mode="rgb_array")
     root = tmp_path / "cartpole"
-    rec = envhub.RecordEpisodes(env, str(root))
+    tap = FrameTap(env)
+    rec = envhub.RecordEpisodes(tap.env, str(root))
     rng = np.random.default_rng(1)
     try:
-        expected = drive(rec, 50, lambda obs: rng.integers(0, 2, 2), seed=3, same_step=True, frames=True)
+        expected = drive(rec, 50, lambda obs: rng.integers(0, 2, 2), seed=3, same_step=True, frames=tap)
     finally:
         rec.close()
     assert len(expected) >= 2
@@ -317,10 +355,11 @@ def test_envs_on_other_hubs(two_hubs, tmp_path):
                           max_episode_steps=12, width=32, height=32)
     assert env.placement == [("pya", 0, 1), ("pyb", 1, 2)]
     root = tmp_path / "remote"
-    rec = envhub.RecordEpisodes(env, str(root))
+    tap = FrameTap(env)
+    rec = envhub.RecordEpisodes(tap.env, str(root))
     rng = np.random.default_rng(7)
     try:
-        expected = drive(rec, 30, lambda obs: rng.uniform(-1, 1, (2, 3)).astype(np.float32), seed=2, frames=True)
+        expected = drive(rec, 30, lambda obs: rng.uniform(-1, 1, (2, 3)).astype(np.float32), seed=2, frames=tap)
     finally:
         rec.close()
     assert len(expected) >= 2
