@@ -14,9 +14,12 @@ from __future__ import annotations
 
 import fcntl
 import glob
+import json
 import os
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -139,6 +142,29 @@ def _serial_tests_run_alone(request, tmp_path_factory):
             fcntl.flock(turnstile, fcntl.LOCK_UN)
         try:
             yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], Any]) -> Any:
+    """What `make(folder)` returns (JSON), made once per test run: under pytest-xdist the
+    workers share it (a lock file in the controller's temporary folder; the first to come
+    makes it into `folder`, the others wait and read it), alone the process makes it. For
+    set-ups whose result does not depend on the process: a reference run, a built wheel."""
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent
+    folder, result = shared / f"once-{name}", shared / f"once-{name}.json"
+    with open(shared / f"once-{name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            if not result.exists():
+                folder.mkdir(exist_ok=True)
+                value = make(folder)
+                tmp = result.with_suffix(".partial")
+                tmp.write_text(json.dumps(value))
+                tmp.rename(result)  # a failed `make` leaves nothing: the next test tries again
+            return json.loads(result.read_text())
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
 

@@ -22,7 +22,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from conftest import import_envhub, once_per_run
 
 envhub = import_envhub()
 
@@ -77,13 +77,18 @@ def metaworld_python() -> str:
 
 
 @pytest.fixture(scope="module")
-def reference():
-    """Meta-World's own evaluation of MT10 (seed 1, EPISODES per task), run once."""
+def reference(tmp_path_factory):
+    """Meta-World's own evaluation of MT10 (seed 1, EPISODES per task), run once for the
+    test run (the test processes share it)."""
     python = metaworld_python()
     code = REFERENCE.replace("SEED", str(SEED)).replace("EPISODES", str(EPISODES))
-    done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
+
+    def run(_folder) -> dict:
+        done = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return json.loads(done.stdout.strip().splitlines()[-1])
+
+    return once_per_run(tmp_path_factory, "metaworld-mt10-reference", run)
 
 
 # One env runs every episode of every task in turn, switching tasks on reset; ten envs run

@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, once_per_run
 
 TARGET = REPO_ROOT / "target" / "release"
 BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco", "envhub-worker-rapier")
@@ -38,18 +38,22 @@ def wheel(tmp_path_factory) -> Path:
         if os.environ.get("ENVHUB_PY_REQUIRED"):
             pytest.fail(f"the release build is missing in {TARGET}; run `make build`")
         pytest.skip("the release build is missing; run `make build`")
-    out = tmp_path_factory.mktemp("dist")
-    start = time.monotonic()
-    done = subprocess.run(
-        [sys.executable, str(REPO_ROOT / "py-client" / "build_wheel.py"), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stdout + done.stderr
-    print(f"wheel built in {time.monotonic() - start:.1f} s")
-    (path,) = out.glob("envhub-*.whl")
-    return path
+
+    def build(out: Path) -> str:
+        start = time.monotonic()
+        done = subprocess.run(
+            [sys.executable, str(REPO_ROOT / "py-client" / "build_wheel.py"), "--out", str(out)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert done.returncode == 0, done.stdout + done.stderr
+        print(f"wheel built in {time.monotonic() - start:.1f} s")
+        (path,) = out.glob("envhub-*.whl")
+        return str(path)
+
+    # One wheel for the run: the test processes that use it share it.
+    return Path(once_per_run(tmp_path_factory, "wheel", build))
 
 
 def third_party(tmp: Path, without: tuple[str, ...]) -> Path:
