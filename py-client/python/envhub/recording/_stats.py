@@ -12,6 +12,9 @@ counts before and in it, for every episode of a commit at once.
 
 from __future__ import annotations
 
+import bisect
+import math
+
 import numpy as np
 
 QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
@@ -89,7 +92,10 @@ def column_stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) ->
 
 def level_quantiles(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
     """Per-channel quantiles of pixel values in [0, 1] from their counts (`(channels, 256)`,
-    by uint8 level), shaped `(channels, 1, 1)` as LeRobot keeps a camera's."""
+    by uint8 level), shaped `(channels, 1, 1)` as LeRobot keeps a camera's. The bins of the
+    levels present are computed as `episode_quantiles` computes them; the rest is done on
+    Python numbers (the same float64 operations, one episode and camera at a time: numpy's
+    per-call cost on arrays of a few levels was most of a short episode's statistics)."""
     levels = np.arange(256) / 255.0
     out = {name: np.zeros((len(counts), 1, 1)) for name in QUANTILE_KEYS}
     for c, count in enumerate(counts):
@@ -101,16 +107,19 @@ def level_quantiles(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
             continue
         lo, hi = levels[present[0]] - 1e-10, levels[present[-1]] + 1e-10
         step = (hi - lo) / BINS
-        b = _bins(levels[present], lo, step, hi)
-        cum = np.cumsum(count[present])
+        # Bins rise with the level: the levels of a bin are consecutive among those present.
+        bins = _bins(levels[present], lo, step, hi).tolist()
+        cum = np.cumsum(count[present]).tolist()
+        lo, hi, step = float(lo), float(hi), float(step)
         for q, name in zip(QUANTILES, QUANTILE_KEYS, strict=True):
             target = q * cum[-1]
-            idx = b[np.searchsorted(cum, max(np.ceil(target), 1))]
-            before = count[present][b < idx].sum()
-            inside = count[present][b == idx].sum()
-            left = _edge(idx, lo, step, hi)
-            value = left + (target - before) / inside * (_edge(idx + 1, lo, step, hi) - left)
-            out[name][c] = lo if idx == 0 else value
+            idx = bins[bisect.bisect_left(cum, max(math.ceil(target), 1))]
+            first, last = bisect.bisect_left(bins, idx), bisect.bisect_right(bins, idx)
+            before = cum[first - 1] if first else 0
+            inside = cum[last - 1] - before
+            left = hi if idx >= BINS else idx * step + lo
+            right = hi if idx + 1 >= BINS else (idx + 1) * step + lo
+            out[name][c] = lo if idx == 0 else left + (target - before) / inside * (right - left)
     return out
 
 

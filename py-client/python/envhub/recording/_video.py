@@ -139,13 +139,19 @@ def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
                 if stream is None:
                     stream = dst.add_stream_from_template(s, opaque=True)  # no encoder: AV1 decodes with dav1d
                 tb = s.time_base
+                shift = int(round(Fraction(offset, fps) / tb))
+                # A packet's frame, round(pts * tb * fps), is under `frames` when pts * tb * fps
+                # < frames - 1/2 (at exactly a half, round() goes to the even neighbour): in
+                # integers, as Fractions per packet cost most of a join of short episodes.
+                scaled, bound = 2 * tb.numerator * fps, (2 * frames - 1) * tb.denominator
+                half_kept = frames % 2 == 1
                 taken = 0
                 for packet in src.demux(s):
                     if not packet.size or packet.pts is None:
                         continue
-                    if round(packet.pts * tb * fps) >= frames:
+                    x = packet.pts * scaled
+                    if x > bound or (x == bound and not half_kept):
                         continue
-                    shift = int(round(Fraction(offset, fps) / tb))
                     packet.pts += shift
                     packet.dts = packet.pts if packet.dts is None else packet.dts + shift
                     packet.stream = stream
