@@ -94,8 +94,8 @@ def pytest_configure(config) -> None:
     )
     config.addinivalue_line(
         "markers",
-        "slow: the test takes over a minute on a two-core machine (a `# slow: <why>` comment "
-        "says why); pytest-xdist hands these out first",
+        "slow(first=False): the test takes over a minute on a two-core machine (a `# slow: <why>` "
+        "comment says why); pytest-xdist hands these out first, those marked `first` before the others",
     )
     # Registered by pytest-xdist too; here so that a run without xdist does not warn.
     config.addinivalue_line("markers", "xdist_group(name): under `--dist loadgroup`, one worker runs the group")
@@ -107,7 +107,10 @@ def pytest_collection_modifyitems(config, items) -> None:
       those are few and short;
     - with `--dist loadgroup` (a test at a time to whichever worker is free), the `slow`
       tests first, so that the short tests fill in around them: a slow test handed out last
-      keeps one worker busy while the others sit idle. (`--dist load` hands out long runs
+      keeps one worker busy while the others sit idle. Those marked `slow(first=True)` lead:
+      the longest, which uses no suite's environment, so that the two workers do not both
+      start with the same suite's first imports (on a fresh machine each compiles LIBERO's
+      bytecode and numba caches: 10 s of CPU where one warm start takes 5). (`--dist load` hands out long runs
       of consecutive tests at first, which would put the slow ones on one worker.)
     Every worker sorts alike, as xdist requires. Alone, the tests keep the files' order."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
@@ -116,8 +119,11 @@ def pytest_collection_modifyitems(config, items) -> None:
 
     def rank(item) -> int:
         if item.get_closest_marker("serial"):
+            return 3
+        slow = item.get_closest_marker("slow")
+        if not slow_first or slow is None:
             return 2
-        return 0 if slow_first and item.get_closest_marker("slow") else 1
+        return 0 if slow.kwargs.get("first") else 1
 
     items.sort(key=rank)
 

@@ -678,11 +678,12 @@ def test_nothing_is_encoded_once_max_episodes_are_kept(tmp_path, null_registry, 
 
 
 # slow: the issue's scale (10,000 episodes, two cameras, a DataLoader with 4 workers under
-# 1,024 open files) is what the test is about: about 50 s on two cores. Measured (cProfile of
-# the writer thread): ~28 s is the recorder itself, one x264 encoder and MP4 per episode and
-# camera (20,000) joined at each commit; ~20 s the DataLoader's 2,000 random reads (fewer would
+# 1,024 open files) is what the test is about: about 50 s on two cores. Measured: ~37 s is the
+# recorder itself (about 1 ms of CPU per episode and camera: an x264 encoder and an MP4 each,
+# 20,000, joined at each commit); the rest the DataLoader's 2,000 random reads (fewer would
 # not reach the open-file limit if each read leaked its two files: 500 reads per worker).
-@pytest.mark.slow
+# Handed out first (the longest test, and it uses no suite's environment).
+@pytest.mark.slow(first=True)
 def test_ten_thousand_episodes_two_cameras_and_a_dataloader(tmp_path, null_registry):
     """10,000 episodes of two steps with two 16x16 cameras: a handful of files (what LeRobot's
     writer makes: one data file, one episodes file, one MP4 per camera); LeRobot's loader
