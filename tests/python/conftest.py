@@ -107,11 +107,12 @@ def pytest_collection_modifyitems(config, items) -> None:
       those are few and short;
     - with `--dist loadgroup` (a test at a time to whichever worker is free), the `slow`
       tests first, so that the short tests fill in around them: a slow test handed out last
-      keeps one worker busy while the others sit idle. Those marked `slow(first=True)` lead:
-      the longest, which uses no suite's environment, so that the two workers do not both
-      start with the same suite's first imports (on a fresh machine each compiles LIBERO's
-      bytecode and numba caches: 10 s of CPU where one warm start takes 5). (`--dist load` hands out long runs
-      of consecutive tests at first, which would put the slow ones on one worker.)
+      keeps one worker busy while the others sit idle. (`--dist load` hands out long runs
+      of consecutive tests at first, which would put the slow ones on one worker.) Those
+      marked `slow(first=True)` lead: the longest, which uses no suite's environment, so that
+      the two workers do not both start with the same suite's first imports (on a fresh
+      machine each compiles LIBERO's bytecode and numba caches: 10 s of CPU where one warm
+      start takes 5).
     Every worker sorts alike, as xdist requires. Alone, the tests keep the files' order."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return
@@ -137,8 +138,7 @@ def _serial_tests_run_alone(request, tmp_path_factory):
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         yield
         return
-    # Each worker's base temporary folder lies in the controller's: one folder per run.
-    shared = tmp_path_factory.getbasetemp().parent
+    shared = run_folder(tmp_path_factory)
     serial = request.node.get_closest_marker("serial") is not None
     with open(shared / "serial.turnstile", "a") as turnstile, open(shared / "serial.lock", "a") as lock:
         fcntl.flock(turnstile, fcntl.LOCK_EX)
@@ -152,14 +152,19 @@ def _serial_tests_run_alone(request, tmp_path_factory):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+def run_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The temporary folder of this test run, shared by its processes: under pytest-xdist
+    each worker's base temporary folder lies in the controller's, which is the run's."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
 def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], Any]) -> Any:
     """What `make(folder)` returns (JSON), made once per test run: under pytest-xdist the
     workers share it (a lock file in the controller's temporary folder; the first to come
     makes it into `folder`, the others wait and read it), alone the process makes it. For
     set-ups whose result does not depend on the process: a reference run, a built wheel."""
-    shared = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        shared = shared.parent
+    shared = run_folder(tmp_path_factory)
     folder, result = shared / f"once-{name}", shared / f"once-{name}.json"
     with open(shared / f"once-{name}.lock", "a") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
