@@ -24,6 +24,7 @@ import time
 import warnings
 from pathlib import Path
 
+import gymnasium
 import numpy as np
 import pytest
 from conftest import REPO_ROOT, import_envhub, mujoco_or_skip
@@ -133,32 +134,29 @@ def _leaf(obs, path: tuple[str, ...], i: int) -> np.ndarray:
     return np.array(obs[i], copy=True)
 
 
-class FrameTap:
+class FrameTap(gymnasium.vector.VectorWrapper):
     """Between an env and its recorder: keeps what each `render()` of the env returned, and
     the env's calls in order, so that a test gets the frame the env rendered right after each
     reset and step (the frame of that observation) without rendering it a second time."""
 
     def __init__(self, env) -> None:
-        import gymnasium
-
-        class Tap(gymnasium.vector.VectorWrapper):
-            def reset(inner, **kwargs):
-                self.calls.append("reset")
-                return inner.env.reset(**kwargs)
-
-            def step(inner, actions):
-                self.calls.append("step")
-                return inner.env.step(actions)
-
-            def render(inner):
-                frames = inner.env.render()
-                self.calls.append("render")
-                self.shown = [np.array(f, copy=True) for f in frames]
-                return frames
-
-        self.env = Tap(env)
+        super().__init__(env)
         self.calls: list[str] = []
         self.shown: list[np.ndarray] = []
+
+    def reset(self, **kwargs):
+        self.calls.append("reset")
+        return self.env.reset(**kwargs)
+
+    def step(self, actions):
+        self.calls.append("step")
+        return self.env.step(actions)
+
+    def render(self):
+        frames = self.env.render()
+        self.calls.append("render")
+        self.shown = [np.array(f, copy=True) for f in frames]
+        return frames
 
     def after(self, call: str) -> list[np.ndarray]:
         """The frames rendered after `call`, which must be the env's last calls: `call`, then
@@ -272,7 +270,7 @@ def test_native_mujoco_with_render_frames(tmp_path):
                           max_episode_steps=25, width=64, height=48)
     root = tmp_path / "hopper"
     tap = FrameTap(env)
-    rec = envhub.RecordEpisodes(tap.env, str(root), commit_every=0.05)
+    rec = envhub.RecordEpisodes(tap, str(root), commit_every=0.05)
     rng = np.random.default_rng(0)
     try:
         expected = drive(rec, 60, lambda obs: rng.uniform(-1, 1, (3, 3)).astype(np.float32), seed=1, frames=tap)
@@ -296,7 +294,7 @@ def test_python_hosted_env_same_step(tmp_path):
     env = envhub.make_vec("gym-cartpole", 2, num_workers=1, autoreset_mode="same_step", render_mode="rgb_array")
     root = tmp_path / "cartpole"
     tap = FrameTap(env)
-    rec = envhub.RecordEpisodes(tap.env, str(root))
+    rec = envhub.RecordEpisodes(tap, str(root))
     rng = np.random.default_rng(1)
     try:
         expected = drive(rec, 50, lambda obs: rng.integers(0, 2, 2), seed=3, same_step=True, frames=tap)
@@ -356,7 +354,7 @@ def test_envs_on_other_hubs(two_hubs, tmp_path):
     assert env.placement == [("pya", 0, 1), ("pyb", 1, 2)]
     root = tmp_path / "remote"
     tap = FrameTap(env)
-    rec = envhub.RecordEpisodes(tap.env, str(root))
+    rec = envhub.RecordEpisodes(tap, str(root))
     rng = np.random.default_rng(7)
     try:
         expected = drive(rec, 30, lambda obs: rng.uniform(-1, 1, (2, 3)).astype(np.float32), seed=2, frames=tap)
