@@ -264,7 +264,7 @@ def hard_resets(suite: str, task: str, caching: str = "cached") -> dict[str, Any
     adapter installs them): the same observations, camera images included."""
     python = suite_python(suite)
     runs = {}
-    for mode in ("plain", caching):
+    for name, mode in (("plain", "plain"), ("cached", caching)):
         done = subprocess.run(
             [python, str(HERE / "hard_resets.py"), task, mode],
             capture_output=True,
@@ -273,7 +273,7 @@ def hard_resets(suite: str, task: str, caching: str = "cached") -> dict[str, Any
             env=WITH_ENVHUB,
         )
         assert done.returncode == 0, f"{suite} {task}, {mode}: failed\n{done.stderr[-4000:]}"
-        runs["plain" if mode == "plain" else "cached"] = json.loads(done.stdout.strip().splitlines()[-1])
+        runs[name] = json.loads(done.stdout.strip().splitlines()[-1])
     assert runs["cached"]["digest"] == runs["plain"]["digest"], f"{suite} {task}: observations differ with the caches"
     return runs
 
