@@ -38,6 +38,11 @@ def _edge(k: np.ndarray, lo: np.ndarray, step: np.ndarray, hi: np.ndarray) -> np
     return np.where(k >= BINS, hi, k * step + lo)
 
 
+def _edge_of(k: int, lo: float, step: float, hi: float) -> float:
+    """`_edge` of one bin, on Python numbers."""
+    return hi if k >= BINS else k * step + lo
+
+
 def episode_quantiles(v: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lo: np.ndarray,
                       hi: np.ndarray) -> dict[str, np.ndarray]:
     """The quantiles of `v` (`(frames, dims)`) per episode (`(episodes, dims)`), the bins over
@@ -117,8 +122,7 @@ def level_quantiles(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
             first, last = bisect.bisect_left(bins, idx), bisect.bisect_right(bins, idx)
             before = cum[first - 1] if first else 0
             inside = cum[last - 1] - before
-            left = hi if idx >= BINS else idx * step + lo
-            right = hi if idx + 1 >= BINS else (idx + 1) * step + lo
+            left, right = _edge_of(idx, lo, step, hi), _edge_of(idx + 1, lo, step, hi)
             out[name][c] = lo if idx == 0 else left + (target - before) / inside * (right - left)
     return out
 
