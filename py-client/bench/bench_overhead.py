@@ -8,9 +8,10 @@ ratios; and the per-env-step overhead of envhub with 1 worker over in-process st
 
 Random actions from a pre-drawn pool; Gymnasium's default next_step autoreset everywhere;
 each peer measured `--rounds` times in alternation, best round kept (the machine may be
-shared). With `--policy`, a policy-in-the-loop figure as well (the first env whose actions are a Box): a small numpy MLP (obs → 64 →
-64 → action, tanh) evaluated on the batch's observations between steps, as a PPO rollout
-does, in-process `SyncVectorEnv` against envhub with 2 workers.
+shared). With `--policy`, a policy-in-the-loop figure as well (the first env whose actions
+are a Box): a small numpy MLP (obs → 64 → 64 → action, tanh) evaluated on the batch's
+observations between steps, as a PPO rollout does, in-process `SyncVectorEnv` against envhub
+with 2 workers.
 
 The per-env-step overhead is `(1 / envhub_1_worker - 1 / in_process)` in µs: what one env's
 step costs more through one worker than in this interpreter (the worker and this process
@@ -104,7 +105,7 @@ def main() -> None:
     args = p.parse_args()
     n = args.envs
     rows = []
-    policy_env = next((e for e in args.env if isinstance(gymnasium.make(e).action_space, gymnasium.spaces.Box)), None)
+    policy_measured = False
     for env_id in args.env:
         fns = [lambda env_id=env_id: gymnasium.make(env_id)] * n
         probe = gymnasium.make(env_id)
@@ -122,7 +123,8 @@ def main() -> None:
         row["envhub_1/in_process"] = round(r["envhub_1"] / r["in_process"], 2)
         row["envhub_2/in_process"] = round(r["envhub_2"] / r["in_process"], 2)
         row["envhub_2/gymnasium_async"] = round(r["envhub_2"] / r["gymnasium_async"], 2)
-        if args.policy and env_id == policy_env:
+        if args.policy and not policy_measured and isinstance(probe.action_space, gymnasium.spaces.Box):
+            policy_measured = True
             space = probe.action_space
             policy = Mlp(int(np.prod(probe.observation_space.shape)), int(np.prod(space.shape)), space.low, space.high)
             pr = best(
