@@ -196,11 +196,11 @@ pub fn lines_until_ready(out: &mut impl std::io::BufRead) -> String {
     let mut said = String::new();
     for _ in 0..20 {
         let mut line = String::new();
-        if out.read_line(&mut line).unwrap() == 0 || line.contains("ready") {
-            said.push_str(&line);
+        let read = out.read_line(&mut line).unwrap();
+        said.push_str(&line);
+        if read == 0 || line.contains("ready") {
             break;
         }
-        said.push_str(&line);
     }
     said
 }
