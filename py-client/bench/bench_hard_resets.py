@@ -1,6 +1,6 @@
 """Hard resets of robosuite and LIBERO with and without the worker's caches
-(`envhub.hosted.compiled_models`, `render_contexts`): CPU seconds per reset, each mode in a
-fresh interpreter of the suite's own environment, alternated `--rounds` times, best of each.
+(`envhub.hosted.compiled_models`, `render_contexts`, `sensor_checks`): CPU seconds per
+reset, each mode in a fresh interpreter of the suite's own environment, alternated `--rounds` times, best of each.
 
     envhub env run robosuite -- py-client/bench/bench_hard_resets.py robosuite Stack
     envhub env run libero -- py-client/bench/bench_hard_resets.py libero libero_spatial
@@ -23,10 +23,11 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
-def make(suite: str, task: str):
+def make(suite: str, task: str, cached: bool):
     if suite == "robosuite":
         import robosuite
 
+        freeze_imports(cached)
         env = robosuite.make(
             task,
             robots="Panda",
@@ -46,21 +47,32 @@ def make(suite: str, task: str):
     from libero.libero import benchmark
     from libero.libero.envs import OffScreenRenderEnv
 
+    freeze_imports(cached)
     tasks = benchmark.get_benchmark(task)()
     env = OffScreenRenderEnv(bddl_file_name=tasks.get_task_bddl_file_path(0), camera_heights=128, camera_widths=128)
     return env, env.reset
 
 
+def freeze_imports(cached: bool) -> None:
+    """What the adapters do once the suite is imported, before the first env."""
+    if cached:
+        from envhub.hosted import sensor_checks
+
+        sensor_checks.freeze_imports()
+
+
 def one_run(suite: str, task: str, cached: bool, resets: int) -> dict:
     import numpy as np
 
-    if cached:
-        from envhub.hosted import compiled_models, render_contexts
+    if cached:  # as each suite's adapter installs them
+        from envhub.hosted import compiled_models, render_contexts, sensor_checks
 
         if suite == "robosuite":
             compiled_models.install()
-        render_contexts.install()
-    env, reset = make(suite, task)
+        else:
+            render_contexts.install(scenes_repeat=True)
+        sensor_checks.install()
+    env, reset = make(suite, task, cached)
     reset()
     digest = hashlib.sha256()
     cpu, wall = time.process_time(), time.perf_counter()

@@ -1,5 +1,6 @@
 """Run in robosuite's interpreter by test_py_suites.py, plainly or with the worker's caches of
-hard resets installed (`envhub.hosted.compiled_models`, `render_contexts`), with two cameras:
+hard resets installed (`envhub.hosted.compiled_models`, `render_contexts`, `sensor_checks`),
+with two cameras:
 - `stack`: robosuite's `Stack`, whose scene is the same at every reset, reset four times;
 - `lift`: robosuite's `Lift`, whose XML is drawn from the reset seed (the cube's size), reset
   with seeds 1 to 3, again, and 3 to 1, the pool cut to two contexts: more scenes that repeat
@@ -8,7 +9,7 @@ hard resets installed (`envhub.hosted.compiled_models`, `render_contexts`), with
 Modes: `plain`, `cached`, and `repeat` (cached, every scene taken to be built again, as LIBERO's
 adapter installs the pool: a context waits from its scene's first build on).
 A step after each reset. Prints JSON: a digest of every observation, and how many models were
-compiled and render contexts built."""
+compiled, render contexts built and camera frames rendered."""
 
 from __future__ import annotations
 
@@ -28,15 +29,16 @@ def main(task: str, mode: str) -> None:
     cached = mode in ("cached", "repeat")
     compile_xml = mujoco.MjModel.from_xml_string
     if cached:
-        from envhub.hosted import compiled_models, render_contexts
+        from envhub.hosted import compiled_models, render_contexts, sensor_checks
 
         compiled_models.install()
         render_contexts.install(scenes_repeat=mode == "repeat")
+        sensor_checks.install()
         render_contexts.MAX_KEPT = 2
     import robosuite
     from robosuite.utils import binding_utils
 
-    counts = {"compiles": 0, "contexts": 0}
+    counts = {"compiles": 0, "contexts": 0, "renders": 0}
 
     def counted_compile(xml, assets=None):
         counts["compiles"] += 1
@@ -56,6 +58,13 @@ def main(task: str, mode: str) -> None:
         new_context(self, *args, **kwargs)
 
     binding_utils.MjRenderContextOffscreen.__init__ = counted_context
+    render = binding_utils.MjSim.render
+
+    def counted_render(self, *args, **kwargs):
+        counts["renders"] += 1
+        return render(self, *args, **kwargs)
+
+    binding_utils.MjSim.render = counted_render
     env = robosuite.make(
         task.capitalize(),
         robots="Panda",

@@ -282,13 +282,16 @@ def hard_resets(suite: str, task: str, caching: str = "cached") -> dict[str, Any
 # reset of two runs.
 @pytest.mark.slow
 def test_robosuite_hard_resets_compile_a_repeated_scene_once():
-    """robosuite 1.5 with the worker's cache of compiled models against robosuite without it:
-    over four resets of a scene that does not change, each XML compiled twice (met once, an
-    XML is not kept), not five times; its render contexts are robosuite's own."""
+    """robosuite 1.5 with the worker's caches against robosuite without them: over four resets
+    of a scene that does not change, each XML compiled twice (met once, an XML is not kept),
+    not five times; each camera rendered to learn its shape once, not 9 times; its render
+    contexts are robosuite's own."""
     runs = hard_resets(SUITES["robosuite"], "stack")
     # robosuite.make builds the scene once and each of the 4 resets again: robot and scene.
-    assert runs["plain"] == {**runs["plain"], "contexts": 5, "compiles": 10}
-    assert runs["cached"] == {**runs["cached"], "contexts": 5, "compiles": 4}
+    # Two cameras: one check each at the build, two each per reset; a frame each per reset
+    # and step.
+    assert runs["plain"] == {**runs["plain"], "contexts": 5, "compiles": 10, "renders": 2 + 4 * 4 + 16}
+    assert runs["cached"] == {**runs["cached"], "contexts": 5, "compiles": 4, "renders": 2 + 16}
 
 
 def libero_python() -> str:
@@ -301,10 +304,12 @@ def libero_python() -> str:
 def test_libero_robosuite_hands_a_repeated_scenes_render_context_on():
     """robosuite 1.4 (LIBERO's interpreter) with the worker's caches as LIBERO's adapter
     installs them (every scene built again): over the build and four resets of a scene that
-    does not change, its render context built once, not five times. (The default, a context
-    kept from a scene's second build on: `lift` below.)"""
+    does not change, its render context built once, not five times, and its cameras rendered
+    for their shapes once (18 frames rendered, not 34). (The default, a context kept from a
+    scene's second build on: `lift` below.)"""
     runs = hard_resets(libero_python(), "stack", caching="repeat")
     assert runs["plain"]["contexts"] == 5 and runs["cached"]["contexts"] == 1, runs
+    assert runs["plain"]["renders"] == 34 and runs["cached"]["renders"] == 18, runs
 
 
 @pytest.mark.slow

@@ -190,11 +190,14 @@ class LiberoAdapter(EnvAdapter):
         from libero.libero.benchmark.libero_suite_task_map import libero_task_map
         from libero.libero.envs import OffScreenRenderEnv
 
-        from . import render_contexts
+        from . import render_contexts, sensor_checks
 
         # Hard resets (LIBERO's evaluation's, and the one that follows making the env) rebuild
-        # the task's scene: its textures uploaded once.
+        # the task's scene: its textures uploaded once, its cameras rendered for their shapes
+        # once, the garbage collector's sweeps without the modules imported above.
         render_contexts.install(scenes_repeat=True)
+        sensor_checks.install()
+        sensor_checks.freeze_imports()
 
         # Suites LIBERO can make (its benchmark dict also lists `libero_100`, which has no tasks).
         known = {s: libero_task_map[s] for s in benchmark.get_benchmark_dict() if s in libero_task_map}

@@ -42,10 +42,13 @@ class RobosuiteAdapter(SuiteAdapter):
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
         import robosuite
 
-        from . import compiled_models
+        from . import compiled_models, sensor_checks
 
-        # Hard resets (the default) compile the same robot, and often the same scene, again.
+        # Hard resets (the default) compile the same robot, and often the same scene, again,
+        # and render each camera to learn its shape again.
         compiled_models.install()
+        sensor_checks.install()
+        sensor_checks.freeze_imports()
 
         if env_id not in robosuite.ALL_ENVIRONMENTS:
             names = sorted(robosuite.ALL_ENVIRONMENTS)
