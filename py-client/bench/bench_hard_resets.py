@@ -1,6 +1,7 @@
 """Hard resets of robosuite and LIBERO with and without the worker's caches
-(`envhub.hosted.compiled_models`, `render_contexts`, `sensor_checks`): CPU seconds per
-reset, each mode in a fresh interpreter of the suite's own environment, alternated `--rounds` times, best of each.
+(`envhub.hosted.compiled_models`, `render_contexts`, `sensor_checks`, as each suite's adapter
+installs them): CPU seconds per reset, each mode in a fresh interpreter of the suite's own
+environment, alternated `--rounds` times, best of each.
 
     envhub env run robosuite -- py-client/bench/bench_hard_resets.py robosuite Stack
     envhub env run libero -- py-client/bench/bench_hard_resets.py libero libero_spatial
