@@ -29,8 +29,6 @@ MAX_SHAPES = 64
 _shapes: dict[Any, tuple[int, ...]] = {}
 _installed = False
 _frozen = False
-#: Camera sensors checked for real, and checks answered from what those learned.
-counts = {"rendered": 0, "reused": 0}
 
 
 def install() -> bool:
@@ -50,15 +48,12 @@ def install() -> bool:
         shape = _shapes.get(key) if key is not None else None
         if shape is None:
             check(observable)
-            if key is not None:
-                counts["rendered"] += 1
-                if len(_shapes) < MAX_SHAPES:
-                    _shapes[key] = observable._data_shape
+            if key is not None and len(_shapes) < MAX_SHAPES:
+                _shapes[key] = observable._data_shape
             return
         _ = observable.modality  # what robosuite's check asserts besides the call
         observable._data_shape = shape
         observable._is_number = len(shape) == 1 and shape[0] == 1
-        counts["reused"] += 1
 
     Observable._check_sensor_validity = checked
     _installed = True
