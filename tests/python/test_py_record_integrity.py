@@ -417,19 +417,6 @@ def _record_many(root, steps: int, seed: int, **sizes) -> list[dict[str, list]]:
     return expected
 
 
-def _episodes_in(root, video) -> int:
-    """How many episodes the MP4 `video` (`.../chunk-XXX/file-YYY.mp4`) holds, as the
-    episodes' metadata addresses them."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    eps = pa.concat_tables(
-        [pq.read_table(p) for p in sorted((root / "meta/episodes").glob("*/*.parquet"))]).to_pydict()
-    key = "videos/observation.images.render"
-    at = (int(video.parent.name.split("-")[1]), int(video.stem.split("-")[1]))
-    return sum(1 for c, f in zip(eps[f"{key}/chunk_index"], eps[f"{key}/file_index"], strict=True) if (c, f) == at)
-
-
 def _check_addresses(root, fps: int) -> dict[str, list]:
     """Episodes are addressed by contiguous index ranges, and by time ranges that follow one
     another in each video file from 0."""
@@ -495,19 +482,21 @@ def test_files_roll_at_the_declared_sizes(tmp_path):
     # fell into commits, so either can happen, but a roll only where the size was reached.
     after = sorted((root / "videos").glob("*/*/*.mp4"))
     assert after[: len(videos)] == videos and len(after) <= len(videos) + 1, (videos, after)
+    info = json.loads((root / "meta/info.json").read_text())
+    assert info["data_files_size_in_mb"] == 0.02 and info["video_files_size_in_mb"] == 0.05
+    summary, arrays = load(root)
+    eps = _check_addresses(root, summary["fps"])
     if len(after) == len(videos):
         assert videos[-1].stat().st_size > last_video
     else:
         # LeRobot's rule adds each episode's own MP4 to the last file's size, its container's
         # boxes included (about 830 bytes for these); joined into a file, an episode adds its
-        # packets: the new file's episodes are allowed 1 KiB each.
-        joined = _episodes_in(root, after[-1])
+        # packets: the new file's episodes (the last file's) are allowed 1 KiB each.
+        key = "videos/observation.images.render"
+        address = list(zip(eps[f"{key}/chunk_index"], eps[f"{key}/file_index"], strict=True))
+        joined = address.count(address[-1])
         both = videos[-1].stat().st_size + after[-1].stat().st_size + joined * 1024
         assert both / 2**20 >= sizes["video_files_size_in_mb"], (last_video, both, joined)
-    info = json.loads((root / "meta/info.json").read_text())
-    assert info["data_files_size_in_mb"] == 0.02 and info["video_files_size_in_mb"] == 0.05
-    summary, arrays = load(root)
-    _check_addresses(root, summary["fps"])
     check_against(summary, arrays, expected, "balance", video_key="observation.images.render")
 
 
