@@ -53,12 +53,13 @@ def peers() -> str:
 class Server:
     """A policy server in a subprocess, on the port it printed."""
 
-    def __init__(self, python: str, *args: str) -> None:
+    def __init__(self, python: str, *args: str, env: dict | None = None) -> None:
         self.proc = subprocess.Popen(
             [python, str(HERE / "eval_peers.py"), *args],
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
             text=True,
+            env=env,
         )
         selector = selectors.DefaultSelector()
         selector.register(self.proc.stdout, selectors.EVENT_READ)
@@ -316,14 +317,14 @@ def test_the_default_layouts() -> None:
     assert set(pi) == {"observation/agentview_image", "observation/state", "prompt"}
     assert pi["prompt"] == vla["task_description"] == "put object 0 in the basket"
     with pytest.raises(
-        ValueError, match="unknown policy-server protocol 'grpc'; valid: \\['openpi', 'vla-eval'\\]"
+        ValueError, match="unknown policy-server protocol 'grpc'; valid: \\['lerobot', 'openpi', 'vla-eval'\\]"
     ):
         connect("grpc", "ws://127.0.0.1:1")
 
 
 class _Bare:
     def __init__(self, fields, text_key) -> None:
-        self.fields, self.text_key = fields, text_key
+        self.fields, self.text_key, self.layout = fields, text_key, None
 
 
 # -- through `envhub.evaluation.evaluate` --------------------------------------------------

@@ -37,6 +37,7 @@ FIELDS = {
     "action": "{sign: [i, ..]}: action dims sent as -1/+1 by their sign (a gripper)",
     "kwargs": "options the envs are made with",
     "python_env": "the catalog Python environment the policy runs in (optional)",
+    "servers": "per server protocol (vla-eval, openpi), what its own harness sends (docs/eval-report.md)",
     "source": "the registry file that declared it (set by the catalog)",
 }
 INIT_KINDS = ("init_states", "train_goals", "seeds", "seed_start")
@@ -367,6 +368,10 @@ def parse(name: str, decl: Any, entries: set[str] | None = None) -> Benchmark:
         raise BenchmarkError(f"{where}: `task_reset_option` must be a reset option name, not {reset_option!r}")
     if reset_option is not None and decl.get("tasks") is None:
         raise BenchmarkError(f"{where}: `task_reset_option` switches between `tasks`; this benchmark lists none")
+    if "servers" in decl:
+        from .servers.layout import check
+
+        check(decl["servers"], where)
     description = decl.get("description", "")
     if not isinstance(description, str):
         raise BenchmarkError(f"{where}: `description` must be text")

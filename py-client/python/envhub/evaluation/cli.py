@@ -29,7 +29,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--per-task", action="store_true", help="--policy names a factory function(task) -> agent")
     p.add_argument("--policy-env", help="run --policy in this catalog Python environment (its own interpreter)")
     p.add_argument("--server", help="a policy server's URL (ws://host:port)")
-    p.add_argument("--server-protocol", choices=["vla-eval", "openpi"], default="vla-eval")
+    p.add_argument("--server-protocol", choices=["vla-eval", "openpi", "lerobot"], default="vla-eval")
     p.add_argument("--replan", type=int, help="use only the first K actions of each chunk")
     p.add_argument("--out", help="output folder (episodes.jsonl, results.json, results.csv)")
     p.add_argument("--resume", action="store_true", help="go on with the evaluation in --out")

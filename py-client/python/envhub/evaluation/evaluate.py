@@ -137,6 +137,11 @@ def evaluate(
         per_task=per_task, server=server, server_protocol=server_protocol, registry=catalog.registry,
     )
     try:
+        bind = getattr(pol, "bind", None)
+        if bind is not None:
+            # A policy server takes the benchmark's layout for its protocol (`servers:`),
+            # which may ask more of the env (LIBERO's controller pose for vla-eval's states).
+            bench = bind(bench)
         description = pol.describe()
         task_plan = [{"id": t.id, "entry": t.entry, "text": t.text, "index": t.index} for t in bench.tasks]
         header = {

@@ -141,7 +141,8 @@ class LiberoAdapter(EnvAdapter):
     fixed initial states, as LIBERO's evaluation uses; reset options may name one too, else
     robosuite places the objects at random from the reset seed); the other options go to
     LIBERO's `OffScreenRenderEnv` (`camera_heights`, `camera_widths`, `camera_names`,
-    `use_camera_obs`, `controller`, ...). Observations: robosuite's dict, camera images
+    `use_camera_obs`, `controller`, ...); `controller_state: true` adds the arm controller's
+end-effector pose to the observation. Observations: robosuite's dict, camera images
     `<camera>_image` uint8 (H, W, 3) as robosuite renders them (upside down); reward 1 and
     `terminated` on success."""
 
@@ -181,6 +182,9 @@ class LiberoAdapter(EnvAdapter):
         suite, task = split_env_id(env_id, options)
         options.pop("task", None)
         init_state = options.pop("init_state", None)
+        controller_state = options.pop("controller_state", False)
+        if not isinstance(controller_state, bool):
+            raise ValueError(f"the LIBERO option `controller_state` is true or false, not {controller_state!r}")
         # Offscreen rendering through EGL (Mesa's or a GPU's) unless the user chose.
         os.environ.setdefault("MUJOCO_GL", "egl")
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
@@ -207,7 +211,7 @@ class LiberoAdapter(EnvAdapter):
         # The hub's `max_episode_steps` is the one limit: robosuite's own horizon would refuse
         # the step after it (`executing action in terminated episode`).
         env = OffScreenRenderEnv(bddl_file_name=bddl, ignore_done=True, **options)
-        return LiberoEnv(env, tasks, index, init_state)
+        return LiberoEnv(env, tasks, index, init_state, controller_state)
 
 
 class LiberoEnv(gym.Env):
@@ -220,15 +224,18 @@ class LiberoEnv(gym.Env):
 
     metadata: dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, env: Any, tasks: Any, index: int, init_state: int | None) -> None:
+    def __init__(
+        self, env: Any, tasks: Any, index: int, init_state: int | None, controller_state: bool = False
+    ) -> None:
         self.env = env
+        self.controller_state = controller_state
         # LIBERO's `ControlEnv` holds robosuite's env as `.env`: one step, one control period.
         self.metadata = {**self.metadata, "render_fps": control_rate(getattr(env, "env", env))}
         self.task = tasks.get_task(index)
         self._tasks, self._index = tasks, index
         self._init_states: Any = None
         self.init_state = init_state
-        obs = env.reset()
+        obs = self._with_controller(env.reset())
         self.observation_space = observation_space(obs)
         self.action_space = action_space(*env.env.action_spec)
         bad = outside(self.observation_space, obs)
@@ -269,7 +276,24 @@ class LiberoEnv(gym.Env):
         return self._obs(obs), float(reward), bool(done), False, {"success": bool(done)}
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
+        obs = self._with_controller(obs)
         return {k: obs[k] for k in self.observation_space.spaces}
+
+    def _with_controller(self, obs: dict[str, Any]) -> dict[str, Any]:
+        """With `controller_state`: the arm controller's end-effector pose as it last
+        updated (`robot0_controller_ee_pos`, `robot0_controller_ee_ori_mat`), which vla-eval's
+        LIBERO sends as `controller_states` and the observation's `robot0_eef_*` (read
+        after the step's last substep) do not give."""
+        if not self.controller_state:
+            return obs
+        import numpy as np
+
+        controller = getattr(self.env, "env", self.env).robots[0].controller
+        return {
+            **obs,
+            "robot0_controller_ee_pos": np.array(controller.ee_pos, dtype=np.float64),
+            "robot0_controller_ee_ori_mat": np.array(controller.ee_ori_mat, dtype=np.float64),
+        }
 
     def close(self) -> None:
         self.env.close()

@@ -25,6 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..policy import Episode, PolicyError, Request
+from .layout import Layout, layout_for
 
 log = logging.getLogger("envhub.evaluation")
 
@@ -33,6 +34,8 @@ log = logging.getLogger("envhub.evaluation")
 _LOOP_GRACE_S = 5.0
 # How long closing a connection may take before it is abandoned.
 _CLOSE_TIMEOUT_S = 1.0
+#: Seconds each wait for a server may take by default (`--policy-timeout`).
+DEFAULT_TIMEOUT_S = 120.0
 
 
 class SlotError(Exception):
@@ -58,7 +61,7 @@ class ServerPolicy:
 
     kind = "server"
 
-    def __init__(self, url: str, *, timeout: float = 60.0) -> None:
+    def __init__(self, url: str, *, timeout: float = DEFAULT_TIMEOUT_S) -> None:
         if not url.startswith(("ws://", "wss://")):
             url = f"ws://{url}"
         if not timeout > 0:
@@ -66,6 +69,11 @@ class ServerPolicy:
         self.url = url
         self.timeout = float(timeout)
         self.server_info: dict[str, Any] = {}
+        # The benchmark's `servers:` declaration and name (`bind`), and the wire layout
+        # they give with what the server asked for (None: the protocol's default layout).
+        self._servers_decl: dict[str, Any] | None = None
+        self._benchmark = "this benchmark"
+        self.layout: Layout | None = None
         self._links: dict[int, _Link] = {}
         self._pending: set[concurrent.futures.Future] = set()
         self._loop = asyncio.new_event_loop()
@@ -110,6 +118,34 @@ class ServerPolicy:
     def end(self, slot: int, episode: Episode, result: dict[str, Any]) -> None:
         self._submit(self._end(slot, episode, result))
 
+    def bind(self, bench: Any) -> Any:
+        """Takes the benchmark's `servers:` layout for this protocol (asking the server, for a
+        protocol whose servers say what they need, now) and returns the benchmark with what
+        that layout needs of the env (options it is made with, observation keys shown);
+        an ask the benchmark does not support raises LayoutError naming the supported."""
+        import copy
+
+        self._servers_decl = (bench.raw or {}).get("servers")
+        self._benchmark = bench.name
+        self.layout = self._layout(self._asked_params())
+        if self.layout is None:
+            return bench
+        out = copy.copy(bench)
+        if self.layout.kwargs:
+            out.kwargs = {**bench.kwargs, **self.layout.kwargs}
+        keys = bench.observation.get("keys")
+        if keys is not None:
+            wanted = [k for k in self.layout.keys + self.layout.sources() if k not in keys]
+            out.observation = {**bench.observation, "keys": [*keys, *wanted]}
+        return out
+
+    def _asked_params(self) -> dict[str, Any]:
+        """What the server asks of the observation (a protocol whose server says so)."""
+        return {}
+
+    def _layout(self, params: dict[str, Any]) -> Layout | None:
+        return layout_for(self._servers_decl, self.kind, params, self._benchmark)
+
     def describe(self) -> dict[str, Any]:
         """What the results record: the protocol, the URL and what the server said of itself
         (asked now, on slot 0's connection, if no connection has been made yet)."""
@@ -127,6 +163,7 @@ class ServerPolicy:
             "url": self.url,
             "timeout_s": self.timeout,
             "server": _plain(self.server_info),
+            "layout": None if self.layout is None else {"entries": self.layout.entries, "params": self.layout.params},
         }
 
     def close(self) -> None:
@@ -272,7 +309,8 @@ class ServerPolicy:
                 return await asyncio.wait_for(self._ask(link.ws, request), self.timeout)
             except (asyncio.TimeoutError, TimeoutError):
                 error = SlotError(
-                    f"the {self.kind} server at {self.url} sent no action within {self.timeout:g} s ({where})"
+                    f"the {self.kind} server at {self.url} sent no action within {self.timeout:g} s "
+                    f"(--policy-timeout; {where})"
                 )
             except BaseException as exc:
                 if isinstance(exc, asyncio.CancelledError):

@@ -23,7 +23,7 @@ import msgpack
 import numpy as np
 
 from ..policy import Request
-from ._link import ServerPolicy, SlotError, checked_action, is_image, wire_observation
+from ._link import DEFAULT_TIMEOUT_S, ServerPolicy, SlotError, checked_action, is_image, wire_observation
 
 
 class OpenPIPolicy(ServerPolicy):
@@ -44,7 +44,7 @@ class OpenPIPolicy(ServerPolicy):
         *,
         fields: dict[str, str] | None = None,
         replan_steps: int | None = None,
-        timeout: float = 60.0,
+        timeout: float = DEFAULT_TIMEOUT_S,
         text_key: str = "prompt",
     ) -> None:
         if replan_steps is not None and replan_steps < 1:
@@ -55,6 +55,9 @@ class OpenPIPolicy(ServerPolicy):
         self.fields = dict(fields) if fields is not None else None
         self.replan_steps = replan_steps
         self.text_key = text_key
+
+    def _layout(self, params: dict[str, Any]):
+        return None if self.fields is not None else super()._layout(params)
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "replan_steps": self.replan_steps}
@@ -74,7 +77,10 @@ class OpenPIPolicy(ServerPolicy):
         return metadata if isinstance(metadata, dict) else {"metadata": metadata}
 
     def observation(self, request: Request) -> dict[str, Any]:
-        """The observation dict sent for `request`."""
+        """The observation dict sent for `request`: the benchmark's OpenPI layout (OpenPI's
+        LIBERO example's keys, sizes and state for LIBERO), else `fields`, else the default."""
+        if self.layout is not None and self.fields is None:
+            return self.layout.observation(request.observation, request.episode.task.text)
         payload = wire_observation(request.observation, self.fields, _default_key)
         if self.text_key:
             payload.setdefault(self.text_key, request.episode.task.text)

@@ -30,7 +30,8 @@ import msgpack
 import numpy as np
 
 from ..policy import Episode, Request
-from ._link import ServerPolicy, SlotError, checked_action, is_image, wire_observation
+from ._link import DEFAULT_TIMEOUT_S, ServerPolicy, SlotError, checked_action, is_image, wire_observation
+from .layout import LayoutError
 
 log = logging.getLogger("envhub.evaluation")
 
@@ -58,7 +59,7 @@ class VlaEvalPolicy(ServerPolicy):
         url: str,
         *,
         fields: dict[str, str] | None = None,
-        timeout: float = 60.0,
+        timeout: float = DEFAULT_TIMEOUT_S,
         text_key: str = "task_description",
         task_info: Callable[[Episode], dict[str, Any]] | None = None,
     ) -> None:
@@ -66,6 +67,10 @@ class VlaEvalPolicy(ServerPolicy):
         self.task_info = task_info
         self.fields = dict(fields) if fields is not None else None
         self.text_key = text_key
+        # The observation params the server asked for at its first HELLO (every later
+        # connection must ask the same).
+        self._bound_params: dict[str, Any] | None = None
+        self._binding = False
         self._seq = itertools.count(1)
         self._seq_warned = False
 
@@ -95,7 +100,47 @@ class VlaEvalPolicy(ServerPolicy):
                 f"the vla-eval server at {self.url} speaks protocol version {version}; "
                 f"envhub speaks version {PROTOCOL_VERSION}"
             )
+        params = _params(info, self.url)
+        if self._bound_params is not None and params != self._bound_params:
+            raise SlotError(
+                f"the vla-eval server at {self.url} now asks for the observation params {params}; the "
+                f"evaluation began with {self._bound_params}"
+            )
+        if self._bound_params is None and not self._binding:
+            # A client used without `bind`: the asks are checked here, once.
+            self.layout = self._layout(params)
+        self._bound_params = params
         return info
+
+    def _asked_params(self) -> dict[str, Any]:
+        import concurrent.futures
+
+        from ..policy import PolicyError
+        from ._link import _LOOP_GRACE_S
+
+        if self._bound_params is not None:
+            return dict(self._bound_params)
+        self._binding = True
+        try:
+            self._submit(self._probe()).result(timeout=4 * self.timeout + _LOOP_GRACE_S)
+        except SlotError as exc:
+            raise PolicyError(str(exc)) from None
+        except concurrent.futures.TimeoutError:
+            raise PolicyError(f"the vla-eval server at {self.url} did not say hello within {self.timeout:g} s") from None
+        finally:
+            self._binding = False
+        return dict(self._bound_params or {})
+
+    def _layout(self, params: dict[str, Any]):
+        if self.fields is not None:
+            asked = {k: v for k, v in params.items() if v}
+            if asked:
+                raise LayoutError(
+                    f"the vla-eval server at {self.url} asks for the observation params {asked}; with `fields` "
+                    f"envhub sends exactly the fields given ({sorted(self.fields)})"
+                )
+            return None
+        return super()._layout(params)
 
     async def _begin(self, ws: Any, episode: Episode) -> None:
         task = episode.task
@@ -115,7 +160,10 @@ class VlaEvalPolicy(ServerPolicy):
         await self._send(ws, "episode_start", {"task": info})
 
     def observation(self, request: Request) -> dict[str, Any]:
-        """The OBSERVATION payload for `request`."""
+        """The OBSERVATION payload for `request`: the benchmark's vla-eval layout under the
+        server's observation params, else `fields`, else the default layout."""
+        if self.layout is not None:
+            return self.layout.observation(request.observation, request.episode.task.text)
         payload = wire_observation(request.observation, self.fields, _default_key)
         if self.text_key:
             payload.setdefault(self.text_key, request.episode.task.text)
@@ -155,6 +203,13 @@ class VlaEvalPolicy(ServerPolicy):
         if result.get("error"):
             payload["error"] = str(result["error"])
         await self._send(ws, "episode_end", payload)
+
+
+def _params(info: dict[str, Any], url: str) -> dict[str, Any]:
+    params = info.get("observation_params") or {}
+    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
+        raise SlotError(f"the vla-eval server at {url} sent `observation_params` {params!r}; expected a mapping")
+    return dict(params)
 
 
 def _default_key(name: str, value: Any) -> str:
