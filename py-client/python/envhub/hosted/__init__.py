@@ -20,6 +20,8 @@ from .dm_control import DmControlAdapter
 from .env_fns import EnvFnsAdapter
 from .gymnasium_adapter import GymnasiumAdapter
 from .isaac_lab import IsaacLabAdapter
+from .lerobot_libero import LeRobotLiberoAdapter
+from .lerobot_metaworld import LeRobotMetaWorldAdapter
 from .libero import LiberoAdapter
 from .maniskill import ManiSkillAdapter
 from .metaworld import MetaWorldAdapter
@@ -38,6 +40,8 @@ BUILTIN: list[type[EnvAdapter]] = [
     RobosuiteAdapter,
     DmControlAdapter,
     MyoSuiteAdapter,
+    LeRobotLiberoAdapter,
+    LeRobotMetaWorldAdapter,
     EnvFnsAdapter,
 ]
 
