@@ -81,7 +81,7 @@ LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
 	@echo "make test   run every check (fmt, clippy, Rust and Python tests)"
-	@echo "make lint   layer checks, ruff, cargo fmt --check, every target built with clippy's lints (warnings denied)"
+	@echo "make lint   layer checks, ruff, mypy (the wire layer), cargo fmt --check, every target built with clippy's lints (warnings denied)"
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
 	@echo "make fuzz   coverage-guided fuzzing of the parsers (cargo-fuzz, FUZZ_SECONDS each)"
@@ -234,6 +234,7 @@ lint: setup lint-rust
 	$(VPY) scripts/check_layers.py
 	$(VPY) scripts/check_untested_targets.py
 	$(VPY) -m ruff check py-client tests scripts
+	cd py-client/python && $(abspath $(VPY)) -m mypy --config-file ../pyproject.toml --cache-dir $(abspath .build/mypy)
 
 # Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
 # tests reuse the build.

@@ -21,7 +21,7 @@ RESERVED = ("reset", "step", "close", "_setattr", "_check_spaces")
 
 # This worker's envs by session index, and whether its listener runs.
 _ENVS: dict[int, Any] = {}
-_STARTED: list[str] = []
+_STARTED: list[object] = []  # the listener's address, once it runs
 
 
 def serve(folder: str, authkey: bytes, index: int, env: Any) -> None:
@@ -74,7 +74,9 @@ def _answer(conn: Connection) -> None:
                 elif kind == "call":
                     result = [_call(_ENVS[i], name, args, kwargs) for i in ids]
                 else:  # "set": args holds one value per env index
-                    result = [_set(_ENVS[i], name, args[i]) for i in ids]
+                    for i in ids:
+                        _set(_ENVS[i], name, args[i])
+                    result = [None] * len(ids)
                 conn.send(("ok", result))
             except Exception as e:
                 try:
@@ -115,7 +117,12 @@ class Calls:
         """`name` of every env (called with the arguments when it is callable), in env order."""
         out: dict[int, Any] = {}
         for ids, conn in self._connect():
-            out.update(zip(ids, self._ask(conn, ("call", name, args, kwargs)), strict=True))
+            answers = self._ask(conn, ("call", name, args, kwargs))
+            # Checked by hand: `zip(strict=True)` is 3.10's, and this module runs in workers
+            # down to 3.9 (docs/architecture.md).
+            if len(answers) != len(ids):
+                raise RuntimeError(f"a worker answered `{name}` for {len(answers)} envs, not its {len(ids)}")
+            out.update(zip(ids, answers))
         return tuple(out[i] for i in range(self.num_envs))
 
     def set(self, name: str, values: list[Any]) -> None:

@@ -13,7 +13,7 @@ __all__ = ["EnvConfig"]
 
 
 def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray | np.generic):
+    if isinstance(value, (np.ndarray, np.generic)):  # `X | Y` here would need 3.10
         return value.tolist()
     if isinstance(value, os.PathLike):
         return os.fspath(value)

@@ -51,8 +51,8 @@ def to_gymnasium(desc: dict[str, Any]) -> spaces.Space[Any]:
             start=np.array(desc["start"], dtype=np.int64).reshape(shape),
         )
     if kind == "multi_binary":
-        shape = list(desc["shape"])
-        return spaces.MultiBinary(shape[0] if len(shape) == 1 else shape)
+        dims = list(desc["shape"])
+        return spaces.MultiBinary(dims[0] if len(dims) == 1 else dims)
     if kind == "dict":
         return spaces.Dict({key: to_gymnasium(sub) for key, sub in desc["spaces"]})
     if kind == "tuple":
