@@ -1,6 +1,10 @@
 """Failures as exceptions a Python user can catch: one class per kind, all `EnvHubError`,
 each also the builtin a caller would expect. Real worker processes are killed, hang and
-fail; a worker crash is raised within a second, never a hang."""
+fail; a worker crash is raised as its death (the hub watches the process), never a hang.
+
+No test here bounds how long something may take: a crash is told from a timeout by what the error
+says, with the step timeout far above any wait a loaded machine causes; how fast a crash is
+noticed is measured by py-client/bench/bench_failure_latency.py."""
 
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ import sys
 import textwrap
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,47 +64,46 @@ def test_bad_discrete_action():
         env.close()
 
 
-def _kill_within(envs_or_env, step, seconds: float = 1.0) -> float:
-    """Kills the (first) worker and returns how long the next step took to raise."""
-    pid = envs_or_env.worker_pids[0] if hasattr(envs_or_env, "worker_pids") else envs_or_env.worker_pid
-    os.kill(pid, signal.SIGKILL)
-    start = time.monotonic()
-    with pytest.raises(envhub.WorkerDiedError) as caught:
-        step()
-    took = time.monotonic() - start
-    assert took < seconds, f"took {took:.2f} s to notice the crash"
+# Far above a step on a slow, busy machine: a crash noticed only when it runs out would say
+# "step timeout", which the tests below refuse.
+STEP_TIMEOUT_S = 60.0
+
+
+def _expect_death_noticed(caught: pytest.ExceptionInfo, pid: int) -> None:
+    """The error is the worker's death as the hub's watch on the process saw it (its exit
+    status), not the step timeout running out."""
     err = caught.value
     assert isinstance(err, RuntimeError) and err.pid == pid
+    assert "step timeout" not in str(err), str(err)
     assert "SIGKILL" in str(err) or "signal" in str(err), str(err)
-    return took
 
 
-# serial: times how fast a crash is noticed (bound of 1 s); a loaded core would stretch it
-@pytest.mark.serial
 def test_worker_killed_between_steps():
-    envs = envhub.make_vec("gym-cartpole", 4, num_workers=2)
+    envs = envhub.make_vec("gym-cartpole", 4, num_workers=2, step_timeout=STEP_TIMEOUT_S)
     try:
         envs.reset(seed=0)
-        _kill_within(envs, lambda: envs.step(np.zeros(4, dtype=np.int64)))
+        pid = envs.worker_pids[0]
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(envhub.WorkerDiedError) as caught:
+            envs.step(np.zeros(4, dtype=np.int64))
+        _expect_death_noticed(caught, pid)
         with pytest.raises(envhub.InvalidStateError):
             envs.step(np.zeros(4, dtype=np.int64))
     finally:
         envs.close()
 
 
-# serial: times how fast a crash is noticed (bound of 1.3 s); a loaded core would stretch it
-@pytest.mark.serial
 def test_worker_killed_during_a_step(null_registry):
-    """The step waits on a slow env (GIL released); a kill -9 ends it with an error fast."""
-    env = envhub.make("null-env", registry=null_registry, sleep_ms=5000)
+    """The step waits on an env that would sleep ten minutes (GIL released); a kill -9 ends
+    it with the worker's death, not at the step timeout."""
+    env = envhub.make("null-env", registry=null_registry, sleep_ms=600_000, step_timeout=STEP_TIMEOUT_S)
     try:
         env.reset(seed=0)
         pid = env.worker_pid
         threading.Timer(0.3, lambda: os.kill(pid, signal.SIGKILL)).start()
-        start = time.monotonic()
-        with pytest.raises(envhub.WorkerDiedError):
+        with pytest.raises(envhub.WorkerDiedError) as caught:
             env.step(0)
-        assert time.monotonic() - start < 1.3  # 0.3 s until the kill, then under a second
+        _expect_death_noticed(caught, pid)
     finally:
         env.close()
 
@@ -123,16 +127,26 @@ def test_worker_exit_and_env_error(null_registry):
         env.close()
 
 
-# serial: times how fast a crash is noticed (bound of 2 s); a loaded core would stretch it
-@pytest.mark.serial
+def _gone(pid: int) -> bool:
+    """Whether process `pid` has exited (a zombie not yet reaped counts as gone)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] == "Z"
+    except (OSError, IndexError):
+        return True
+
+
 def test_hung_worker_times_out(null_registry):
-    env = envhub.make("null-env", registry=null_registry, sleep_ms=10_000, step_timeout=0.5)
+    """A step that would sleep ten minutes ends at the 0.5 s step timeout: the worker is
+    killed, and the error says so."""
+    env = envhub.make("null-env", registry=null_registry, sleep_ms=600_000, step_timeout=0.5)
     try:
         env.reset(seed=0)
+        pid = env.worker_pid
         start = time.monotonic()
-        with pytest.raises(envhub.WorkerDiedError, match="step timeout"):
+        with pytest.raises(envhub.WorkerDiedError, match=r"did not answer within 500ms \(step timeout\) and was killed"):
             env.step(0)
-        assert time.monotonic() - start < 2
+        assert time.monotonic() - start >= 0.5  # not before the timeout; after it, however late
+        assert _gone(pid), f"the hung worker {pid} still runs"
     finally:
         env.close()
 

@@ -1,7 +1,11 @@
-"""Ctrl-C while a step waits on its workers: `KeyboardInterrupt` reaches the client within
-100 ms, however long the step would take, and the session is closed on the spot — workers
-killed, nothing of it left in /dev/shm. The client runs in a child process here, so the
-signal reaches only it, as Ctrl-C in a terminal reaches the foreground program."""
+"""Ctrl-C while a step waits on its workers: `KeyboardInterrupt` reaches the client while
+the step still waits, however long the step would take, and the session is closed on the
+spot — workers killed, nothing of it left in /dev/shm. The client runs in a child process
+here, so the signal reaches only it, as Ctrl-C in a terminal reaches the foreground program.
+
+The step would take ten minutes and the step timeout is longer still, so only the interrupt
+can end it within the test; how fast it does (tens of milliseconds here) is measured by
+py-client/bench/bench_failure_latency.py, not bounded here."""
 
 from __future__ import annotations
 
@@ -29,7 +33,9 @@ CLIENT = textwrap.dedent(
     # KeyboardInterrupt handler.
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-    envs = envhub.make_vec("null-env", 2, num_workers=2, registry=sys.argv[1], sleep_ms=20000)
+    envs = envhub.make_vec(
+        "null-env", 2, num_workers=2, registry=sys.argv[1], sleep_ms=600_000, step_timeout=1200
+    )
     envs.reset(seed=0)
     print("ready", *envs.worker_pids, flush=True)
     try:
@@ -52,9 +58,7 @@ def alive(pid: int) -> bool:
         return False
 
 
-# serial: times the interrupt (100 ms); a loaded core would stretch it
-@pytest.mark.serial
-def test_ctrl_c_interrupts_a_long_step_within_100_ms(null_registry, tmp_path):
+def test_ctrl_c_interrupts_a_step_that_would_take_minutes(null_registry, tmp_path):
     namespace = f"pyint{os.getpid()}_"
     script = tmp_path / "client.py"
     script.write_text(CLIENT)
@@ -72,20 +76,20 @@ def test_ctrl_c_interrupts_a_long_step_within_100_ms(null_registry, tmp_path):
         assert line and line[0] == "ready", (line, child.stderr.read() if child.stderr else "")
         workers = [int(p) for p in line[1:]]
         time.sleep(0.3)  # the step is under way and blocked on the workers
-        sent = time.monotonic()
         child.send_signal(signal.SIGINT)
-        # The interrupt's latency is the printed time, not this bound: it only ends a child
-        # that never returns (a missed Ctrl-C prints "stepped" after the 20 s step).
-        out, err = child.communicate(timeout=40)
+        # Far below the ten minutes of the step: a missed Ctrl-C never returns in time.
+        out, err = child.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        pytest.fail("Ctrl-C did not end the step: it still waited on its workers")
     finally:
         if child.poll() is None:
             child.kill()
+            child.wait()
     words = out.split()
     assert words and words[0] == "interrupted", (out, err)
-    waited = float(words[1]) - sent
-    assert waited < 0.1, f"KeyboardInterrupt after {waited * 1000:.0f} ms"
     assert words[2] == "True", "the session is closed"
-    deadline = time.monotonic() + 2
+    # None of its workers is left sleeping in its ten-minute step.
+    deadline = time.monotonic() + 60
     while any(alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.01)
     assert not any(alive(p) for p in workers), "workers outlived the interrupted session"

@@ -10,7 +10,6 @@ import os
 import signal
 import socket
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -119,20 +118,22 @@ def test_send_and_recv_across_hubs_return_every_env_once(two_hubs):
         env.close()
 
 
-# serial: times how fast a crash is noticed (bound of 1 s); a loaded core would stretch it
-@pytest.mark.serial
 def test_a_killed_hub_raises_hub_lost_naming_it(two_hubs):
+    """The hub's death is noticed as its liveliness token going away (its TCP links close),
+    not at the step timeout, which is set far above any wait a loaded machine causes: a loss
+    noticed only when it runs out would say "step timeout". How fast it is noticed is a
+    figure of docs/remote.md, not a bound here."""
     a, b = two_hubs
-    env = envhub.make_vec("gym-cartpole", 4, hubs=["pya", "pyb"])
+    env = envhub.make_vec("gym-cartpole", 4, hubs=["pya", "pyb"], step_timeout=60.0)
     try:
         env.reset(seed=0)
         os.kill(b.proc.pid, signal.SIGKILL)
-        start = time.monotonic()
         with pytest.raises(envhub.HubLostError) as caught:
-            while time.monotonic() - start < 5:
+            for _ in range(3):  # the hub was idle between steps: the next step fails
                 env.step(np.zeros(4, dtype=np.int64))
-        assert time.monotonic() - start < 1.0
         assert caught.value.hub == "pyb" and caught.value.envs == "2..4"
+        assert "liveliness token went away" in str(caught.value), str(caught.value)
+        assert "step timeout" not in str(caught.value), str(caught.value)
     finally:
         env.close()
 
