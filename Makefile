@@ -81,6 +81,7 @@ LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
 	@echo "make test   run every check (fmt, clippy, Rust and Python tests)"
+	@echo "make check  the quick loop: lint, Rust unit tests, the Python tests that need no suite environment"
 	@echo "make lint   layer checks, ruff, mypy (the wire layer), cargo fmt --check, every target built with clippy's lints (warnings denied)"
 	@echo "make fmt    format the code"
 	@echo "make bench  data-plane figures: hub vs in-process, round trip"
@@ -325,6 +326,19 @@ test:
 	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
 	$(MAKE) --no-print-directory -j2 lint-rust suite-envs
 	$(MAKE) --no-print-directory lint rust-test py-test
+
+# The quick loop (CONTRIBUTING.md): the lint, every crate's unit tests (no integration or
+# end-to-end test), and the Python tests that need no suite environment (marked `suite` by
+# tests/python/conftest.py from what they use) and take under a minute (`slow`). `make test`
+# and CI run everything.
+.PHONY: check
+check: lint py-install
+	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) nextest run $(PROFILE) --workspace --lib --bins $(FEATURES) --test-threads $(RUST_TEST_THREADS) $${CI:+--profile ci}; \
+	else \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(CARGO) test $(PROFILE) --workspace --lib --bins $(FEATURES); \
+	fi
+	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup -m "not suite and not slow" --durations=10
 
 # Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
 # cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. CI runs it after

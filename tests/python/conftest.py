@@ -16,6 +16,7 @@ import fcntl
 import glob
 import json
 import os
+import re
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
@@ -97,11 +98,59 @@ def pytest_configure(config) -> None:
         "slow(first=False): the test takes over a minute on a two-core machine (a `# slow: <why>` "
         "comment says why); pytest-xdist hands these out first, those marked `first` before the others",
     )
+    config.addinivalue_line(
+        "markers",
+        "suite: the test needs a Python environment besides .venv (a suite's, the evaluation's peers', "
+        "LeRobot's loader): conftest.py marks it by what it uses; `make check` runs `-m 'not suite and not slow'`",
+    )
     # Registered by pytest-xdist too; here so that a run without xdist does not warn.
     config.addinivalue_line("markers", "xdist_group(name): under `--dist loadgroup`, one worker runs the group")
 
 
+#: What a test module uses when it needs a Python environment besides .venv: the switch that
+#: turns its skip (no uv, no suite environment) into a failure, or a helper that runs another
+#: interpreter built for the tests.
+_USES_A_SUITE = re.compile(
+    r"ENVHUB_(SUITES|PYENV|LIBERO)_REQUIRED|\b(suite_runs|eval_peers|lerobot_load)\b"
+)
+
+
+def _suite_entries() -> set[str]:
+    """The built-in catalog's entries whose workers run in a Python environment of their own:
+    the entry names one, or its framework does (`frameworks:` of the registry file). Empty
+    without the built package: then the tests that make them skip anyway."""
+    try:
+        import envhub
+        import yaml
+
+        catalog = yaml.safe_load((REPO_ROOT / "configs" / "env_registry.yaml").read_text())
+        own = {name for name, f in (catalog.get("frameworks") or {}).items() if f.get("python_env")}
+        registry = envhub.EnvRegistry()
+        entries = [registry.get(i) for i in registry.list_ids()]
+        return {e.id for e in entries if e.python_env is not None or e.framework in own}
+    except Exception:
+        return set()
+
+
 def pytest_collection_modifyitems(config, items) -> None:
+    """Marks `suite` the tests that need a suite's environment, so that `make check` leaves
+    them to `make test`: those of a module that uses one (`_USES_A_SUITE`), and those
+    parametrized with a catalog entry (`entry_id`) that runs in a Python environment of its
+    own. Then orders the tests for pytest-xdist (`_order_for_xdist`)."""
+    modules: dict[Path, bool] = {}
+    entries: set[str] | None = None
+    for item in items:
+        if item.path not in modules:
+            modules[item.path] = bool(_USES_A_SUITE.search(item.path.read_text()))
+        entry_id = getattr(getattr(item, "callspec", None), "params", {}).get("entry_id")
+        if isinstance(entry_id, str) and entries is None:
+            entries = _suite_entries()
+        if modules[item.path] or (isinstance(entry_id, str) and entry_id in (entries or ())):
+            item.add_marker(pytest.mark.suite)
+    _order_for_xdist(config, items)
+
+
+def _order_for_xdist(config, items) -> None:
     """Under pytest-xdist, the order in which tests are handed out:
     - the `serial` tests last: each waits for the tests running beside it, and at the end
       those are few and short;
