@@ -64,6 +64,13 @@ impl PyRegistry {
         Ok(serde_json::to_string(entry).expect("entry serializes"))
     }
 
+    /// The Python environment (`python_envs:`) entry `id`'s workers run in: its own, else
+    /// its framework's; None where they run in the hub's interpreter.
+    fn python_env_of(&self, py: Python<'_>, id: &str) -> PyResult<Option<String>> {
+        let entry = self.inner.get(id).map_err(|e| registry_error(py, e))?;
+        Ok(self.inner.python_envs().name_for(entry).map(str::to_owned))
+    }
+
     /// Search results as JSON: `[{"entry": {...}, "matched_tags": [...]}, ...]`.
     #[pyo3(signature = (robot_type=None, env_type=None, framework=None, robot_model=None, action_type=None, tags=Vec::new()))]
     fn search_json(

@@ -3,10 +3,14 @@
 //! callables or policy servers, results, reports), which this runs with the hub's
 //! interpreter, as `envhub record` runs the recorder: one implementation for the command line
 //! and `envhub.eval` in Python.
+//!
+//! The interpreter replaces this process (`exec`): a signal to `envhub eval` reaches the
+//! evaluation itself, which stops its workers and its policy's process before it exits, and
+//! no child is left running when this pid is gone.
 
 use super::Outcome;
-use anyhow::Context;
 use std::ffi::OsString;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args, Debug)]
@@ -22,8 +26,9 @@ pub(crate) struct Args {
     args: Vec<OsString>,
 }
 
-/// The hub's interpreter running `python -m envhub.evaluation ARGS`, with the command line's
-/// registries and config file; its exit status is this command's.
+/// Replaces this process with the hub's interpreter running `python -m envhub.evaluation
+/// ARGS`, with the command line's registries and config file; returns only when the
+/// interpreter cannot be run.
 pub(crate) fn run(
     registries: &[PathBuf],
     config: Option<&Path>,
@@ -31,16 +36,9 @@ pub(crate) fn run(
 ) -> anyhow::Result<Outcome> {
     let (python, mut command) =
         super::record::python_module("envhub.evaluation", registries, config)?;
-    let status = command.args(&args.args).status().with_context(|| {
-        format!(
-            "cannot run `{} -m envhub.evaluation`\nhint: the evaluation runs in the Python package: set ENVHUB_PYTHON to an interpreter with envhub installed",
-            python.display()
-        )
-    })?;
-    match status.code() {
-        Some(0) => Ok(Outcome::Done),
-        // The evaluation printed its own error (usage, a failed episode with --fail-fast).
-        Some(code) => std::process::exit(code),
-        None => anyhow::bail!("the evaluation was killed ({status})"),
-    }
+    let error = command.args(&args.args).exec();
+    anyhow::bail!(
+        "cannot run `{} -m envhub.evaluation`: {error}\nhint: the evaluation runs in the Python package: set ENVHUB_PYTHON to an interpreter with envhub installed",
+        python.display()
+    )
 }

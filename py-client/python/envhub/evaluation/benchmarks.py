@@ -127,6 +127,33 @@ class Benchmark:
             out.episodes_per_task = episodes
         return out
 
+    def reseeded(self, offset: int) -> Benchmark:
+        """The protocol under its `offset`-th seed (`--seeds N` runs offsets 0..N-1; 0 is the
+        protocol itself): every seed the protocol draws from moved by `offset` (LIBERO's
+        reset seed, Meta-World's goal set, the first reset seed, by a task's episodes per
+        step); the fixed initial conditions (LIBERO's init states) stay."""
+        import copy
+
+        if offset == 0:
+            return self
+        out = copy.copy(self)
+        init = dict(self.init)
+        if "init_states" in init:
+            init["seed"] = int(init.get("seed", 0)) + offset
+        elif "train_goals" in init:
+            init["train_goals"] = {**init["train_goals"], "seed": int(init["train_goals"]["seed"]) + offset}
+        elif "seed_start" in init:
+            init["seed_start"] = int(init["seed_start"]) + offset * self.episodes_per_task
+        else:
+            kind = next(iter(init), None)
+            raise BenchmarkError(
+                f"`{self.name}` has no seed to vary (`init: {kind or 'none'}`"
+                f"{': a fixed list of seeds' if kind == 'seeds' else ''}); --seeds needs `init_states`, "
+                "`train_goals` or `seed_start`"
+            )
+        out.init = init
+        return out
+
     def _episode_limit(self) -> int | None:
         if "seeds" in self.init:
             return len(self.init["seeds"])

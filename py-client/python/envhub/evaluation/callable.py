@@ -6,14 +6,22 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
+import queue
 import sys
+import threading
+import time
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .policy import Episode, Request, Task
+from .policy import Episode, PolicyError, Request, Task
 
-__all__ = ["CallablePolicy", "PerTask", "load"]
+__all__ = ["CallablePolicy", "PerTask", "Watchdog", "load"]
+
+#: Seconds a policy call may take by default (`--policy-timeout`).
+DEFAULT_TIMEOUT = 120.0
 
 
 def load(spec: str) -> Any:
@@ -63,24 +71,92 @@ class PerTask:
         return out
 
 
+class Watchdog:
+    """Runs a policy's calls one at a time in a thread of its own and waits `timeout` seconds
+    for each. Python cannot stop a thread: a call past its deadline is abandoned (the thread
+    finishes it whenever it returns, and its answer is dropped); until then every other call
+    fails at once, naming the call that hangs. `timeout` None: calls run in the caller's
+    thread, unbounded."""
+
+    def __init__(self, name: str, timeout: float | None) -> None:
+        if timeout is not None and not timeout > 0:
+            raise ValueError(f"the policy timeout must be a positive number of seconds, not {timeout!r}")
+        self.name, self.timeout = name, timeout
+        self._calls: queue.SimpleQueue[tuple[Future, Callable[..., Any], tuple]] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._hung: tuple[str, float] | None = None  # the abandoned call and when it began
+        self._busy = threading.Event()
+
+    def _serve(self) -> None:
+        while True:
+            future, fn, args = self._calls.get()
+            try:
+                value, error = fn(*args), None
+            except BaseException as e:  # re-raised in the caller (KeyboardInterrupt too)
+                value, error = None, e
+            self._busy.clear()  # before the caller hears: its next call may set it again
+            if error is None:
+                future.set_result(value)
+            else:
+                future.set_exception(error)
+
+    def call(self, what: str, fn: Callable[..., Any], *args: Any) -> Any:
+        if self.timeout is None:
+            return fn(*args)
+        if self._hung is not None:
+            if self._busy.is_set():
+                call, began = self._hung
+                raise PolicyError(
+                    f"the policy {self.name} is still in its `{call}` call, which began "
+                    f"{time.monotonic() - began:.0f} s ago and passed its {self.timeout:g} s deadline (--policy-timeout)"
+                )
+            self._hung = None
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._serve, name="envhub-eval-policy", daemon=True)
+            self._thread.start()
+        future: Future = Future()
+        began = time.monotonic()
+        self._busy.set()
+        self._calls.put((future, fn, args))
+        try:
+            return future.result(timeout=self.timeout)
+        except FutureTimeout:
+            if future.done():  # answered at the deadline
+                return future.result()
+            self._hung = (what, began)
+            raise PolicyError(
+                f"the policy {self.name} gave no answer to `{what}` within {self.timeout:g} s (--policy-timeout); "
+                "the call is abandoned (an in-process policy cannot be interrupted)"
+            ) from None
+
+    @property
+    def hung(self) -> bool:
+        """A call passed its deadline and has not returned yet."""
+        return self._hung is not None and self._busy.is_set()
+
+
 class CallablePolicy:
     """The `Policy` the runner drives, over `target(observations, tasks)`: one call per batch,
     answers in request order (an array `(n, ...)` or a list). `target.reset(slot, episode)`
-    and `target.end(slot, episode, result)` are called where it has them."""
+    and `target.end(slot, episode, result)` are called where it has them. Every call to the
+    target has a deadline of `timeout` seconds (`Watchdog`; None: unbounded)."""
 
-    def __init__(self, target: Any, name: str | None = None) -> None:
+    def __init__(self, target: Any, name: str | None = None, timeout: float | None = None) -> None:
         if not callable(target):
             raise TypeError(f"a policy must be callable as policy(observations, tasks), not {type(target).__name__}")
         self.target = target
         self.name = name or getattr(target, "__qualname__", None) or type(target).__name__
+        self.watchdog = Watchdog(f"`{self.name}`", timeout)
 
     def start(self, slot: int, episode: Episode) -> None:
         reset = getattr(self.target, "reset", None)
         if callable(reset):
-            reset(slot, episode)
+            self.watchdog.call("reset", reset, slot, episode)
 
     def act(self, requests: Sequence[Request]) -> list[np.ndarray]:
-        answer = self.target([r.observation for r in requests], [r.episode.task for r in requests])
+        answer = self.watchdog.call(
+            "act", self.target, [r.observation for r in requests], [r.episode.task for r in requests]
+        )
         if isinstance(answer, np.ndarray) or isinstance(answer, (list, tuple)):
             if len(answer) != len(requests):
                 raise ValueError(
@@ -92,12 +168,12 @@ class CallablePolicy:
     def end(self, slot: int, episode: Episode, result: dict[str, Any]) -> None:
         end = getattr(self.target, "end", None)
         if callable(end):
-            end(slot, episode, result)
+            self.watchdog.call("end", end, slot, episode, result)
 
     def describe(self) -> dict[str, Any]:
         return {"kind": "callable", "name": self.name}
 
     def close(self) -> None:
         close = getattr(self.target, "close", None)
-        if callable(close):
-            close()
+        if callable(close) and not self.watchdog.hung:  # a hung policy is left to the process's exit
+            self.watchdog.call("close", close)

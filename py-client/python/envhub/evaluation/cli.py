@@ -1,23 +1,40 @@
-"""`python -m envhub.evaluation` (and `envhub eval`, which runs it): exit status 0 when every
+"""`python -m envhub.evaluation` (and `envhub eval`, which execs it): exit status 0 when every
 episode ran, 1 when an episode or the run failed, 2 for a usage error (an unknown
-benchmark, task or option; nothing started)."""
+benchmark, task, option or policy; a folder in use; nothing started), 128 + the signal's
+number when stopped by SIGINT (130), SIGTERM (143) or SIGHUP (129): the envs, their
+workers and the policy's process are down when it exits."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import sys
 from typing import Any
 
 from ..wire.errors import RegistryError
 from .benchmarks import BenchmarkError
+from .callable import DEFAULT_TIMEOUT
+from .policy import PolicyLoadError
 from .results import ResumeError
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"`{text}` is not a number of seconds") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"`{text}`: give a number of seconds, 0 or more (0: no deadline)")
+    return value
 
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="envhub eval",
-        description="Run a policy over a benchmark of the catalog with the benchmark's own protocol.",
+        description="Run a policy over a benchmark of the catalog with the benchmark's own protocol. "
+        "`envhub eval compare RUN_A RUN_B` compares two runs (--help there).",
     )
     p.add_argument("benchmark", nargs="?", help="a benchmark of the catalog (--list shows them)")
     p.add_argument("--list", action="store_true", help="list the catalog's benchmarks and exit")
@@ -31,12 +48,26 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--server", help="a policy server's URL (ws://host:port)")
     p.add_argument("--server-protocol", choices=["vla-eval", "openpi", "lerobot"], default="vla-eval")
     p.add_argument("--replan", type=int, help="use only the first K actions of each chunk")
-    p.add_argument("--out", help="output folder (episodes.jsonl, results.json, results.csv)")
+    p.add_argument("--out", help="output folder (episodes.jsonl, results.json, results.csv); required")
     p.add_argument("--resume", action="store_true", help="go on with the evaluation in --out")
+    p.add_argument(
+        "--seeds",
+        type=int,
+        metavar="N",
+        help="run the protocol under its first N seeds (--out/seed-0 is the protocol itself) and report the spread",
+    )
     p.add_argument("--num-envs", type=int, default=1, help="envs (episodes in parallel)")
     p.add_argument("--workers", type=int, help="worker processes per session (default: its share of the cores)")
     p.add_argument("--hubs", help="place envs on other hubs: all, or names separated by commas")
     p.add_argument("--step-timeout", type=float, help="seconds a step may take before its episode fails")
+    p.add_argument(
+        "--policy-timeout",
+        type=_seconds,
+        default=DEFAULT_TIMEOUT,
+        metavar="SECONDS",
+        help=f"seconds a policy call (in-process, --policy-env, --server) may take before its batch's episodes "
+        f"fail (default {DEFAULT_TIMEOUT:g}; 0: no deadline)",
+    )
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed episode")
     p.add_argument("--video", action="store_true", help="one MP4 per episode in --out/videos")
     p.add_argument("--video-failures-only", action="store_true", help="with --video: only failed episodes")
@@ -46,6 +77,27 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--record-fps", type=int, help="the dataset's fps (default: the env's render_fps)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return p
+
+
+#: The signals that stop an evaluation cleanly (SIGKILL cannot be caught: its workers and
+#: policy process die with it, by the parent-death signal they are started with).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal, raised in the main thread: the evaluation unwinds through its cleanup
+    (sessions closed, the policy's process killed, the results file closed)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum: int, frame: Any) -> None:
+    # Once: the cleanup that follows is not interrupted by a second signal.
+    for s in STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    raise Stopped(signum)
 
 
 def list_benchmarks(registry: Any, as_json: bool) -> int:
@@ -78,9 +130,46 @@ def list_benchmarks(registry: Any, as_json: bool) -> int:
     return 0
 
 
+def compare_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="envhub eval compare",
+        description="Compare two runs of one benchmark episode by episode (paired by task and episode index): "
+        "the success-rate difference B - A with its 95%% interval (Newcombe's method 10 for paired data) "
+        "and McNemar's exact test, per task and overall.",
+    )
+    p.add_argument("run_a", metavar="RUN_A", help="a finished run's --out folder (or its results.json)")
+    p.add_argument("run_b", metavar="RUN_B", help="the run to compare with it")
+    p.add_argument("--html", metavar="FILE", help="also write the comparison as one HTML page")
+    p.add_argument("--json", action="store_true", help="print the comparison as JSON instead of a table")
+    return p
+
+
+def compare_main(argv: list[str]) -> int:
+    from .compare import compare, load_run, markdown, write_html
+
+    args = compare_parser().parse_args(argv)
+    try:
+        comparison = compare(load_run(args.run_a), load_run(args.run_b))
+    except BenchmarkError as e:
+        print(f"envhub eval compare: error: {e}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(comparison, indent=1))
+    else:
+        sys.stdout.write(markdown(comparison))
+    if args.html:
+        print(f"report: {write_html(comparison, args.html)}", file=sys.stderr)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["compare"]:
+        return compare_main(argv[1:])
     args = parser().parse_args(argv)
     registry = args.registry
+    for s in STOP_SIGNALS:
+        signal.signal(s, _stop)
     try:
         if args.list:
             return list_benchmarks(registry, args.json)
@@ -93,10 +182,21 @@ def main(argv: list[str] | None = None) -> int:
         from .evaluate import evaluate, resolve
 
         resolve(args.benchmark, args.tasks, args.episodes, registry)  # usage errors before anything starts
+        if args.out is None:
+            print("envhub eval: error: give --out DIR (the folder the results are written to)", file=sys.stderr)
+            return 2
         hubs = args.hubs if args.hubs in (None, "all", "local") else args.hubs.split(",")
-        results = evaluate(
+        if args.seeds is not None:
+            from .evaluate import evaluate_seeds, seeds_markdown
+
+            run: Any = evaluate_seeds
+            extra: dict[str, Any] = {"seeds": args.seeds}
+        else:
+            run, extra = evaluate, {}
+        results = run(
             args.benchmark,
             args.policy,
+            **extra,
             tasks=args.tasks,
             episodes=args.episodes,
             out=args.out,
@@ -118,14 +218,20 @@ def main(argv: list[str] | None = None) -> int:
             record_fps=args.record_fps,
             report=args.report,
             step_timeout=args.step_timeout,
+            policy_timeout=args.policy_timeout or None,
             progress=not args.quiet,
         )
-    except (BenchmarkError, FileExistsError, ResumeError, RegistryError) as e:
+    except (BenchmarkError, FileExistsError, ResumeError, RegistryError, PolicyLoadError) as e:
         print(f"envhub eval: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("envhub eval: interrupted; --resume goes on from the last finished episode", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        signum = e.signum if isinstance(e, Stopped) else signal.SIGINT
+        print(
+            f"envhub eval: stopped by {signal.Signals(signum).name}; its envs and policy are down; "
+            "--resume goes on from the last finished episode",
+            file=sys.stderr,
+        )
+        return 128 + signum
     except Exception as e:
         from .runner import EvaluationStopped
 
@@ -134,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     from .results import markdown
 
+    if args.seeds is not None:
+        sys.stdout.write(seeds_markdown(results))
+        print(f"\nresults: {os.path.abspath(args.out)}/seeds.json (and seed-*/results.json)", file=sys.stderr)
+        return 1 if any(s["errors"] for s in results["seeds"]) else 0
     sys.stdout.write(markdown(results))
     print(f"\nresults: {results['run']['out']}/results.json", file=sys.stderr)
     return 1 if results["summary"]["errors"] else 0

@@ -80,3 +80,21 @@ class Policy(Protocol):
 class PolicyError(RuntimeError):
     """A policy that failed its episodes (disconnected, stalled past its timeout, answered
     something that is not an action); the message says which and what was expected."""
+
+
+class PolicyLoadError(PolicyError):
+    """The policy `module:function` names cannot be loaded (no such module, file or name): a
+    usage error, found before any episode runs."""
+
+
+def policy_traceback(error: BaseException) -> str:
+    """The traceback of an exception a policy raised, from the policy's own frames (the
+    evaluation's frames above them left out): what a failed episode's error shows."""
+    import os
+    import traceback
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    frames = [f for f in traceback.extract_tb(error.__traceback__) if not os.path.abspath(f.filename).startswith(here)]
+    lines = ["Traceback (most recent call last):\n", *traceback.format_list(frames)]
+    lines += traceback.format_exception_only(type(error), error)
+    return "".join(lines).rstrip()

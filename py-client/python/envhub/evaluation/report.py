@@ -98,6 +98,11 @@ def _se(stderr: Any) -> str:
     return "" if stderr is None else f"± {100 * stderr:.1f}"
 
 
+def _ci(interval: Any) -> str:
+    """A Wilson 95 % interval in percent."""
+    return "" if not interval else f"95% CI {100 * interval[0]:.1f}–{100 * interval[1]:.1f}%"
+
+
 def _key(value: Any) -> str:
     """A cell's sort key: numbers as numbers, missing last."""
     if value is None:
@@ -158,7 +163,7 @@ def _page(results: dict[str, Any], videos: _Videos) -> str:
             "</main>",
             f"<footer>Written by envhub {_e((results.get('versions') or {}).get('envhub', ''))}. "
             "Rates are the share of successful episodes (an errored episode counts as a failure); "
-            "± is one standard error, √(p(1−p)/n).</footer>",
+            "± is one standard error, √(p(1−p)/n); 95% CI is the Wilson score interval.</footer>",
             f"<script>{_JS}</script>",
             "</body></html>",
         ]
@@ -171,7 +176,8 @@ def _headline(summary: dict[str, Any], rule: Any, results: dict[str, Any]) -> st
         stats.append(
             (
                 "Success rate",
-                f"{_pct(summary.get('success_rate'))} <small>{_se(summary.get('stderr'))}</small>",
+                f"{_pct(summary.get('success_rate'))} <small>{_se(summary.get('stderr'))}</small>"
+                f"<div class=\"ci\"><small>{_ci(summary.get('ci95'))}</small></div>",
                 "big",
             )
         )
@@ -211,7 +217,7 @@ def _task_table(results: dict[str, Any], rule: Any) -> str:
             f'<td data-key="{_key(row.get("successes"))}" class="num">{_num(row.get("successes"))}</td>'
             f'<td data-key="{_key(row.get("errors"))}" class="num">{_num(row.get("errors"))}</td>'
             f'<td data-key="{_key(rate)}" class="rate">{bar}<b>{_pct(rate)}</b> '
-            f"<small>{_se(row.get('stderr'))}</small></td>"
+            f"<small>{_se(row.get('stderr'))}</small><br><small>{_ci(row.get('ci95'))}</small></td>"
             f'<td data-key="{_key(row.get("mean_return"))}" class="num">{_num(row.get("mean_return"))}</td>'
             f'<td data-key="{_key(row.get("mean_length"))}" class="num">{_num(row.get("mean_length"), 1)}</td>'
             "</tr>"

@@ -14,15 +14,52 @@ import sys
 import time
 from typing import Any
 
-__all__ = ["EpisodeLog", "ResumeError", "Progress", "summarize", "markdown", "write_outputs"]
+from .stats import wilson
+
+__all__ = ["EpisodeLog", "FolderLock", "FolderLocked", "ResumeError", "Progress", "summarize", "markdown", "write_outputs"]
 
 SCHEMA = "envhub.eval/1"
 LOG = "episodes.jsonl"
 RUN = "run.json"
+LOCK = ".lock"
 
 
 class ResumeError(ValueError):
     """`--resume` on a folder that holds another evaluation."""
+
+
+class FolderLocked(FileExistsError):
+    """The output folder belongs to an evaluation that is running."""
+
+
+class FolderLock:
+    """One evaluation per output folder: an exclusive `flock` on `<folder>/.lock`, which holds
+    the owner's pid, kept until `release` (the kernel drops it when the process ends, however
+    it ends: a killed run leaves no stale lock)."""
+
+    def __init__(self, folder: str) -> None:
+        import fcntl
+
+        os.makedirs(folder, exist_ok=True)
+        self.path = os.path.join(folder, LOCK)
+        self.fd: int | None = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(self.fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(self.fd)
+            self.fd = None
+            raise FolderLocked(
+                f"{folder} is in use by a running evaluation (pid {owner})\n"
+                "hint: wait for it to end (or stop it), then --resume; or use another --out"
+            ) from None
+        os.ftruncate(self.fd, 0)
+        os.pwrite(self.fd, f"{os.getpid()}\n".encode(), 0)
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # the flock goes with the last descriptor
+            self.fd = None
 
 
 class EpisodeLog:
@@ -108,11 +145,12 @@ def _rate(records: list[dict[str, Any]], rule: str) -> dict[str, Any]:
     lengths = [r["length"] for r in records if r.get("length") is not None]
     out: dict[str, Any] = {"episodes": n, "successes": successes, "errors": errors}
     if rule == "none" or n == 0:
-        out["success_rate"] = out["stderr"] = None
+        out["success_rate"] = out["stderr"] = out["ci95"] = None
     else:
         p = successes / n  # an errored episode counts as a failure
         out["success_rate"] = p
         out["stderr"] = math.sqrt(p * (1 - p) / n)
+        out["ci95"] = list(wilson(successes, n))  # type: ignore[arg-type]
     out["mean_return"] = sum(returns) / len(returns) if returns else None
     out["mean_length"] = sum(lengths) / len(lengths) if lengths else None
     return out
@@ -137,10 +175,16 @@ def markdown(results: dict[str, Any]) -> str:
     if rule == "none":
         lines += ["| task | episodes | errors | mean return | mean length |", "|---|---:|---:|---:|---:|"]
     else:
-        lines += ["| task | episodes | success | ± s.e. | errors | mean return |", "|---|---:|---:|---:|---:|---:|"]
+        lines += [
+            "| task | episodes | success | 95% CI (Wilson) | ± s.e. | errors | mean return |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+        ]
 
     def num(x: Any, fmt: str) -> str:
         return "–" if x is None else format(x, fmt)
+
+    def interval(ci: Any) -> str:
+        return "–" if ci is None else f"{ci[0]:.3f}–{ci[1]:.3f}"
 
     rows = results["per_task"] + [{"task": "**all**", **results["summary"]}]
     for r in rows:
@@ -150,17 +194,21 @@ def markdown(results: dict[str, Any]) -> str:
             )
         else:
             lines.append(
-                f"| {r['task']} | {r['episodes']} | {num(r['success_rate'], '.3f')} | {num(r['stderr'], '.3f')} "
-                f"| {r['errors']} | {num(r['mean_return'], '.3f')} |"
+                f"| {r['task']} | {r['episodes']} | {num(r['success_rate'], '.3f')} | {interval(r.get('ci95'))} "
+                f"| {num(r['stderr'], '.3f')} | {r['errors']} | {num(r['mean_return'], '.3f')} |"
             )
     return "\n".join(lines) + "\n"
 
 
 CSV_FIELDS = ["task", "index", "init", "success", "return", "length", "seconds", "error", "video"]
+TASK_FIELDS = [
+    "task", "episodes", "successes", "errors", "success_rate", "ci95_low", "ci95_high", "stderr", "mean_return", "mean_length",
+]
 
 
 def write_outputs(folder: str, results: dict[str, Any]) -> None:
-    """`results.json` and `results.csv` (one row per episode) in `folder`."""
+    """`results.json`, `results.csv` (one row per episode) and `tasks.csv` (one row per task
+and one for all: success rates with their Wilson 95 % intervals) in `folder`."""
     _write_json(os.path.join(folder, "results.json"), results)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS)
@@ -168,6 +216,14 @@ def write_outputs(folder: str, results: dict[str, Any]) -> None:
     for e in results["episodes"]:
         w.writerow({**{k: e.get(k) for k in CSV_FIELDS}, "init": json.dumps(e.get("init"))})
     with open(os.path.join(folder, "results.csv"), "w", encoding="utf-8", newline="") as f:
+        f.write(buf.getvalue())
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=TASK_FIELDS)
+    w.writeheader()
+    for r in results["per_task"] + [{"task": "all", **results["summary"]}]:
+        ci = r.get("ci95") or [None, None]
+        w.writerow({**{k: r.get(k) for k in TASK_FIELDS}, "ci95_low": ci[0], "ci95_high": ci[1]})
+    with open(os.path.join(folder, "tasks.csv"), "w", encoding="utf-8", newline="") as f:
         f.write(buf.getvalue())
 
 
@@ -184,6 +240,7 @@ class Progress:
         self.t0 = time.monotonic()
         self.last = 0.0
         self.done = self.successes = 0
+        self.errors_seen: set[str] = set()
 
     def episode(self, success: bool | None) -> None:
         self.done += 1
@@ -202,6 +259,16 @@ class Progress:
             f"ETA {_duration(eta)}"
         )
         self.stream.write(("\r" + line + "\x1b[K") if self.tty else line + "\n")
+        self.stream.flush()
+
+    def error(self, episode: str, message: str) -> None:
+        """An episode's error, on stderr whatever `quiet` says: in full the first time a
+        message is seen, then its first line (a broken policy fails many episodes alike)."""
+        first = message.splitlines()[0] if message else ""
+        text = message if first not in self.errors_seen else f"{first} (as above)"
+        self.errors_seen.add(first)
+        lead = "\r\x1b[K" if self.tty and not self.quiet else ""
+        self.stream.write(f"{lead}episode {episode} failed: {text}\n")
         self.stream.flush()
 
     def close(self) -> None:

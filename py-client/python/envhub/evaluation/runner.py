@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import time
-import traceback
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -31,7 +30,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .benchmarks import Benchmark, TaskSpec
-from .policy import Episode, Policy, PolicyError, Request, Task
+from .policy import Episode, Policy, PolicyError, Request, Task, policy_traceback
 from .protocol import ActionError, Observer, check_actions
 
 __all__ = ["Runner", "EvaluationStopped"]
@@ -82,12 +81,33 @@ class _Session:
         self.broken = broken  # sessions of these episodes that broke before this one
         self.sent: list[int] = []
         self.first = True
+        # Videos of envs with no image observation: frames from `render()`, once per step of
+        # the session (every env rendered), kept per env until the runner takes them.
+        self.render = getattr(envs, "render_mode", None) == "rgb_array" and self.observer.video is None
+        self.rendered: Any = None
 
 
 def _row(obs: Any, j: int) -> Any:
     if isinstance(obs, dict):
         return {k: _row(v, j) for k, v in obs.items()}
     return obs[j]
+
+
+def _copy(obs: Any) -> Any:
+    if isinstance(obs, dict):
+        return {k: _copy(v) for k, v in obs.items()}
+    return np.array(obs)
+
+
+def _info_row(info: dict[str, Any], j: int) -> dict[str, Any]:
+    """Env `j`'s part of a batch's info, as a batch of one (what `_flag` reads at index 0)."""
+    out: dict[str, Any] = {}
+    for key, values in info.items():
+        try:
+            out[key] = np.array(np.asarray(values)[j : j + 1])
+        except Exception:
+            continue
+    return out
 
 
 def _flag(info: dict[str, Any], key: str, j: int) -> bool | None:
@@ -199,6 +219,7 @@ class Runner:
         # By default a session gets the share of the cores its envs are of `num_envs` (at least
         # one worker): sessions run side by side, and every worker is an interpreter to start.
         workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
+        render = {"render_mode": "rgb_array"} if self.videos is not None and self._needs_render(specs[0]) else {}
         return make_vec(
             specs[0].entry,
             n,
@@ -208,8 +229,20 @@ class Runner:
             registry=self.registry,
             step_timeout=self.step_timeout,
             hubs=self.hubs,
+            **render,
             **self.bench.session_options(specs),
         )
+
+    def _needs_render(self, spec: TaskSpec) -> bool:
+        """A video needs `render()` frames: the protocol names no video key and the entry's
+        observation holds no image."""
+        if self.bench.observation.get("video"):
+            return False
+        try:
+            obs_type = self.registry.get(spec.entry).obs_type if self.registry is not None else "state"
+        except Exception:
+            return False
+        return "image" not in obs_type and "pixel" not in obs_type
 
     def _started_session(
         self, future: Any, todo: deque[Job], ids: list[int], broken: int
@@ -309,6 +342,8 @@ class Runner:
                     if spec.id not in self.tasks:
                         self.tasks[spec.id] = self.bench.task(spec, texts[i])
                 s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
+        if s.render:
+            s.rendered = s.envs.render()
         for i, (spec, k) in assign.items():
             s.tasks[i] = spec.id
             task = self.tasks.setdefault(spec.id, self.bench.task(spec))
@@ -379,7 +414,7 @@ class Runner:
             else:
                 message = str(e) if isinstance(e, PolicyError) else f"the policy raised {type(e).__name__}: {e}"
                 if not isinstance(e, PolicyError):
-                    message += "\n" + "".join(traceback.format_exception(e)[-3:]).rstrip()
+                    message += "\n" + policy_traceback(e)
                 for s, i in need:
                     self._finish(s, i, error=message)
                 return
@@ -423,11 +458,20 @@ class Runner:
         waiting = set(s.sent)
         s.sent = []
         self.env_steps += len(waiting)
+        later = []  # with `render()` frames: the results, taken once every env is back and rendered
         while waiting:
             obs, rewards, terminated, truncated, info = s.envs.recv()
             for j, i in enumerate(info["env_id"].tolist()):
                 waiting.discard(i)
-                self._after_step(s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
+                step = (s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
+                if s.render:
+                    later.append((*step[:2], _copy(step[2]), *step[3:6], _info_row(info, j), 0))
+                else:
+                    self._after_step(*step)
+        if later:
+            s.rendered = s.envs.render()
+            for step in later:
+                self._after_step(*step)
 
     def _after_step(
         self, s: _Session, i: int, obs: Any, reward: float, terminated: bool, truncated: bool, info: Any, j: int
@@ -435,10 +479,9 @@ class Runner:
         slot = s.slots[i]
         slot.obs = obs
         if slot.settle_left:
+            # A `done` while settling is ignored, as the references' loops ignore it.
             slot.settle_left -= 1
-            if terminated or truncated:
-                self._finish(s, i, success=False)
-            elif slot.settle_left == 0:
+            if slot.settle_left == 0:
                 self._frame(s, i)
             return
         slot.t += 1
@@ -467,7 +510,10 @@ class Runner:
             self.dataset.observe(s.ids[i], s.slots[i].obs)
         if self.videos is None:
             return
-        frame = s.observer.frame(s.slots[i].obs)
+        if s.render:
+            frame = None if s.rendered is None else s.rendered[i]
+        else:
+            frame = s.observer.frame(s.slots[i].obs)
         if frame is not None:
             self.videos.frame(s.ids[i], frame)
             s.slots[i].frames = True

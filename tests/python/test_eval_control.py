@@ -1,0 +1,324 @@
+"""`envhub eval` kept under control: a policy that hangs, two runs into one folder, signals.
+
+- Every policy call has a deadline (`policy_timeout`, `--policy-timeout`): an in-process
+  policy that hangs fails its batch's episodes with an error naming it and the wait (its
+  call is abandoned: later calls fail at once while it hangs, and go through once it
+  returns); a `--policy-env` process that hangs is killed and a new one takes the next
+  episodes. `fail_fast` stops at the first such failure.
+- The output folder is locked while an evaluation runs: a second one, or a `--resume`, is
+  refused with the first one's pid; the lock goes when the run ends, however it ends.
+- SIGTERM (or SIGINT) to `envhub eval` stops the evaluation: the exit status is 143 (130)
+  and no process it started (its workers, its policy's process) is left; after SIGKILL too,
+  every one of them is gone within a bounded wait.
+
+Outcomes are asserted, never how long anything took.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+import uuid
+
+import numpy as np
+import pytest
+from conftest import import_envhub
+
+envhub = import_envhub()
+
+from envhub.evaluation import EvaluationStopped, PolicyError, evaluate  # noqa: E402
+from envhub.evaluation.callable import Watchdog  # noqa: E402
+from envhub.evaluation.policy_env import EnvPolicy  # noqa: E402
+from envhub.evaluation.results import FolderLock, FolderLocked  # noqa: E402
+
+REQUIRED = bool(os.environ.get("ENVHUB_SUITES_REQUIRED"))
+
+PENDULUM = {
+    "name": "pendulum",
+    "entries": ["gym-pendulum"],
+    "episodes_per_task": 4,
+    "init": {"seed_start": 10},
+    "horizon": 20,
+    "success": "none",
+}
+
+
+# The watchdog ------------------------------------------------------------------------------
+
+
+def test_a_hung_in_process_policy_fails_its_batch_and_the_run_goes_on(tmp_path):
+    release = threading.Event()
+
+    class Hangs:
+        """Hangs at episode 1's first call until released."""
+
+        def reset(self, slot, episode):
+            self.episode = episode.index
+
+        def __call__(self, observations, tasks):
+            if self.episode == 1:
+                release.wait()
+            return [np.zeros(1, np.float32) for _ in observations]
+
+    try:
+        results = evaluate(PENDULUM, Hangs(), out=tmp_path / "hang", policy_timeout=1.0, progress=False)
+        errors = [e["error"] for e in results["episodes"]]
+        assert errors[0] is None
+        assert "gave no answer to `act` within 1 s (--policy-timeout)" in errors[1] and "Hangs" in errors[1]
+        # While the abandoned call hangs, the next episodes fail at once, naming it.
+        assert all("still in its `act` call" in e for e in errors[2:]), errors
+        assert results["summary"]["done"] == 4
+        with pytest.raises(EvaluationStopped, match="gave no answer"):
+            evaluate(PENDULUM, Hangs(), out=tmp_path / "fast", policy_timeout=1.0, fail_fast=True, progress=False)
+    finally:
+        release.set()
+
+
+def test_the_watchdog_lets_a_policy_that_returns_late_go_on():
+    release = threading.Event()
+    dog = Watchdog("`slow`", 0.5)
+    with pytest.raises(PolicyError, match="gave no answer to `act` within 0.5 s"):
+        dog.call("act", release.wait)
+    with pytest.raises(PolicyError, match="still in its `act` call"):
+        dog.call("act", lambda: 1)
+    release.set()
+    deadline = time.monotonic() + 60
+    while dog.hung and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert dog.call("act", lambda: 2) == 2
+    assert Watchdog("x", None).call("act", lambda: 3) == 3  # no deadline: in the caller's thread
+    with pytest.raises(ValueError, match="positive"):
+        Watchdog("x", 0)
+
+
+HANG_ONCE = textwrap.dedent(
+    """\
+    import os, time
+    import numpy as np
+
+    MARK = {mark!r}
+
+    def act(observations, tasks):
+        # The first process to see a third call hangs there; a new process answers.
+        n = int(open(MARK).read()) if os.path.exists(MARK) else 0
+        open(MARK, "w").write(str(n + 1))
+        if n == 2:
+            open(MARK + ".pid", "w").write(str(os.getpid()))
+            time.sleep(3600)
+        return np.zeros((len(observations), 1), np.float32)
+    """
+)
+
+
+def test_a_hung_policy_process_is_killed_and_a_new_one_takes_the_next_episodes(tmp_path):
+    mark = tmp_path / "calls"
+    (tmp_path / "hang_once.py").write_text(HANG_ONCE.format(mark=str(mark)))
+    policy = EnvPolicy(f"{tmp_path / 'hang_once.py'}:act", [sys.executable], env_name="(this interpreter)", timeout=3.0)
+    bench = {**PENDULUM, "horizon": 2}  # two calls per episode: the third call is episode 1's first
+    results = evaluate(bench, policy, out=tmp_path / "out", progress=False)
+    errors = [e["error"] for e in results["episodes"]]
+    assert errors[0] is None and errors[2:] == [None, None], errors
+    assert "gave no answer to `act` within 3 s (--policy-timeout)" in errors[1] and "hang_once.py:act" in errors[1]
+    assert "was killed" in errors[1] and policy.killed == 1
+    hung = int((tmp_path / "calls.pid").read_text())
+    assert not _alive(hung)
+
+
+# One evaluation per folder -----------------------------------------------------------------
+
+
+def test_a_folder_in_use_is_refused_naming_its_owner(tmp_path):
+    code = textwrap.dedent(
+        f"""\
+        import sys, time
+        sys.path.insert(0, {os.path.join(os.path.dirname(envhub.__file__), os.pardir)!r})
+        from envhub.evaluation.results import FolderLock
+        FolderLock({str(tmp_path / "run")!r})
+        print("locked", flush=True)
+        sys.stdin.read()
+        """
+    )
+    owner = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert owner.stdout.readline().strip() == "locked"
+        for resume in (False, True):
+            with pytest.raises(FolderLocked, match=rf"in use by a running evaluation \(pid {owner.pid}\)"):
+                evaluate(PENDULUM, lambda o, t: np.zeros((len(o), 1), np.float32), out=tmp_path / "run",
+                         resume=resume, progress=False)
+    finally:
+        owner.communicate("", timeout=60)
+    # The lock went with its process: the folder is free again.
+    FolderLock(str(tmp_path / "run")).release()
+
+
+# Signals to `envhub eval` --------------------------------------------------------------------
+
+SLOW_POLICY = textwrap.dedent(
+    """\
+    import os, time
+    import numpy as np
+
+    def act(observations, tasks):
+        open(os.environ["EVAL_MARK_FILE"], "a").write(f"{os.getpid()}\\n")
+        time.sleep(0.05)
+        return np.zeros((len(observations), 1), np.float32)
+    """
+)
+
+
+def _alive(pid: int) -> bool:
+    """Running (a zombie, or no process, is down)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+def _marked(mark: str) -> list[int]:
+    """The processes whose environment holds `mark` (every descendant inherits it, whatever
+    its process group or session)."""
+    found = []
+    needle = f"EVAL_RUN_MARK={mark}".encode()
+    for name in os.listdir("/proc"):
+        if not name.isdigit() or int(name) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{name}/environ", "rb") as f:
+                if needle in f.read().split(b"\0") and _alive(int(name)):
+                    found.append(int(name))
+        except OSError:
+            continue
+    return found
+
+
+def _wait_for(check, seconds: float, what: str):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        value = check()
+        if value:
+            return value
+        time.sleep(0.1)
+    pytest.fail(f"gave up waiting for {what} after {seconds:g} s")
+
+
+def _python_env(name: str) -> None:
+    from envhub._cli import BINARY
+
+    done = subprocess.run([str(BINARY), "env", "sync", name], capture_output=True, text=True, timeout=900)
+    if done.returncode != 0:
+        reason = f"the Python environment `{name}` cannot be built here: {(done.stderr or done.stdout)[-1500:]}"
+        if REQUIRED:
+            pytest.fail(f"{reason}, and ENVHUB_SUITES_REQUIRED is set")
+        pytest.skip(reason)
+
+
+def _start_eval(tmp_path, *extra):
+    """`envhub eval` of long Pendulum episodes over 2 envs (2 workers), the slow policy
+    (`extra` may run it in a Python environment), in its own session; returns it once its
+    policy has answered."""
+    from envhub._cli import BINARY
+
+    registry = tmp_path / "bench.yaml"
+    registry.write_text(json.dumps({"environments": [], "benchmarks": {"long-pendulum": {
+        "entries": ["gym-pendulum"], "episodes_per_task": 4, "init": {"seed_start": 0},
+        "horizon": 100000, "success": "none"}}}))
+    (tmp_path / "slow.py").write_text(SLOW_POLICY)
+    mark, calls = uuid.uuid4().hex, tmp_path / "calls"
+    env = {**os.environ, "EVAL_RUN_MARK": mark, "EVAL_MARK_FILE": str(calls)}
+    args = [str(BINARY), "--registry", "@default", "--registry", str(registry), "eval", "long-pendulum",
+            "--policy", f"{tmp_path / 'slow.py'}:act", "--num-envs", "2", "--workers", "2",
+            "--out", str(tmp_path / "out"), "--quiet", *extra]
+    proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+
+    def answered():
+        if proc.poll() is not None:
+            pytest.fail(f"envhub eval ended early ({proc.returncode}): {proc.stderr.read().decode()[-3000:]}")
+        return calls.exists() and calls.read_text().count("\n") >= 2
+
+    _wait_for(answered, 300, "the policy's first answers")
+    return proc, mark, args, env
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_stops_the_evaluation_and_everything_it_started(tmp_path, sig):
+    proc, mark, args, env = _start_eval(tmp_path)
+    try:
+        started = _marked(mark)
+        assert proc.pid in started and len(started) >= 3, started  # the evaluation and its 2 workers
+        # The folder is in use: a second run and a resume are refused, naming this one.
+        for more in ([], ["--resume"]):
+            second = subprocess.run(args + more, env={**env, "EVAL_RUN_MARK": "other"}, capture_output=True,
+                                    text=True, timeout=300, cwd=tmp_path)
+            assert second.returncode == 2, second.stderr
+            assert f"in use by a running evaluation (pid {proc.pid})" in second.stderr
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 128 + sig, stderr.decode()[-3000:]
+        assert f"stopped by {sig.name}" in stderr.decode()
+        # Exited only when everything was down.
+        assert [p for p in started if _alive(p)] == []
+        assert _marked(mark) == []
+    finally:
+        _kill_all(proc, mark)
+    done = [json.loads(x) for x in (tmp_path / "out" / "episodes.jsonl").read_text().splitlines()]
+    assert done == []  # no episode of 100000 steps ended: none recorded, none lost on --resume
+
+
+def test_kill_9_leaves_no_process_of_the_evaluation(tmp_path):
+    _python_env("metaworld")
+    proc, mark, _, _ = _start_eval(tmp_path, "--policy-env", "metaworld")
+    try:
+        started = _marked(mark)
+        policy = {int(x) for x in (tmp_path / "calls").read_text().split()}
+        assert policy and policy <= set(started) and proc.pid not in policy  # the policy's own process
+        assert len(started) >= 4, started  # the evaluation, its 2 workers, the policy's process
+        proc.kill()
+        proc.wait(timeout=60)
+        _wait_for(lambda: not _marked(mark), 60, "the evaluation's processes to end after SIGKILL")
+    finally:
+        _kill_all(proc, mark)
+
+
+def test_sigterm_stops_a_policy_process(tmp_path):
+    _python_env("metaworld")
+    proc, mark, _, _ = _start_eval(tmp_path, "--policy-env", "metaworld")
+    try:
+        started = _marked(mark)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 143, stderr.decode()[-3000:]
+        assert [p for p in started if _alive(p)] == []
+    finally:
+        _kill_all(proc, mark)
+
+
+def _kill_all(proc, mark) -> None:
+    """Whatever a failed test left running."""
+    for pid in [proc.pid] * (proc.poll() is None) + _marked(mark):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        proc.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        pass
+
+
+def test_an_unknown_policy_is_a_usage_error(tmp_path):
+    done = subprocess.run(
+        [sys.executable, "-m", "envhub.evaluation", "mujoco", "--policy", "no_such_module_xyz:act",
+         "--out", str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    assert re.search(r"cannot load the policy `no_such_module_xyz:act`: ModuleNotFoundError", done.stderr)
