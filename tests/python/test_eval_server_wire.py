@@ -36,7 +36,7 @@ from envhub.evaluation.benchmarks import BenchmarkError, parse  # noqa: E402
 from envhub.evaluation.catalog import Catalog  # noqa: E402
 from envhub.evaluation.policy import Episode, Request, Task  # noqa: E402
 from envhub.evaluation.servers import OpenPIPolicy, VlaEvalPolicy, connect  # noqa: E402
-from envhub.evaluation.servers.layout import axis_angle, quat_of_matrix  # noqa: E402
+from envhub.evaluation.servers.layout import LayoutError, axis_angle, quat_of_matrix  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
@@ -211,14 +211,21 @@ def test_the_hello_chooses_what_a_vla_eval_server_is_sent(peers, tmp_path) -> No
     ],
 )
 def test_an_unsupported_ask_is_an_error_naming_the_supported(peers, tmp_path, params, message) -> None:
+    from envhub.evaluation import evaluate
+
     server = logging_server(peers, tmp_path / "seen.pkl", params)
     try:
         with VlaEvalPolicy(server.url, timeout=30) as policy:
-            with pytest.raises(BenchmarkError) as caught:
+            with pytest.raises(LayoutError) as caught:
                 policy.bind(libero_spatial())
+        # Through `evaluate` (`envhub eval`): a usage error (exit status 2) before any env starts.
+        decl = {**Catalog().declared["libero-spatial"], "name": "libero-spatial"}
+        with pytest.raises(BenchmarkError) as usage:
+            evaluate(decl, connect("vla-eval", server.url, timeout=30), progress=False, out=tmp_path / "run")
     finally:
         server.stop()
     assert message in str(caught.value), str(caught.value)
+    assert message in str(usage.value), str(usage.value)
     assert not (tmp_path / "seen.pkl").exists()
 
 
@@ -226,7 +233,7 @@ def test_an_ask_on_a_benchmark_without_a_layout_is_an_error(peers, tmp_path) -> 
     server = logging_server(peers, tmp_path / "seen.pkl", {"send_state": True})
     try:
         with VlaEvalPolicy(server.url, timeout=30) as policy:
-            with pytest.raises(BenchmarkError, match="declares no `servers.vla-eval` layout"):
+            with pytest.raises(LayoutError, match="declares no `servers.vla-eval` layout"):
                 policy.bind(parse("cheetah-short", {k: v for k, v in CHEETAH.items() if k != "name"}))
     finally:
         server.stop()
@@ -283,3 +290,25 @@ def test_a_server_that_stops_answering_fails_its_episodes(protocol, fail_fast, p
         server.stop()
     want = f"the {protocol} server at {server.url} sent no action within 1.5 s (--policy-timeout"
     assert all(want in e for e in errors), errors
+
+
+@pytest.mark.parametrize(
+    "servers,message",
+    [
+        ({"grpc": {"send": {"x": "y"}}}, "unknown server protocol `grpc` in `servers`; valid: vla-eval, openpi"),
+        ({"openpi": {"send": {"a": {"rotate": "b"}}}}, "a source is an observation key, `$text`, or one of"),
+        (
+            {"vla-eval": {"send": {"a": "b"}, "params": {"send_state": {"add": {"s": "k"}, "sends": 1}}}},
+            "unknown field `sends`; valid: `add`, `replace`, `env`, `equals`",
+        ),
+        (
+            {"openpi": {"send": {"a": {"axis_angle": "q", "convention": "scipy"}}}},
+            "unknown axis-angle convention `scipy`; valid: antipodal, robosuite, robosuite64",
+        ),
+    ],
+)
+def test_a_bad_servers_declaration_is_a_benchmark_error(servers, message) -> None:
+    decl = {k: v for k, v in CHEETAH.items() if k != "name"}
+    with pytest.raises(BenchmarkError) as caught:
+        parse("cheetah-short", {**decl, "servers": servers})
+    assert message in str(caught.value), str(caught.value)

@@ -396,9 +396,12 @@ def parse(name: str, decl: Any, entries: set[str] | None = None) -> Benchmark:
     if reset_option is not None and decl.get("tasks") is None:
         raise BenchmarkError(f"{where}: `task_reset_option` switches between `tasks`; this benchmark lists none")
     if "servers" in decl:
-        from .servers.layout import check
+        from .servers.layout import LayoutError, check
 
-        check(decl["servers"], where)
+        try:
+            check(decl["servers"], where)
+        except LayoutError as e:
+            raise BenchmarkError(str(e)) from None
     description = decl.get("description", "")
     if not isinstance(description, str):
         raise BenchmarkError(f"{where}: `description` must be text")

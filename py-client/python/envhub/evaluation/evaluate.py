@@ -251,7 +251,12 @@ def _evaluate(
         if bind is not None:
             # A policy server takes the benchmark's layout for its protocol (`servers:`),
             # which may ask more of the env (LIBERO's controller pose for vla-eval's states).
-            bench = bind(bench)
+            from .servers.layout import LayoutError
+
+            try:
+                bench = bind(bench)
+            except LayoutError as e:  # what the server asks for, refused: a usage error
+                raise BenchmarkError(str(e)) from None
         description = pol.describe()
         task_plan = [{"id": t.id, "entry": t.entry, "text": t.text, "index": t.index} for t in bench.tasks]
         header = {

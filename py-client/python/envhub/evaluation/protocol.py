@@ -9,28 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from .images import resize_with_pad
+
 __all__ = ["ActionError", "Observer", "check_actions", "resize_with_pad"]
 
 
 class ActionError(ValueError):
     """A policy answer that is not an action (or chunk) of the env's action space."""
-
-
-def resize_with_pad(image: np.ndarray, height: int, width: int) -> np.ndarray:
-    """`image` (H, W, C) uint8 scaled to fit (height, width), centred on black, as
-    vla-eval's and OpenPI's `resize_with_pad` do."""
-    if image.shape[:2] == (height, width):
-        return image
-    from PIL import Image
-
-    pil = Image.fromarray(np.ascontiguousarray(image))
-    w, h = pil.size
-    ratio = max(w / width, h / height)
-    rw, rh = int(w / ratio), int(h / ratio)
-    resized = pil.resize((rw, rh), resample=Image.Resampling.BILINEAR)
-    canvas = Image.new(resized.mode, (width, height), 0)
-    canvas.paste(resized, (max(0, (width - rw) // 2), max(0, (height - rh) // 2)))
-    return np.asarray(canvas)
 
 
 class Observer:

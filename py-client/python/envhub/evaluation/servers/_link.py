@@ -25,7 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..policy import Episode, PolicyError, Request
-from .layout import Layout, layout_for
+from .layout import Layout, LayoutError, layout_for
 
 log = logging.getLogger("envhub.evaluation")
 
@@ -357,6 +357,8 @@ def _slot_error(exc: BaseException, policy: ServerPolicy, where: str) -> SlotErr
     """A slot's failure with its cause in words: a closed connection names its code and reason."""
     if isinstance(exc, SlotError):
         return exc
+    if isinstance(exc, LayoutError):
+        return SlotError(f"{exc} ({where})")
     from websockets.exceptions import ConnectionClosed
 
     if isinstance(exc, ConnectionClosed):

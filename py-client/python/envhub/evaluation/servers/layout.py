@@ -38,8 +38,6 @@ from typing import Any
 
 import numpy as np
 
-from ..benchmarks import BenchmarkError
-
 __all__ = ["LayoutError", "Layout", "check", "layout_for"]
 
 PROTOCOLS = ("vla-eval", "openpi")
@@ -48,9 +46,9 @@ CONVENTIONS = ("antipodal", "robosuite", "robosuite64")
 _OPS = ("concat", "axis_angle", "quat_of_matrix", "float32", "resize")
 
 
-class LayoutError(BenchmarkError):
+class LayoutError(ValueError):
     """A `servers:` declaration, or a server's ask, that does not fit; the message names
-    what is valid."""
+    what is valid (the catalog and `evaluate` raise it as a BenchmarkError, a usage error)."""
 
 
 @dataclass
@@ -183,9 +181,7 @@ def value(source: Any, obs: Any, text: str) -> Any:
             return text
         if not isinstance(obs, dict) or source not in obs:
             valid = sorted(obs) if isinstance(obs, dict) else []
-            from ._link import SlotError
-
-            raise SlotError(f"the observation has no key {source!r} (the server's layout reads it); it has {valid}")
+            raise LayoutError(f"the observation has no key {source!r} (the server's layout reads it); it has {valid}")
         return obs[source]
     (op, arg), = ((k, v) for k, v in source.items() if k in _OPS)
     if op == "concat":
@@ -196,7 +192,7 @@ def value(source: Any, obs: Any, text: str) -> Any:
         return quat_of_matrix(value(arg, obs, text))
     if op == "axis_angle":
         return axis_angle(np.asarray(value(arg, obs, text)), source.get("convention", "antipodal"))
-    from ..protocol import resize_with_pad
+    from ..images import resize_with_pad
 
     height, width = source["resize"]
     return resize_with_pad(np.asarray(value(source["of"], obs, text)), height, width)
