@@ -55,7 +55,10 @@ def peers() -> str:
 
 
 def libero_spatial():
-    return parse("libero-spatial", dict(Catalog().declared["libero-spatial"]))
+    """The checkout's libero-spatial (its registry file as written, not the catalog built into
+    the extension at its last build)."""
+    registry = HERE.parent.parent / "configs" / "env_registry.yaml"
+    return parse("libero-spatial", dict(Catalog([str(registry)]).declared["libero-spatial"]))
 
 
 def read_log(path: Path) -> list:
@@ -247,6 +250,8 @@ def test_openpi_on_libero_sends_the_examples_keys() -> None:
         obs = libero_observation(np.random.default_rng(4))
         task = Task("libero-spatial", "libero-spatial/0", "libero-spatial", "open the drawer", 0)
         sent = policy.observation(Request(0, Episode(task, 0), 0, obs))
+        assert policy.replan() == 5  # the example's replan_steps, unless the caller gives one
+        assert OpenPIPolicy("ws://127.0.0.1:9", timeout=5, replan_steps=2).replan() == 2
     finally:
         policy.close()
     assert list(sent) == ["observation/image", "observation/wrist_image", "observation/state", "prompt"]

@@ -17,6 +17,7 @@ HELLO (`get_observation_params`) changes:
           seed: {equals: 7}                                          # what this benchmark runs with
       openpi:
         send: {observation/image: {resize: [224, 224], of: agentview_image}, prompt: $text, ...}
+        replan: 5                       # actions of each chunk run before the next request
 
 A source is an observation key (as the benchmark's `observation:` shows it: flipped,
 resized), `$text` (the task's instruction), or one of: `{concat: [s, ..]}`,
@@ -62,6 +63,8 @@ class Layout:
     kwargs: dict[str, Any] = field(default_factory=dict)
     keys: list[str] = field(default_factory=list)
     params: dict[str, Any] = field(default_factory=dict)
+    #: OpenPI: actions of each chunk run before the next request (the harness's replanning).
+    replan: int | None = None
 
     def observation(self, obs: Any, text: str) -> dict[str, Any]:
         """The message's observation dict for one env's observation and task text."""
@@ -88,7 +91,11 @@ def check(decl: Any, where: str) -> dict[str, Any]:
             raise LayoutError(f"{where}: unknown server protocol `{protocol}` in `servers`; valid: {', '.join(PROTOCOLS)}")
         if not isinstance(spec, dict):
             raise LayoutError(f"{here}: a mapping with `send` (and `params`), not {spec!r}")
-        _only(spec, ["send", "params"], here)
+        _only(spec, ["send", "params", "replan"], here)
+        if "replan" in spec and (
+            protocol != "openpi" or not isinstance(spec["replan"], int) or isinstance(spec["replan"], bool) or spec["replan"] < 1
+        ):
+            raise LayoutError(f"{here}.replan: OpenPI's actions per chunk run before the next request, a positive integer")
         _entries(spec.get("send"), f"{here}.send")
         params = spec.get("params") or {}
         if protocol != "vla-eval" and params:
@@ -134,7 +141,7 @@ def layout_for(decl: dict[str, Any] | None, protocol: str, params: dict[str, Any
             )
         return None
     entries = dict(spec.get("send") or {})
-    layout = Layout(protocol, entries, params=params)
+    layout = Layout(protocol, entries, params=params, replan=spec.get("replan"))
     declared = spec.get("params") or {}
     for name, asked in params.items():
         if name not in declared:

@@ -12,7 +12,8 @@ sends the traceback as a text frame and closes the connection.
 The protocol has no episodes: a connection serves whatever comes. One connection per env,
 so a batch's requests are in flight together. The chunk comes back to the runner as
 OpenPI's own clients use it: its first `replan_steps` actions are executed before the env
-asks again (all of them when `replan_steps` is None).
+asks again (without `replan_steps`, the benchmark's `servers.openpi.replan`, LIBERO's 5 as
+OpenPI's LIBERO example replans, else the whole chunk).
 """
 
 from __future__ import annotations
@@ -59,8 +60,15 @@ class OpenPIPolicy(ServerPolicy):
     def _layout(self, params: dict[str, Any]):
         return None if self.fields is not None else super()._layout(params)
 
+    def replan(self) -> int | None:
+        """Actions of each chunk run before the next request: `replan_steps`, else the
+        benchmark's layout's (OpenPI's LIBERO example: 5), else the whole chunk."""
+        if self.replan_steps is not None:
+            return self.replan_steps
+        return self.layout.replan if self.layout is not None and self.fields is None else None
+
     def describe(self) -> dict[str, Any]:
-        return {**super().describe(), "replan_steps": self.replan_steps}
+        return {**super().describe(), "replan_steps": self.replan()}
 
     async def _hello(self, ws: Any) -> dict[str, Any]:
         frame = await ws.recv()
@@ -109,8 +117,9 @@ class OpenPIPolicy(ServerPolicy):
             actions = checked_action(answer["actions"], "`actions`")
         except SlotError as exc:
             raise SlotError(f"the OpenPI server at {self.url}: {exc}") from None
-        if actions.ndim == 2 and self.replan_steps is not None:
-            actions = actions[: self.replan_steps]
+        replan = self.replan()
+        if actions.ndim == 2 and replan is not None:
+            actions = actions[:replan]
         return actions
 
 
