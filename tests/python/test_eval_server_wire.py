@@ -310,6 +310,10 @@ def test_a_server_that_stops_answering_fails_its_episodes(protocol, fail_fast, p
             {"openpi": {"send": {"a": {"axis_angle": "q", "convention": "scipy"}}}},
             "unknown axis-angle convention `scipy`; valid: antipodal, robosuite, robosuite64",
         ),
+        (
+            {"vla-eval": {"send": {"a": "b"}, "params": {"seed": {"equals": "$init.sed"}}}},
+            "unknown protocol value `$init.sed`; valid: $init.seed, $settle.steps",
+        ),
     ],
 )
 def test_a_bad_servers_declaration_is_a_benchmark_error(servers, message) -> None:
@@ -317,3 +321,17 @@ def test_a_bad_servers_declaration_is_a_benchmark_error(servers, message) -> Non
     with pytest.raises(BenchmarkError) as caught:
         parse("cheetah-short", {**decl, "servers": servers})
     assert message in str(caught.value), str(caught.value)
+
+
+def test_equals_follows_the_runs_own_protocol() -> None:
+    """`seed: {equals: $init.seed}`: a server's `seed` must be the seed the run resets with
+    (7, or 7 + k under `--seeds`); the settling steps likewise."""
+    from envhub.evaluation.servers.layout import layout_for
+
+    decl = libero_spatial().raw["servers"]
+    assert layout_for(decl, "vla-eval", {"seed": 7, "num_steps_wait": 10}, "b", {"init.seed": 7, "settle.steps": 10})
+    assert layout_for(decl, "vla-eval", {"env_seed": 8}, "b", {"init.seed": 8, "settle.steps": 10})
+    with pytest.raises(LayoutError, match="asks for `seed` = 7; envhub's `b` runs with `seed` = 8"):
+        layout_for(decl, "vla-eval", {"seed": 7}, "b", {"init.seed": 8, "settle.steps": 10})
+    with pytest.raises(LayoutError, match="asks for `num_steps_wait` = 0; envhub's `b` runs with `num_steps_wait` = 10"):
+        layout_for(decl, "vla-eval", {"num_steps_wait": 0}, "b", {"init.seed": 7, "settle.steps": 10})

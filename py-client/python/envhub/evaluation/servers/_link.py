@@ -73,6 +73,7 @@ class ServerPolicy:
         # they give with what the server asked for (None: the protocol's default layout).
         self._servers_decl: dict[str, Any] | None = None
         self._benchmark = "this benchmark"
+        self._protocol_values: dict[str, Any] = {}
         self.layout: Layout | None = None
         self._links: dict[int, _Link] = {}
         self._pending: set[concurrent.futures.Future] = set()
@@ -127,6 +128,7 @@ class ServerPolicy:
 
         self._servers_decl = (bench.raw or {}).get("servers")
         self._benchmark = bench.name
+        self._protocol_values = {"init.seed": bench.init.get("seed"), "settle.steps": bench.settle_steps}
         self.layout = self._layout(self._asked_params())
         if self.layout is None:
             return bench
@@ -144,7 +146,7 @@ class ServerPolicy:
         return {}
 
     def _layout(self, params: dict[str, Any]) -> Layout | None:
-        return layout_for(self._servers_decl, self.kind, params, self._benchmark)
+        return layout_for(self._servers_decl, self.kind, params, self._benchmark, self._protocol_values)
 
     def describe(self) -> dict[str, Any]:
         """What the results record: the protocol, the URL and what the server said of itself

@@ -14,7 +14,7 @@ HELLO (`get_observation_params`) changes:
             add: {states: {concat: [robot0_eef_pos, {axis_angle: robot0_eef_quat}, robot0_gripper_qpos]}}
             env: {kwargs: {controller_state: true}, keys: [...]}   # what the env must give for it
           quat_no_antipodal: {replace: {states: ...}}
-          seed: {equals: 7}                                          # what this benchmark runs with
+          seed: {equals: $init.seed}                    # what this benchmark runs with
       openpi:
         send: {observation/image: {resize: [224, 224], of: agentview_image}, prompt: $text, ...}
         replan: 5                       # actions of each chunk run before the next request
@@ -44,6 +44,8 @@ __all__ = ["LayoutError", "Layout", "check", "layout_for"]
 PROTOCOLS = ("vla-eval", "openpi")
 TEXT = "$text"
 CONVENTIONS = ("antipodal", "robosuite", "robosuite64")
+#: The benchmark's protocol values an `equals` may name (the run's, `--seeds` included).
+PROTOCOL_VALUES = ("$init.seed", "$settle.steps")
 _OPS = ("concat", "axis_angle", "quat_of_matrix", "float32", "resize")
 
 
@@ -109,6 +111,9 @@ def check(decl: Any, where: str) -> dict[str, Any]:
             _only(effect, ["add", "replace", "env", "equals"], p)
             if "equals" in effect and len(effect) > 1:
                 raise LayoutError(f"{p}: `equals` stands alone")
+            want = effect.get("equals")
+            if isinstance(want, str) and want.startswith("$") and want not in PROTOCOL_VALUES:
+                raise LayoutError(f"{p}.equals: unknown protocol value `{want}`; valid: {', '.join(PROTOCOL_VALUES)}")
             for kind in ("add", "replace"):
                 if kind in effect:
                     _entries(effect[kind], f"{p}.{kind}")
@@ -124,11 +129,19 @@ def check(decl: Any, where: str) -> dict[str, Any]:
     return decl
 
 
-def layout_for(decl: dict[str, Any] | None, protocol: str, params: dict[str, Any] | None, benchmark: str) -> Layout | None:
+def layout_for(
+    decl: dict[str, Any] | None,
+    protocol: str,
+    params: dict[str, Any] | None,
+    benchmark: str,
+    protocol_values: dict[str, Any] | None = None,
+) -> Layout | None:
     """The layout of `protocol` for a server that asked for `params` (vla-eval's HELLO),
     or None when the benchmark declares none for the protocol (the client's default
     layout applies). A param the declaration does not name, a non-boolean for a switch,
-    or another value than an `equals` is a LayoutError naming what is supported."""
+    or another value than an `equals` is a LayoutError naming what is supported. An
+    `equals` may name a value of the benchmark's protocol (`$init.seed`, `$settle.steps`):
+    `protocol_values` holds them for the run (its `--seeds` offset included)."""
     spec = (decl or {}).get(protocol)
     params = dict(params or {})
     if spec is None:
@@ -157,10 +170,13 @@ def layout_for(decl: dict[str, Any] | None, protocol: str, params: dict[str, Any
             continue
         asked = params[name]
         if "equals" in effect:
-            if asked != effect["equals"] or isinstance(asked, bool) != isinstance(effect["equals"], bool):
+            want = effect["equals"]
+            if isinstance(want, str) and want.startswith("$"):
+                want = (protocol_values or {}).get(want[1:], want)
+            if asked != want or isinstance(asked, bool) != isinstance(want, bool):
                 raise LayoutError(
                     f"the {protocol} server asks for `{name}` = {asked!r}; envhub's `{benchmark}` runs with "
-                    f"`{name}` = {effect['equals']!r} (the only value it supports)"
+                    f"`{name}` = {want!r} (the only value it supports)"
                 )
             continue
         if not isinstance(asked, bool):
