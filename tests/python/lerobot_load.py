@@ -1,7 +1,7 @@
 """Loads a dataset with LeRobot's own loader and dumps what it gives, for test_py_record.py.
 
-Runs in the LeRobot interpreter (`.venv-lerobot/`, with `lerobot-dataset` and torch), not
-envhub's: `python lerobot_load.py ROOT OUT.npz`. Writes, per feature, the values of every
+Runs in the LeRobot interpreter (`.venv-lerobot/`, with `lerobot-dataset` or `lerobot`, and
+torch), not envhub's: `python lerobot_load.py ROOT OUT.npz`. Writes, per feature, the values of every
 frame as `ds[i]` returns them (videos decoded by the loader, as uint8 `(h, w, 3)`), the raw
 columns of `ds.hf_dataset` as stored (`raw/<key>`), the task text of every frame, and a JSON summary.
 
@@ -22,8 +22,15 @@ import sys
 import traceback
 
 import numpy as np
-from ledataset.datasets import video_utils
-from ledataset.datasets.lerobot_dataset import LeRobotDataset
+
+# LeRobot's dataset code: `lerobot` itself (0.4 on), or the `lerobot-dataset` package of it
+# without the robot stack (`ledataset`), whichever this interpreter has.
+try:
+    from lerobot.datasets import video_utils
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+except ImportError:
+    from ledataset.datasets import video_utils
+    from ledataset.datasets.lerobot_dataset import LeRobotDataset
 
 
 def main(root: str, out: str) -> None:
@@ -76,7 +83,9 @@ def serve() -> None:
         except Exception:
             answer = {"ok": False, "error": traceback.format_exc()}
         finally:
-            video_utils._default_decoder_cache.clear()
+            cache = getattr(video_utils, "_default_decoder_cache", None)
+            if cache is not None:
+                cache.clear()
         answers.write(json.dumps(answer) + "\n")
         answers.flush()
 

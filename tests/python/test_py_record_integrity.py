@@ -547,7 +547,10 @@ LEROBOT_STATS = textwrap.dedent(
     import json, sys
     from pathlib import Path
     import numpy as np, pyarrow as pa, pyarrow.parquet as pq
-    from ledataset.datasets.compute_stats import aggregate_stats, get_feature_stats
+    try:
+        from lerobot.datasets.compute_stats import aggregate_stats, get_feature_stats
+    except ImportError:
+        from ledataset.datasets.compute_stats import aggregate_stats, get_feature_stats
 
     root = Path(sys.argv[1])
     data = pa.concat_tables([pq.read_table(p) for p in sorted((root / "data").glob("*/*.parquet"))])
@@ -634,7 +637,10 @@ LEROBOT_DATALOADER = textwrap.dedent(
     # dataset through a DataLoader with 4 workers.
     import json, resource, sys, time
     import torch
-    from ledataset.datasets.lerobot_dataset import LeRobotDataset
+    try:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    except ImportError:
+        from ledataset.datasets.lerobot_dataset import LeRobotDataset
 
     resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
     ds = LeRobotDataset("envhub/scale", root=sys.argv[1])
@@ -738,7 +744,10 @@ LEROBOT_WRITER = textwrap.dedent(
     import json, sys
     from pathlib import Path
     import av, numpy as np, pyarrow as pa, pyarrow.parquet as pq
-    from ledataset.datasets.lerobot_dataset import LeRobotDataset
+    try:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    except ImportError:
+        from ledataset.datasets.lerobot_dataset import LeRobotDataset
 
     src, out = Path(sys.argv[1]), Path(sys.argv[2])
     info = json.loads((src / "meta/info.json").read_text())

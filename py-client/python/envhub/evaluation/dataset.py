@@ -28,6 +28,7 @@ import numpy as np
 from ..recording._budget import DEFAULT_QUEUE_BYTES, ByteQueue
 from ..recording._dataset import Dataset
 from ..recording._dataset import Episode as Recorded
+from ..recording._encoding import CANONICAL, DEFAULT_CODEC
 from ..recording._features import (
     STEP_COLUMNS,
     Column,
@@ -36,7 +37,7 @@ from ..recording._features import (
     frame_rate,
     observation_columns,
 )
-from ..recording._video import CANONICAL, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, EpisodeVideo, check_codec
+from ..recording._video import EpisodeVideo, check_codec
 from ..recording.errors import RecordingError, require
 
 __all__ = ["EpisodeDataset"]
@@ -66,8 +67,8 @@ class EpisodeDataset:
         *,
         fps: int | None = None,
         codec: str | None = None,
-        crf: int = DEFAULT_CRF,
-        gop: int = DEFAULT_GOP,
+        crf: int | None = None,
+        gop: int | None = None,
         queue_bytes: int = DEFAULT_QUEUE_BYTES,
         commit_every: float = 1.0,
     ) -> None:
@@ -77,7 +78,7 @@ class EpisodeDataset:
         if queue_bytes < 1:
             raise ValueError(f"`queue_bytes={queue_bytes}` must be at least 1 (a byte budget)")
         self.root = Path(root)
-        self._fps, self._codec, self._crf, self._gop = fps, codec or DEFAULT_CODEC, crf, gop
+        self._fps, self._codec, self._crf, self._gop = fps, codec, crf, gop
         self._commit_every = commit_every
         self._queue = ByteQueue(queue_bytes)
         self._layout: tuple[list[Column], Column, str] | None = None  # columns, action, first task
@@ -96,8 +97,9 @@ class EpisodeDataset:
         action = action_column(envs.single_action_space)
         if self._layout is None:
             fps = frame_rate(envs.metadata.get("render_fps"), self._fps)
-            wanted = features([*columns, action, *STEP_COLUMNS], fps, CANONICAL[self._codec])
-            self._dataset = Dataset(self.root, fps, wanted, None)
+            wanted = features([*columns, action, *STEP_COLUMNS], fps, CANONICAL[self._codec or DEFAULT_CODEC])
+            # An existing dataset's own encoding (its codec, CRF, GOP), unless others are asked.
+            self._dataset = Dataset(self.root, fps, wanted, None, codec=self._codec, crf=self._crf, gop=self._gop)
             self._layout = (columns, action, task)
             self._video_fps = fps
             self._thread = threading.Thread(target=self._run, name="envhub-eval-dataset", daemon=True)
@@ -221,11 +223,8 @@ class EpisodeDataset:
                 video = ep.videos.get(name)
                 if video is None:
                     serial += 1
-                    h, w, _ = feature["shape"]
                     path = self._dataset.staged(f"eval-slot{slot}-{serial}.mp4")
-                    video = ep.videos[name] = EpisodeVideo(
-                        path, self._video_fps, h, w, self._codec, self._crf, self._gop
-                    )
+                    video = ep.videos[name] = EpisodeVideo(path, self._video_fps, self._dataset.encodings[name])
                 video.add(value)
             else:
                 ep.rows.setdefault(name, []).append(value)

@@ -21,6 +21,7 @@ next open cuts what was appended past it and removes files no committed episode 
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import glob
 import json
@@ -34,9 +35,11 @@ from typing import Any
 
 import numpy as np
 
+from . import _encoding as encoding
 from ._durable import Commit, fsync_dir, fsync_file
-from ._stats import NAMES, aggregate, column_stats
-from ._video import concatenate, count_frames
+from ._encoding import Encoding
+from ._stats import NAMES, aggregate, aggregate_all, column_stats
+from ._video import concatenate, count_frames, pix_fmt
 from .errors import DatasetLayoutError, RecordingError
 
 CODEBASE_VERSION = "v3.0"
@@ -88,6 +91,83 @@ def _ours(rel: str, template: str) -> bool:
 
 def _fmt(template: str, at: tuple[int, int], **kw: str) -> str:
     return template.format(chunk_index=at[0], file_index=at[1], **kw)
+
+
+def _acquire(path: Path) -> Any:
+    """The lock file at `path`, opened and locked (exclusively), or `None` if another process
+    holds it. A lock taken on a file that was meanwhile removed (its holder closing) is taken
+    again on the file now there, so two writers never hold locks on two different files."""
+    for _ in range(100):
+        lock = open(path, "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            return None
+        try:
+            same = os.stat(path).st_ino == os.fstat(lock.fileno()).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return lock
+        lock.close()
+        path.parent.mkdir(exist_ok=True)
+    raise RecordingError(f"the lock `{path}` kept being removed while it was taken\nhint: is another program cleaning the folder?")
+
+
+def _remove_private(private: Path) -> None:
+    """Removes the private folder while its lock is still held: everything but the lock, then
+    the lock file, then the folder (a writer that locks the removed file sees it is gone)."""
+    for p in private.iterdir():
+        if p.name != "lock":
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        (private / "lock").unlink()
+        private.rmdir()
+
+
+def _read_only(folder: Path) -> bool:
+    """Whether `folder`'s file system is mounted read-only (where `access` does not say so)."""
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def _stacked(column: Any) -> np.ndarray:
+    """A column of nested lists of numbers (one per row, all of one shape) as an array
+    `(rows, *shape)`; `ValueError` if rows differ in shape or hold nulls."""
+    import pyarrow as pa
+
+    flat = column.combine_chunks()
+    rows = len(flat)
+    if flat.null_count:
+        raise ValueError("nulls")
+    while pa.types.is_list(flat.type) or pa.types.is_large_list(flat.type) or pa.types.is_fixed_size_list(flat.type):
+        flat = flat.flatten()
+        if flat.null_count:
+            raise ValueError("nulls")
+    values = flat.to_numpy(zero_copy_only=False).astype(np.float64)
+    shape = np.shape(column[0].as_py()) if rows else ()
+    return values.reshape(rows, *shape)
+
+
+def _same_stats(a: dict[str, dict[str, np.ndarray]], b: dict[str, dict[str, Any]]) -> bool:
+    """Whether two sets of statistics agree: counts exactly, the rest to rounding (LeRobot's
+    `aggregate_stats` differs from these sums by up to 1e-8 relative in `std`)."""
+    if set(a) != set(b):
+        return False
+    for key, stats in a.items():
+        for name, value in stats.items():
+            other = b[key].get(name)
+            if other is None or np.shape(other) != np.shape(value):
+                return False
+            if not np.allclose(np.asarray(other, dtype=np.float64), value, rtol=1e-6, atol=1e-9):
+                return False
+    return True
 
 
 def _nested(values: np.ndarray, leaf: Any) -> Any:
@@ -155,39 +235,123 @@ class Dataset:
     shape), else `DatasetLayoutError` names each difference."""
 
     def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None,
-                 data_files_size_in_mb: float | None = None, video_files_size_in_mb: float | None = None) -> None:
+                 data_files_size_in_mb: float | None = None, video_files_size_in_mb: float | None = None, *,
+                 codec: str | None = None, crf: int | None = None, gop: int | None = None) -> None:
         import pyarrow  # noqa: F401  (fails early, before any file is touched)
 
         self.root = Path(root)
         private = self.root / PRIVATE
         self._ours = private.is_dir()  # an envhub recording was here (maybe cut short)
+        self._request = (codec, crf, gop)
         wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
-        self._check_folder(wanted)  # before anything is created: a refusal touches nothing
-        self.root.mkdir(parents=True, exist_ok=True)
-        private.mkdir(exist_ok=True)
-        self._lock = open(private / "lock", "a")  # held until close
+        self._check_writable()
+        self._inspect(wanted)  # before anything is created: a refusal touches nothing
+        made = [p for p in (self.root, private) if not p.exists()]
         try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self._lock.close()
+            self.root.mkdir(parents=True, exist_ok=True)
+            private.mkdir(exist_ok=True)
+            lock = _acquire(private / "lock")
+        except OSError as e:
+            raise RecordingError(f"cannot write into `{self.root}`: {e}\nhint: record into a folder you can write") from e
+        if lock is None:
             raise RecordingError(
                 f"the dataset `{self.root}` is being written by another recorder\n"
                 "hint: record into another folder, or wait for that recording to end"
-            ) from None
+            )
+        self._lock = lock
         try:
             self._open(fps, features, robot_type,
                        {"data_files_size_in_mb": data_files_size_in_mb,
                         "video_files_size_in_mb": video_files_size_in_mb})
         except BaseException:
-            self._lock.close()
+            # Refused under the lock (another process changed the folder meanwhile): what this
+            # opening made goes, the lock last.
+            shutil.rmtree(private / "staging", ignore_errors=True)
+            if private in made:
+                _remove_private(private)
+            lock.close()
+            if self.root in made:
+                with contextlib.suppress(OSError):
+                    self.root.rmdir()
             raise
+
+    def _check_writable(self) -> None:
+        """A clear error for a dangling link, a file, or a folder this process cannot write."""
+        if self.root.is_symlink() and not self.root.exists():
+            raise DatasetLayoutError(
+                f"`{self.root}` is a symbolic link to `{os.readlink(self.root)}`, which does not exist\n"
+                "hint: create the folder it points to, or record into another folder"
+            )
+        if self.root.exists() and not self.root.is_dir():
+            raise DatasetLayoutError(f"`{self.root}` is a file\nhint: record into a new or empty folder")
+        folder = self.root
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK) or _read_only(folder):
+            raise RecordingError(
+                f"`{folder}` is not writable by this process, so the dataset `{self.root}` cannot be "
+                "written there\nhint: record into a folder you can write (check its permissions, or "
+                "whether its file system is mounted read-only)"
+            )
+
+    def _inspect(self, wanted: dict[str, Any], locked: bool = False) -> None:
+        """Every check of the folder, reading only: its layout, its committed episodes, and the
+        encoding of each camera (the dataset's, or the one asked for a new dataset). Sets
+        `info` (`None` for a new folder), `_rows` and `encodings`."""
+        info = self._check_folder(wanted, locked)
+        self.info = info  # type: ignore[assignment]
+        features = (info or wanted)["features"]
+        self.video_keys = [k for k, f in features.items() if f["dtype"] == "video"]
+        self._rows = self._committed_episode_rows() if info is not None else []
+        self.encodings = self._encodings(features, (info or wanted)["fps"])
+
+    def _encodings(self, features: dict[str, dict], fps: int) -> dict[str, Encoding]:
+        """Each camera's encoding: the dataset's where it has videos (asked parameters must be
+        the same, and two frames encoded with them must join its last file), else the asked
+        one, with the codec `info.json` names."""
+        import av
+
+        codec, crf, gop = self._request
+        last = self._rows[-1] if self._rows else {}
+        out: dict[str, Encoding] = {}
+        for key in self.video_keys:
+            f = features[key]
+            if last.get(f"videos/{key}/chunk_index") is not None:
+                at = (last[f"videos/{key}/chunk_index"], last[f"videos/{key}/file_index"])
+                path = self.root / _fmt(VIDEO_PATH, at, video_key=key)
+                try:
+                    there = encoding.read(path, f)
+                    problems = encoding.conflicts(there, codec, crf, gop)
+                    if not problems and there.encoder not in av.codecs_available:
+                        problems = [f"its videos are encoded with `{there.encoder}`, which this PyAV build lacks"]
+                    if not problems:
+                        encoding.check_joinable(path, there, fps)
+                except (ValueError, OSError, av.FFmpegError) as e:
+                    problems = [str(e)]
+                if problems:
+                    raise DatasetLayoutError(
+                        f"the dataset at `{self.root}` cannot take this recording's `{key}` frames in its "
+                        f"own encoding: {'; '.join(problems)}\nhint: leave `codec`, `crf` and `gop` out to "
+                        "append in the dataset's encoding, or record into a new folder"
+                    )
+                out[key] = there
+                continue
+            h, w, _ = f["shape"]
+            info = f.get("info", {})
+            named = info.get("video.codec")
+            chosen = codec or encoding.ENCODER.get(named or "")
+            if named and chosen and encoding.CANONICAL.get(chosen) != named:
+                raise DatasetLayoutError(
+                    f"the dataset at `{self.root}` says its `{key}` videos are `{named}`, this recording "
+                    f"encodes `{encoding.CANONICAL.get(chosen)}` (`{chosen}`)\nhint: leave `codec` out"
+                )
+            out[key] = encoding.requested(chosen, crf, gop, info.get("video.pix_fmt") or pix_fmt(w, h), w, h)
+        return out
 
     def _check_folder(self, wanted: dict[str, Any], locked: bool = False) -> dict[str, Any] | None:
         """The dataset's `info.json` if it holds one of this layout, `None` for a new or empty
         folder (or one where an envhub recording crashed before its first commit); else
         `DatasetLayoutError`. Reads only."""
-        if self.root.exists() and not self.root.is_dir():
-            raise DatasetLayoutError(f"`{self.root}` is a file\nhint: record into a new or empty folder")
         info_path = self.root / "meta" / "info.json"
         if info_path.exists():
             try:
@@ -222,13 +386,12 @@ class Dataset:
     def _open(self, fps: int, features: dict[str, dict], robot_type: str | None,
               sizes: dict[str, float | None]) -> None:
         wanted = {"codebase_version": CODEBASE_VERSION, "fps": fps, "features": features}
-        info = self._check_folder(wanted, locked=True)  # again, under the lock
+        self._inspect(wanted, locked=True)  # again, under the lock
+        info = self.info
         self.staging = self.root / PRIVATE / "staging"
         shutil.rmtree(self.staging, ignore_errors=True)
         self.staging.mkdir()
-        if info is not None:
-            self.info = info
-        else:
+        if info is None:
             self.info = {
                 "codebase_version": CODEBASE_VERSION,
                 "robot_type": robot_type,
@@ -245,18 +408,17 @@ class Dataset:
                 "features": features,
             }
         self.features = self.info["features"]
-        self.video_keys = [k for k, f in self.features.items() if f["dtype"] == "video"]
         for key, value in sizes.items():
             if value is not None:
                 self.info[key] = value
-        rows = self._committed_episode_rows()
+        rows = self._rows
         self._remove_uncommitted(rows)
         self._data = self._last_file(rows, "data")
         self._meta = self._last_file(rows, "meta/episodes")
         self._videos = {k: self._last_file(rows, f"videos/{k}") for k in self.video_keys}
         self._trim(rows)
         self.tasks = self._read_tasks()
-        self.stats = self._read_stats()
+        self.stats = self._committed_stats()
         self._schemas = self._existing_schemas()
 
     # Reading what is there -----------------------------------------------------------------
@@ -348,7 +510,7 @@ class Dataset:
             path = self.root / _fmt(VIDEO_PATH, last.at, video_key=key)
             if count_frames(path) > last.count:
                 tmp = self.staging / f"trim-{len(cut)}.mp4"
-                concatenate([(path, last.count)], tmp, self.info["fps"])
+                concatenate([(path, last.count)], tmp, self.info["fps"], self.encodings[key].tag())
                 cut.append((tmp, path))
         for tmp, path in cut:
             fsync_file(tmp)
@@ -377,6 +539,43 @@ class Dataset:
         if not path.exists():
             return {}
         return {k: {s: np.asarray(v) for s, v in d.items()} for k, d in json.loads(path.read_text()).items()}
+
+    def _committed_stats(self) -> dict[str, dict[str, np.ndarray]]:
+        """The dataset's statistics over the committed episodes, aggregated from theirs in
+        `meta/episodes/` (the commit's own record), and `stats.json` rewritten if it says
+        otherwise: without an atomic exchange of `meta/`, a crash between its renames can leave
+        a `stats.json` of episodes never committed."""
+        import pyarrow.parquet as pq
+
+        written = self._read_stats()
+        total = self.info["total_episodes"]
+        per_key: dict[str, dict[str, list[np.ndarray]]] = {}
+        try:
+            for path in self._episode_files():
+                names = [n for n in pq.read_schema(path).names if n.startswith("stats/") or n == "episode_index"]
+                table = pq.read_table(path, columns=names)
+                keep = table.column("episode_index").to_numpy() < total
+                for name in names:
+                    if name != "episode_index":
+                        key, stat = name[len("stats/"):].rsplit("/", 1)
+                        per_key.setdefault(key, {}).setdefault(stat, []).append(_stacked(table.column(name))[keep])
+        except ValueError:  # statistics with gaps (nulls): `stats.json` is all there is
+            return written
+        stats: dict[str, dict[str, np.ndarray]] = {}
+        for key, parts in per_key.items():
+            columns = {stat: np.concatenate(values) for stat, values in parts.items()}
+            if not {"min", "max", "mean", "std", "count"} <= set(columns) or len(columns["count"]) != total:
+                return written  # episodes without their statistics: `stats.json` is all there is
+            stats[key] = aggregate_all(columns)
+        if total and not _same_stats(stats, written):
+            tmp = self.staging / "stats.json"
+            self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in stats.items()}, tmp)
+            fsync_file(tmp)
+            os.replace(tmp, self.root / "meta" / "stats.json")
+            fsync_dir(self.root / "meta")
+            warnings.warn(f"`{self.root}/meta/stats.json` did not describe the committed episodes: rewritten",
+                          stacklevel=4)
+        return stats if total else written
 
     def _existing_schemas(self) -> dict[str, Any]:
         """The schemas of the files already there, which new files follow (the loader reads
@@ -474,7 +673,7 @@ class Dataset:
             parts = [(self.root / rel, last.count)] if last.count else []
             parts += [(ep.videos[key], ep.length) for ep in episodes]
             video = commit.staged("video.mp4")
-            concatenate(parts, video, fps)
+            concatenate(parts, video, fps, self.encodings[key].tag())
             commit.place(video, rel)
             meta[f"videos/{key}/chunk_index"] = np.full(count, last.at[0])
             meta[f"videos/{key}/file_index"] = np.full(count, last.at[1])
@@ -610,5 +809,7 @@ class Dataset:
         """Releases the folder (removing the private folder's files not committed)."""
         if self._lock.closed:
             return
-        shutil.rmtree(self.root / PRIVATE, ignore_errors=True)
-        self._lock.close()
+        try:
+            _remove_private(self.root / PRIVATE)
+        finally:
+            self._lock.close()  # released only once the private folder is gone

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from ..wire.errors import EnvHubError
-from ._video import DEFAULT_CODEC, DEFAULT_CRF, EpisodeVideo, check_codec
+from ._encoding import DEFAULT_CODEC, requested
+from ._video import EpisodeVideo, check_codec, pix_fmt
 from ._wrapper import RecordEpisodes
 from .errors import require
 
@@ -134,7 +135,7 @@ def record_video(
     seed: int | None = 0,
     fps: int | None = None,
     codec: str = DEFAULT_CODEC,
-    crf: int = DEFAULT_CRF,
+    crf: int | None = None,
     **make_kwargs: Any,
 ) -> int:
     """`render()` frames of one env of catalog entry `id` over `steps` steps (episodes
@@ -159,7 +160,8 @@ def record_video(
             frame = np.asarray(env.render()[0])
             if video is None:
                 out.parent.mkdir(parents=True, exist_ok=True)
-                video = EpisodeVideo(tmp, rate, frame.shape[0], frame.shape[1], codec, crf, gop=rate)
+                h, w = frame.shape[:2]
+                video = EpisodeVideo(tmp, rate, requested(codec, crf, rate, pix_fmt(w, h), w, h))
             video.add(frame)
             if k < steps:
                 obs, *_ = env.step(act(obs))

@@ -95,7 +95,7 @@ def column_stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) ->
     return per_episode, whole
 
 
-def level_quantiles(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
+def level_quantiles(counts: np.ndarray) -> dict[str, np.ndarray]:
     """Per-channel quantiles of pixel values in [0, 1] from their counts (`(channels, 256)`,
     by uint8 level), shaped `(channels, 1, 1)` as LeRobot keeps a camera's. The bins of the
     levels present are computed as `episode_quantiles` computes them; the rest is done on
@@ -105,7 +105,8 @@ def level_quantiles(counts: np.ndarray, frames: int) -> dict[str, np.ndarray]:
     out = {name: np.zeros((len(counts), 1, 1)) for name in QUANTILE_KEYS}
     for c, count in enumerate(counts):
         present = np.flatnonzero(count)
-        if frames < 2 or not len(present):
+        # LeRobot takes a camera's quantiles over its pixels: a single frame has many.
+        if count.sum() < 2 or not len(present):
             mean = (count * levels).sum() / max(count.sum(), 1)
             for name in QUANTILE_KEYS:
                 out[name][c] = mean
@@ -147,4 +148,25 @@ def aggregate(a: dict[str, np.ndarray] | None, b: dict[str, np.ndarray]) -> dict
     for name in QUANTILE_KEYS:
         if name in a and name in b:
             out[name] = (np.asarray(a[name]) * na + np.asarray(b[name]) * nb) / n
+    return out
+
+
+def aggregate_all(episodes: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Statistics over many episodes at once (each statistic stacked, episodes first), as
+    `aggregate` pairs them: exact mean and std, quantiles weighted by count."""
+    counts = episodes["count"].reshape(len(episodes["count"]), -1)[:, 0]
+    n = counts.sum()
+    w = counts.reshape(-1, *([1] * (episodes["mean"].ndim - 1)))
+    mean = (episodes["mean"] * w).sum(0) / n
+    var = ((episodes["std"] ** 2 + (episodes["mean"] - mean) ** 2) * w).sum(0) / n
+    out = {
+        "min": episodes["min"].min(0),
+        "max": episodes["max"].max(0),
+        "mean": mean,
+        "std": np.sqrt(var),
+        "count": np.array([int(n)]),
+    }
+    for name in QUANTILE_KEYS:
+        if name in episodes:
+            out[name] = (episodes[name] * w).sum(0) / n
     return out

@@ -16,21 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ._encoding import CODECS, DEFAULT_CODEC, Encoding
 from ._stats import level_quantiles
-
-#: Encoder settings per codec: `crf` (quality, lower is better) where the encoder has one.
-CODECS: dict[str, dict[str, str]] = {
-    "libx264": {"preset": "veryfast", "tune": "zerolatency"},
-    "libsvtav1": {"preset": "12"},
-    "libaom-av1": {"cpu-used": "8", "row-mt": "1"},
-    "libopenh264": {},
-}
-DEFAULT_CODEC = "libx264"
-#: Codec names as `info.json` has them (LeRobot writes FFmpeg's canonical names), both ways.
-CANONICAL = {"libx264": "h264", "libopenh264": "h264", "libsvtav1": "av1", "libaom-av1": "av1"}
-ENCODER = {"h264": "libx264", "av1": "libsvtav1"}
-DEFAULT_CRF = 18
-DEFAULT_GOP = 2
 
 
 def check_codec(codec: str) -> None:
@@ -56,24 +43,22 @@ class EpisodeVideo:
     """One episode of one camera, encoded into `path` frame by frame (frame `k` at time
     `k / fps`)."""
 
-    def __init__(self, path: Path, fps: int, height: int, width: int, codec: str, crf: int, gop: int) -> None:
+    def __init__(self, path: Path, fps: int, encoding: Encoding) -> None:
         import av
 
         self.path = path
-        self.shape = (height, width, 3)
+        self.shape = (encoding.height, encoding.width, 3)
         self.frames = 0
         self._container = av.open(str(path), mode="w", format="mp4")
         try:
-            options = dict(CODECS[codec])
-            if codec != "libopenh264":
-                options["crf"] = str(crf)
-            options["g"] = str(gop)
-            stream = self._container.add_stream(codec, rate=fps, options=options)
-            stream.width, stream.height = width, height
-            stream.pix_fmt = pix_fmt(width, height)
+            self._container.metadata["comment"] = encoding.tag()  # read back by appends
+            stream = self._container.add_stream(encoding.encoder, rate=fps, options=encoding.options())
+            stream.width, stream.height = encoding.width, encoding.height
+            stream.pix_fmt = encoding.pix_fmt
             stream.codec_context.time_base = Fraction(1, fps)
-            # One thread per encoder (FFmpeg's default is one per core each): the recorder
-            # bounds the threads that encode by calling encoders from `encode_threads` threads.
+            # One thread per encoder (FFmpeg's default is one per core each; SVT-AV1's own bound
+            # is in its options): the recorder bounds the threads that encode by calling
+            # encoders from `encode_threads` threads.
             stream.codec_context.thread_count = 1
             self._stream = stream
         except BaseException:
@@ -122,15 +107,18 @@ def count_frames(path: Path) -> int:
         return sum(1 for p in src.demux(src.streams.video[0]) if p.size)
 
 
-def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int) -> None:
+def concatenate(parts: list[tuple[Path, int]], out: Path, fps: int, tag: str | None = None) -> None:
     """Writes the first `frames` frames of each `(mp4, frames)` of `parts`, one after another,
     into the MP4 `out`: packets are copied (no encoding again) with their times moved on by
     the frames before them, so part `k` starts at the sum of the earlier parts' frames over
     `fps`. Parts come from `EpisodeVideo`s (or earlier concatenations) of one camera: the same
-    encoder and settings, no reordered frames, a keyframe first."""
+    encoder and settings (`tag`: the `comment` tag that says them), no reordered frames, a
+    keyframe first."""
     import av
 
     with av.open(str(out), mode="w", format="mp4") as dst:
+        if tag is not None:
+            dst.metadata["comment"] = tag
         stream = None
         offset = 0  # frames before this part
         for path, frames in parts:
@@ -191,5 +179,5 @@ class _ChannelStats:
             "mean": mean.reshape(shape),
             "std": std.reshape(shape),
             "count": np.array([frames]),
-            **level_quantiles(self.counts, frames),
+            **level_quantiles(self.counts),
         }

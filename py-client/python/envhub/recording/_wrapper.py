@@ -19,10 +19,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
+from ._encoding import CANONICAL, DEFAULT_CODEC
 from ._features import RENDER_KEY, STEP_COLUMNS, action_column, features, frame_rate, observation_columns
-from ._video import CANONICAL, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_GOP, ENCODER, check_codec
+from ._video import check_codec
 from ._writer import STOP, Reset, Step, Writer
-from .errors import DatasetLayoutError, QueueFullWarning, RecordingError, require
+from .errors import QueueFullWarning, RecordingError, require
 
 
 def _mode(env: VectorEnv) -> AutoresetMode:
@@ -88,6 +89,10 @@ class RecordEpisodes(VectorWrapper):
     4, one per core), the envs shared among them; each encoder runs on its caller's thread, so
     these are all the threads encoding takes.
 
+    Videos are encoded with `codec` (x264 by default), `crf` (18 for x264, 30 for AV1) and
+    `gop` (a keyframe every 2 frames); appending to a dataset encodes with its own parameters
+    (leave these out), and asking for others is a `DatasetLayoutError`.
+
     The dataset folder is opened (checked and locked) at the first `reset()`; a folder that
     holds a dataset of another layout raises `DatasetLayoutError` naming the differences.
     """
@@ -102,8 +107,8 @@ class RecordEpisodes(VectorWrapper):
         keep: str = "all",
         video: bool = True,
         codec: str | None = None,
-        crf: int = DEFAULT_CRF,
-        gop: int = DEFAULT_GOP,
+        crf: int | None = None,
+        gop: int | None = None,
         queue_bytes: int = DEFAULT_QUEUE_BYTES,
         when_full: str = "wait",
         commit_every: float = 1.0,
@@ -138,7 +143,10 @@ class RecordEpisodes(VectorWrapper):
         self._obs_columns = observation_columns(env.single_observation_space)
         self._action = action_column(env.single_action_space)
         self._render = bool(video) and getattr(env, "render_mode", None) == "rgb_array"
-        self._codec, self._crf, self._gop = codec, int(crf), int(gop)
+        for name, value, least in (("crf", crf, 0), ("gop", gop, 1)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+                raise ValueError(f"`{name}={value!r}` must be a whole number of at least {least}")
+        self._codec, self._crf, self._gop = codec, crf, gop
         self._queue_bytes, self._commit_every, self._robot_type = int(queue_bytes), float(commit_every), robot_type
         self._sizes = (data_files_size_in_mb, video_files_size_in_mb)
         self._max_episodes = max_episodes
@@ -186,39 +194,21 @@ class RecordEpisodes(VectorWrapper):
             render[RENDER_KEY] = tuple(np.asarray(frames[0]).shape)
         columns = [*self._obs_columns, self._action, *STEP_COLUMNS]
         wanted = features(columns, self.fps, CANONICAL[codec], render)
-        dataset = Dataset(self.root, self.fps, wanted, self._robot_type, *self._sizes)
-        try:
-            codec = self._dataset_codec(dataset, codec)
-            check_codec(codec)
-        except BaseException:
-            dataset.close()
-            raise
+        dataset = Dataset(self.root, self.fps, wanted, self._robot_type, *self._sizes,
+                          codec=self._codec, crf=self._crf, gop=self._gop)
         self._dataset = dataset
         numeric = [c.name for c in self._obs_columns if not c.video]
         videos = [c.name for c in self._obs_columns if c.video]
-        self._writer = Writer(
-            dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
-            codec, self._crf, self._gop, self.keep, self._commit_every, self._queue_bytes, self.stats,
-            self._max_episodes, self._encode_threads,
-        )
+        try:
+            self._writer = Writer(
+                dataset, self.num_envs, numeric, videos, RENDER_KEY if self._render else None, self.fps,
+                self.keep, self._commit_every, self._queue_bytes, self.stats, self._max_episodes,
+                self._encode_threads,
+            )
+        except BaseException:
+            dataset.close()
+            raise
         self._finalizer = weakref.finalize(self, _stop_writer, self._writer, dataset)
-
-    def _dataset_codec(self, dataset: Dataset, codec: str) -> str:
-        """The encoder for this dataset: its videos' codec when appending (an explicit other
-        codec is an error, since `info.json` describes one per camera)."""
-        for key in dataset.video_keys:
-            there = dataset.features[key].get("info", {}).get("video.codec")
-            if there is None or dataset.info["total_episodes"] == 0:
-                continue
-            if self._codec is None:
-                return ENCODER.get(there, codec)
-            if CANONICAL[self._codec] != there:
-                raise DatasetLayoutError(
-                    f"the dataset at `{dataset.root}` holds `{there}` videos, this recording "
-                    f"encodes `{CANONICAL[self._codec]}` (`{self._codec}`)\n"
-                    f"hint: leave `codec` out to append with the dataset's codec"
-                )
-        return codec
 
     # The step path ------------------------------------------------------------------------
 

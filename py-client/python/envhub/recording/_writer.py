@@ -98,9 +98,6 @@ class Writer:
         videos: list[str],
         render_key: str | None,
         fps: int,
-        codec: str,
-        crf: int,
-        gop: int,
         keep: str,
         commit_every: float,
         queue_bytes: int,
@@ -114,7 +111,7 @@ class Writer:
         self.videos = videos  # observation images, by column
         self.render_key = render_key
         self.video_keys = [*videos, *([render_key] if render_key else [])]
-        self.fps, self.codec, self.crf, self.gop = fps, codec, crf, gop
+        self.fps = fps
         self.keep = keep
         self.max_episodes = max_episodes
         self.commit_every = commit_every
@@ -235,10 +232,9 @@ class Writer:
             encoders = self._encoders[i]
             if not encoders:  # the episode's first frame: its files
                 for key in self.video_keys:
-                    h, w, _ = self.dataset.features[key]["shape"]
                     self._serial += 1
                     path = self.dataset.staged(f"env{i}-{self._serial}.mp4")
-                    encoders[key] = EpisodeVideo(path, self.fps, h, w, self.codec, self.crf, self.gop)
+                    encoders[key] = EpisodeVideo(path, self.fps, self.dataset.encodings[key])
             job = jobs[i % self._threads]
             for key in self.videos:
                 job.append((encoders[key], s.obs[key][i]))
