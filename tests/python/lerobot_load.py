@@ -16,6 +16,7 @@ is across processes).
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import sys
@@ -26,11 +27,17 @@ import numpy as np
 # LeRobot's dataset code: `lerobot` itself (0.4 on), or the `lerobot-dataset` package of it
 # without the robot stack (`ledataset`), whichever this interpreter has.
 try:
-    from lerobot.datasets import video_utils
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    _PACKAGE = "lerobot.datasets"
 except ImportError:
-    from ledataset.datasets import video_utils
     from ledataset.datasets.lerobot_dataset import LeRobotDataset
+
+    _PACKAGE = "ledataset.datasets"
+try:  # its in-process cache of video decoders, where this version has one
+    video_utils = importlib.import_module(f"{_PACKAGE}.video_utils")
+except ImportError:
+    video_utils = None
 
 
 def main(root: str, out: str) -> None:
@@ -63,10 +70,16 @@ def main(root: str, out: str) -> None:
         "features": {k: {"dtype": f["dtype"], "shape": list(f["shape"])} for k, f in ds.features.items()},
         "tasks": [item["task"] for item in items],
         "episode_lengths": [int(x) for x in episodes["length"]],
-        "episode_success": list(episodes["success"]) if "success" in episodes.column_names else None,
+        "episode_success": list(episodes["success"]) if "success" in _columns(episodes) else None,
         "stats_keys": sorted(ds.meta.stats or {}),
     }
     np.savez(out, summary=np.array(json.dumps(summary)), **arrays)
+
+
+def _columns(table) -> list[str]:
+    """The column names of LeRobot's episodes table (a `datasets.Dataset`, or a DataFrame)."""
+    names = getattr(table, "column_names", None)
+    return list(names) if names is not None else list(table.columns)
 
 
 def serve() -> None:
@@ -83,7 +96,7 @@ def serve() -> None:
         except Exception:
             answer = {"ok": False, "error": traceback.format_exc()}
         finally:
-            cache = getattr(video_utils, "_default_decoder_cache", None)
+            cache = getattr(video_utils, "_default_decoder_cache", None) if video_utils is not None else None
             if cache is not None:
                 cache.clear()
         answers.write(json.dumps(answer) + "\n")
