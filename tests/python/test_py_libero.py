@@ -327,10 +327,9 @@ def reference(suite: str, task: int):
     from libero.libero.envs import OffScreenRenderEnv
 
     tasks = benchmark.get_benchmark(suite)()
+    # The adapter's env starts each episode on a LIBERO env built for it (`FreshScenes`: its
+    # kitchens keep state across resets), as this one is: made, then seeded and reset.
     env = OffScreenRenderEnv(bddl_file_name=tasks.get_task_bddl_file_path(task), ignore_done=True, **CAMERA)
-    # The adapter resets a new env once to build its spaces; some scenes (libero_90's kitchens)
-    # keep state across resets that `set_init_state` does not restore, so the reference does too.
-    env.reset()
     return env, tasks.get_task_init_states(task)
 
 

@@ -210,17 +210,55 @@ end-effector pose to the observation. Observations: robosuite's dict, camera ima
         bddl = tasks.get_task_bddl_file_path(index)
         # The hub's `max_episode_steps` is the one limit: robosuite's own horizon would refuse
         # the step after it (`executing action in terminated episode`).
-        env = OffScreenRenderEnv(bddl_file_name=bddl, ignore_done=True, **options)
+        env = FreshScenes(lambda: OffScreenRenderEnv(bddl_file_name=bddl, ignore_done=True, **options))
         return LiberoEnv(env, tasks, index, init_state, controller_state)
+
+
+class FreshScenes:
+    """LIBERO's env made anew for every episode, so that an episode does not depend on the ones
+    before it. LIBERO's hard reset rebuilds the simulation, but where a kitchen's fixtures
+    (cabinets, stoves) are placed depends on the resets before it: on LIBERO-90's task 0,
+    episode 1 after episode 0 had its cabinet's body 8 mm from where a new env puts it (the
+    scene's XML differs there; 10 % of the camera's pixels; the states, which do not hold a
+    fixture's place, equal). `seed` (an episode's first call) or else `reset` builds a new env
+    first (unless the env was just built), so every episode runs as vla-eval's first episode
+    of a new env does: made, seeded, reset, set to its init state. Everything else goes to the
+    env of the episode."""
+
+    def __init__(self, make: Any) -> None:
+        self._make = make
+        self._current = make()
+        self._fresh = True  # built, nothing done with it since: the next episode may use it
+        self._seeded = False  # seeded for the episode whose reset comes next
+
+    def _renew(self) -> None:
+        if not self._fresh:
+            self._current.close()
+            self._current = self._make()
+        self._fresh = False
+
+    def seed(self, seed: int) -> Any:
+        self._renew()
+        self._seeded = True
+        return self._current.seed(seed)
+
+    def reset(self) -> Any:
+        if not self._seeded:
+            self._renew()
+        self._seeded = False
+        self._fresh = False
+        return self._current.reset()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.__dict__["_current"], name)
 
 
 class LiberoEnv(gym.Env):
     """Gymnasium's contract over LIBERO's `OffScreenRenderEnv` (`reset() -> obs`, `step ->
     (obs, reward, done, info)`); the spaces come from the first observation, of a reset when
-    the env is made (LIBERO's kitchen scenes keep state across resets that `set_init_state`
-    does not restore: LIBERO in-process matches this env bit for bit when it is reset once
-    after it is made too). A `gymnasium.Env`, so the worker's `TimeLimit` (the session's
-    `max_episode_steps`) can wrap it."""
+    the env is made; every episode then starts on a LIBERO env built for it (`FreshScenes`).
+    A `gymnasium.Env`, so the worker's `TimeLimit` (the session's `max_episode_steps`) can
+    wrap it."""
 
     metadata: dict[str, Any] = {"render_modes": []}
 
