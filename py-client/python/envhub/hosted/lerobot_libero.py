@@ -13,9 +13,10 @@ the reset's info also carries the task's `task` and `task_description`; an episo
 success (`is_success` in every step's info) and is never truncated here:
 LeRobot's rollout stops at the suite's horizon (`TASK_SUITE_MAX_STEPS`).
 
-It runs in the catalog's `libero` environment (hf-libero 0.1.4, robosuite 1.4.0), with the
-`libero` adapter's asset set-up and its caches of what a hard reset rebuilds (the same
-observations, checked in tests/python/test_py_suites.py).
+It runs in the LeRobot plugin's Python environment `lerobot-libero`, pinned as
+`lerobot[libero]==0.6.1` installs LIBERO (hf-libero 0.1.4, robosuite 1.4.0, mujoco 3.8.1,
+numpy 2.2.6, CPython 3.12), with the `libero` adapter's asset set-up and its caches of what a
+hard reset rebuilds (the same observations, checked in tests/python/test_py_suites.py).
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ class LeRobotLiberoAdapter(EnvAdapter):
     frameworks = ["lerobot_libero"]
     requires = ["libero", "robosuite", "bddl", "torch"]
     description = "LIBERO as LeRobot 0.6.1's LiberoEnv presents it (init states, settling steps, nested observation)"
-    install_hint = "it runs in the catalog's python env `libero` (`envhub env sync libero`)"
+    install_hint = "it runs in the LeRobot plugin's python env `lerobot-libero` (integrations/lerobot)"
 
     def availability(self) -> tuple[bool, str | None, str | None]:
         from .libero import LiberoAdapter

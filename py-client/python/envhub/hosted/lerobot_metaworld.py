@@ -6,9 +6,9 @@ its first train task, the `corner2` camera moved to LeRobot's position and its f
 right side up (both axes flipped), goals drawn from the reset seed (`seeded_rand_vec`).
 Observation `{"pixels": (480, 480, 3) uint8, "agent_pos": the first 4 state values}` (or only
 `pixels` with `obs_type: pixels`); an episode ends at success, with `final_info` in the
-step's info and the env reset at once, as LeRobot's does. It runs in the catalog's Python
-environment pinned like `lerobot[metaworld]` (metaworld 3.0.0), so the episodes are
-LeRobot's own.
+step's info and the env reset at once, as LeRobot's does. It runs in the LeRobot plugin's
+Python environment `lerobot-metaworld`, pinned as LeRobot 0.6.1's own lock pins Meta-World
+(metaworld 3.0.0, mujoco 3.8.1), so the episodes are LeRobot's own.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class LeRobotMetaWorldAdapter(EnvAdapter):
     frameworks = ["lerobot_metaworld"]
     requires = ["metaworld", "mujoco"]
     description = "Meta-World as LeRobot 0.6.1's MetaworldEnv presents it (corner2 camera, 4-d agent_pos)"
-    install_hint = "it runs in the catalog's python env `lerobot-metaworld` (metaworld==3.0.0, as lerobot[metaworld])"
+    install_hint = "it runs in the LeRobot plugin's python env `lerobot-metaworld` (integrations/lerobot)"
 
     def make(self, env_id: str, config: Any) -> Any:
         options = dict(config.extra)
