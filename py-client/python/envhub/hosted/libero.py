@@ -233,8 +233,14 @@ class FreshScenes:
 
     def _renew(self) -> None:
         if not self._fresh:
+            import numpy as np
+
             self._current.close()
+            # Building draws from numpy's global generator (LIBERO's placement): put back as it
+            # was, so an unseeded reset draws what it would have drawn from the old env.
+            state = np.random.get_state()
             self._current = self._make()
+            np.random.set_state(state)
         self._fresh = False
 
     def seed(self, seed: int) -> Any:
