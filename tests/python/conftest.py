@@ -108,10 +108,12 @@ def pytest_configure(config) -> None:
 
 
 #: What a test module uses when it needs a Python environment besides .venv: the switch that
-#: turns its skip (no uv, no suite environment) into a failure, or a helper that runs another
-#: interpreter built for the tests.
+#: turns its skip (no uv, no suite environment, no LeRobot) into a failure, a helper that runs
+#: another interpreter built for the tests, or a venv it makes itself (`python -m venv`).
 _USES_A_SUITE = re.compile(
-    r"ENVHUB_(SUITES|PYENV|LIBERO)_REQUIRED|\b(suite_runs|eval_peers|lerobot_load)\b"
+    r"ENVHUB_(SUITES|PYENV|LIBERO|LEROBOT)_REQUIRED"
+    r"|\b(suite_runs|eval_peers|lerobot_load|lerobot_envs|lerobot_python)\b"
+    r"""|["']-m["'],\s*["']venv["']"""
 )
 
 
