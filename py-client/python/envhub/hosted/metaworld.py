@@ -133,8 +133,9 @@ class MetaWorldAdapter(SuiteAdapter):
 def _goal_set(benchmark: str, seed: int) -> tuple[Any, list[Any]]:
     """(task classes, train goals) of Meta-World's benchmark of that seed. Drawing them makes
     every task's env and resets it 50 times (MT10: about 13 s here), so every worker of
-    every session would pay it: they are kept in a file per user, benchmark, seed and
-    Meta-World version (written whole, then renamed into place)."""
+    every session would pay it: they are kept in a file per benchmark, seed and Meta-World
+    version in this user's private folder (`envhub.wire.private_dir`; written whole, then
+    renamed into place)."""
     import os
     import pickle
     import tempfile
@@ -143,8 +144,11 @@ def _goal_set(benchmark: str, seed: int) -> tuple[Any, list[Any]]:
     import metaworld
     from metaworld import env_dict
 
+    from ..wire import private_dir
+
     classes = getattr(env_dict, f"{benchmark}_V3")
-    folder = os.path.join(tempfile.gettempdir(), f"envhub-{os.getuid()}-metaworld")
+    # Unpickled: so only in a folder no other user can have made or write in.
+    folder = private_dir.runtime_dir("metaworld")
     path = os.path.join(folder, f"{benchmark}-seed{seed}-{metadata.version('metaworld')}.pkl")
     try:
         with open(path, "rb") as f:
@@ -152,7 +156,6 @@ def _goal_set(benchmark: str, seed: int) -> tuple[Any, list[Any]]:
     except (OSError, pickle.UnpicklingError, EOFError):
         pass
     tasks = getattr(metaworld, benchmark)(seed=seed).train_tasks
-    os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=folder)
     with os.fdopen(fd, "wb") as f:
         pickle.dump(tasks, f)
