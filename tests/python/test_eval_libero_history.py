@@ -9,7 +9,8 @@ before `hosted/libero.py`'s `FreshScenes`: 10 % of the pixels differed, the stat
 For LIBERO-90 it is also vla-eval's first episode of a new env, LIBERO in-process: made,
 `seed(7)`, `reset()`, `set_init_state(init_states[1])`.
 
-Skipped with the reason where LIBERO's environment cannot be built (as test_eval_libero.py).
+Skipped with the reason where LIBERO's environment cannot be built, failed instead under
+ENVHUB_LIBERO_REQUIRED=1 or ENVHUB_SUITES_REQUIRED=1 (`libero_python` of test_eval_libero.py).
 """
 
 from __future__ import annotations
