@@ -75,8 +75,14 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 # downloads in parallel.
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
+# LeRobot 0.6.1 itself (CPython 3.12, torch), where tests/python/test_lerobot_plugin.py runs
+# LeRobot's own commands with the plugin (requirements-lerobot-next.txt); meant to replace
+# .venv-lerobot once the recorder's loader moves to it. The 3.12 interpreter: pyenv's or PATH's.
+LEROBOT_NEXT_VENV := .venv-lerobot-next
+LEROBOT_NEXT_STAMP := $(LEROBOT_NEXT_VENV)/.installed
+PYTHON312 = $(shell for p in $$(pyenv root 2>/dev/null)/versions/3.12*/bin/python3.12 $$(command -v python3.12); do "$$p" -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null && { echo "$$p"; break; }; done)
 
-.PHONY: fuzz help demo test build-all suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
+.PHONY: fuzz help demo test build-all suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot lerobot-next wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -91,6 +97,7 @@ help:
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
 	@echo "make lerobot  LeRobot's dataset loader in .venv-lerobot, the recorder tests' judge (about 5 GB; make py-test does it)"
+	@echo "make lerobot-next  LeRobot 0.6.1 in .venv-lerobot-next, where the LeRobot plugin's tests run (about 7 GB; make py-test does it)"
 
 # Packages go in with uv (pinned in requirements-dev.txt; pip brings it in first): it resolves
 # fast and links files from its cache (~/.cache/uv) instead of copying them, so a second clone
@@ -196,6 +203,15 @@ $(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_BASE)
 
 lerobot: $(LEROBOT_STAMP)
 
+$(LEROBOT_NEXT_STAMP): requirements-lerobot-next.txt $(VENV_BASE)
+	@test -n "$(PYTHON312)" || { echo "error: LeRobot 0.6.1 needs CPython 3.12: install it (pyenv install 3.12, or uv python install 3.12)" >&2; exit 1; }
+	rm -rf $(LEROBOT_NEXT_VENV)
+	$(UV) venv --quiet --python $(PYTHON312) $(LEROBOT_NEXT_VENV)
+	$(UV) pip install --quiet --python $(LEROBOT_NEXT_VENV)/bin/python -r requirements-lerobot-next.txt
+	touch $@
+
+lerobot-next: $(LEROBOT_NEXT_STAMP)
+
 # What the demo and the Python package run: the CLI, the workers and the extension module
 # (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py;
 # rapier's worker is part of the rest: `make build-all`).
@@ -234,7 +250,7 @@ demo:
 lint: setup lint-rust
 	$(VPY) scripts/check_layers.py
 	$(VPY) scripts/check_untested_targets.py
-	$(VPY) -m ruff check py-client tests scripts
+	$(VPY) -m ruff check py-client tests scripts integrations
 	cd py-client/python && $(abspath $(VPY)) -m mypy --config-file ../pyproject.toml --cache-dir $(abspath .build/mypy)
 
 # Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
@@ -294,6 +310,7 @@ py-install: build $(VENV_STAMP)
 # py-client/build_wheel.py (no second compile, unlike `maturin build`; see the script).
 wheel: build-all
 	$(VPY) py-client/build_wheel.py --out dist
+	$(VPY) integrations/lerobot/build_wheel.py --out dist
 
 # Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt
 # into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
@@ -303,8 +320,8 @@ wheel: build-all
 # (pytest-xdist; the isolation rules are in tests/python/README.md). `--dist loadgroup` hands
 # out one test at a time, slow ones first (conftest.py). PY_TEST_JOBS=0: one at a time.
 PY_TEST_JOBS ?= 2
-py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
-	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup --durations=25
+py-test: py-install $(LEROBOT_STAMP) $(LEROBOT_NEXT_STAMP) $(BROWSER_STAMP)
+	ENVHUB_PY_REQUIRED=1 ENVHUB_LEROBOT_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup --durations=25
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
 			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider --durations=10; \
@@ -323,7 +340,7 @@ suite-envs: py-install
 # build of every other target while the suites' environments are built; then the checks and
 # the tests, one after the other.
 test:
-	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
+	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(LEROBOT_NEXT_STAMP) $(BROWSER_STAMP)
 	$(MAKE) --no-print-directory -j2 lint-rust suite-envs
 	$(MAKE) --no-print-directory lint rust-test py-test
 
@@ -351,7 +368,7 @@ fuzz:
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) .build dist
+	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) $(LEROBOT_NEXT_VENV) .build dist
 
 # The variables cargo sees here, for running it by hand: `eval "$$(make -s env)"`.
 env:
