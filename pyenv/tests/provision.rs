@@ -252,7 +252,7 @@ fn a_build_held_by_another_waits_a_bounded_time_and_says_who() {
     let Some(store) = store("lock_wait") else {
         return;
     };
-    let store = store.with_lock_wait(Duration::from_millis(300));
+    let store = std::sync::Arc::new(store.with_lock_wait(Duration::from_millis(300)));
     let s = spec(&["packaging==24.2"]);
     let plan = store.plan("held", &s).unwrap();
     std::fs::create_dir_all(store.root()).unwrap();
@@ -265,9 +265,17 @@ fn a_build_held_by_another_waits_a_bounded_time_and_says_who() {
         unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) },
         0
     );
-    let start = Instant::now();
-    let err = store.ensure("held", &s).unwrap_err();
-    assert!(start.elapsed() < Duration::from_secs(5));
+    // The lock is held for as long as this test likes: only the store's own 0.3 s wait can
+    // end the call (a thread, so that a wait without end fails here rather than hangs).
+    let (tx, waited) = std::sync::mpsc::channel();
+    let (waiter, wanted) = (store.clone(), s.clone());
+    std::thread::spawn(move || {
+        let _ = tx.send(waiter.ensure("held", &wanted).map(drop));
+    });
+    let Ok(result) = waited.recv_timeout(Duration::from_secs(60)) else {
+        panic!("a build held by another waits without end");
+    };
+    let err = result.unwrap_err();
     let text = err.to_string();
     assert!(
         matches!(err, PyEnvError::LockTimeout { .. }) && text.contains("pid 4242"),

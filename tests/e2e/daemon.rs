@@ -2,13 +2,13 @@
 
 use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_HUB, ENVHUB_NAMESPACE, ENVHUB_REGISTRY};
 use envhub::{EnvConfig, Host, Hub, HubError, Registry, SessionOptions};
-use envhub_e2e::{PyModule, binary, python_worker_available};
+use envhub_e2e::{PATIENCE, PyModule, binary, eventually, python_worker_available};
 use rand::SeedableRng;
 use std::ffi::OsString;
 use std::io::BufRead;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 struct Daemon {
     child: Child,
@@ -139,11 +139,9 @@ fn several_clients_share_one_daemon() {
     env.step_f32(&[5.0, -5.0]).unwrap(); // beyond the bounds: the env clips, as in Gymnasium
     assert_eq!(hub.daemon().unwrap().worker_count().unwrap(), 2);
     env.close();
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while hub.daemon().unwrap().worker_count().unwrap() != 0 {
-        assert!(Instant::now() < deadline, "closed workers are forgotten");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    eventually("closed workers are forgotten", || {
+        hub.daemon().unwrap().worker_count().unwrap() == 0
+    });
 
     // `strict_actions` travels through the daemon's routing.
     let mut strict = hub
@@ -190,11 +188,15 @@ fn killed_worker_and_killed_client_leave_the_daemon_running() {
         .args(["-9", &pid.to_string()])
         .status()
         .unwrap();
-    let start = Instant::now();
+    // Noticed as the process's exit (its status), not at the step timeout.
     let err = env.step_i64(&[0, 1]).unwrap_err();
-    assert!(start.elapsed() < Duration::from_secs(1));
     match err {
-        HubError::WorkerDied { why, .. } => assert!(why.contains("signal: 9"), "{why}"),
+        HubError::WorkerDied { why, .. } => {
+            assert!(
+                why.starts_with("died (") && why.contains("signal: 9"),
+                "{why}"
+            )
+        }
         other => panic!("expected WorkerDied, got {other}"),
     }
     assert!(d.alive());
@@ -217,21 +219,14 @@ fn killed_worker_and_killed_client_leave_the_daemon_running() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while hub.daemon().unwrap().worker_count().unwrap() < 2 {
-        assert!(Instant::now() < deadline, "the client's workers start");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    eventually("the client's workers start", || {
+        hub.daemon().unwrap().worker_count().unwrap() >= 2
+    });
     client.kill().unwrap();
     client.wait().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while hub.daemon().unwrap().worker_count().unwrap() != 0 {
-        assert!(
-            Instant::now() < deadline,
-            "the dead client's workers are stopped"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    eventually("the dead client's workers are stopped", || {
+        hub.daemon().unwrap().worker_count().unwrap() == 0
+    });
     assert!(d.alive());
     let mut env = hub
         .make_vec("gym-cartpole", 1, &EnvConfig::default())
@@ -451,9 +446,9 @@ fn another_user_cannot_use_the_daemon() {
 }
 
 /// A socket that accepts and never answers (a stuck or stopped daemon, or not a daemon at
-/// all): connecting fails within the ping's time limit instead of hanging.
+/// all): connecting fails at the ping's time limit instead of hanging.
 #[test]
-fn a_daemon_that_never_answers_is_an_error_within_seconds() {
+fn a_daemon_that_never_answers_is_an_error_at_the_pings_time_limit() {
     let dir = std::env::temp_dir().join(format!("e2e-silent-daemon-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let socket = dir.join("hub.sock");
@@ -465,13 +460,22 @@ fn a_daemon_that_never_answers_is_an_error_within_seconds() {
         let mut sink = Vec::new();
         let _ = std::io::Read::read_to_end(&mut stream, &mut sink);
     });
-    let start = std::time::Instant::now();
-    let Err(e) = Hub::connect(&socket, Registry::builtin()) else {
+    let (tx, connected) = std::sync::mpsc::channel();
+    let client = socket.clone();
+    std::thread::spawn(move || {
+        let _ = tx.send(Hub::connect(&client, Registry::builtin()).map(drop));
+    });
+    // The silent socket would hold it forever: only the ping's own 5 s limit ends it.
+    let Ok(connected) = connected.recv_timeout(Duration::from_secs(5) + PATIENCE) else {
+        panic!("connecting to a silent socket hangs");
+    };
+    let Err(e) = connected else {
         panic!("a silent socket passed for a daemon");
     };
-    let took = start.elapsed();
-    assert!(took < std::time::Duration::from_secs(8), "took {took:?}");
-    assert!(e.to_string().contains("no reply to `ping`"), "{e}");
+    assert!(
+        e.to_string().contains("no reply to `ping` within 5s"),
+        "{e}"
+    );
     silent.join().unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -589,9 +593,9 @@ fn an_overlong_request_line_ends_that_connection_only() {
     use std::io::Write;
     let daemon = Daemon::start("overlong");
     let mut stream = std::os::unix::net::UnixStream::connect(&daemon.socket).unwrap();
-    stream
-        .set_read_timeout(Some(Duration::from_secs(10)))
-        .unwrap();
+    // Bounded so that a daemon that never answers fails here, far above a loaded machine's
+    // answer.
+    stream.set_read_timeout(Some(PATIENCE)).unwrap();
     // 17 MiB without a newline: past the 16 MiB bound.
     let chunk = vec![b'x'; 1 << 20];
     for _ in 0..17 {

@@ -1,8 +1,9 @@
-//! Workers that die, hang or fail: the client gets an error quickly, never a hang, and the
-//! hub and other sessions keep working.
+//! Workers that die, hang or fail: the client gets an error, never a hang, and the hub and
+//! other sessions keep working. A death is noticed by the hub's watch on the process, a hang
+//! by the step timeout; the tests tell them apart by what the error says, not by a clock.
 
 use envhub::{EnvConfig, HubError};
-use envhub_e2e::{TestHub, kill_worker_expect_died, shm_files, sigkill};
+use envhub_e2e::{TestHub, eventually, kill_worker_expect_died, shm_files, sigkill};
 use std::time::{Duration, Instant};
 
 fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
@@ -17,7 +18,7 @@ fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
 }
 
 #[test]
-fn kill_9_mid_rollout_errors_within_a_second_and_hub_lives_on() {
+fn kill_9_mid_rollout_is_worker_died_and_hub_lives_on() {
     let t = TestHub::new("kill9");
     let mut env = t
         .hub
@@ -59,21 +60,25 @@ fn kill_9_mid_rollout_errors_within_a_second_and_hub_lives_on() {
 
 #[test]
 fn hung_worker_is_killed_after_the_step_timeout() {
-    let t = TestHub::with("hang", |o| o.step_timeout = Duration::from_millis(300));
+    let timeout = Duration::from_millis(300);
+    let t = TestHub::with("hang", |o| o.step_timeout = timeout);
+    // A step that would sleep ten minutes: only the timeout can end it within the test.
     let mut env = t
         .hub
-        .make_vec_direct("null", "Null-v0", &null_config(&[("sleep_ms", 5_000)], 1))
+        .make_vec_direct("null", "Null-v0", &null_config(&[("sleep_ms", 600_000)], 1))
         .unwrap();
     env.reset(None).unwrap();
     let pid = env.worker_pids()[0];
     let start = Instant::now();
     let err = env.step(&[0u8; 8]).unwrap_err();
     let took = start.elapsed();
+    // Not before the timeout; after it, however late a loaded machine lets the hub look.
+    assert!(took >= timeout, "{took:?}");
     assert!(
-        took >= Duration::from_millis(300) && took < Duration::from_secs(2),
-        "{took:?}"
+        matches!(&err, HubError::WorkerDied { why, .. }
+            if why.contains("did not answer within 300ms (step timeout) and was killed")),
+        "{err}"
     );
-    assert!(err.to_string().contains("step timeout"), "{err}");
     assert!(
         !std::path::Path::new(&format!("/proc/{pid}")).exists() || is_zombie_free(pid),
         "the hung worker was killed"
@@ -128,10 +133,13 @@ fn crash_inside_the_simulator_is_an_error_not_a_hang() {
     env.reset(None).unwrap();
     env.step(&[0u8; 8]).unwrap();
     env.step(&[0u8; 8]).unwrap();
-    let start = Instant::now();
+    // The abort is noticed as the process's exit (its status), not at the step timeout.
     let err = env.step(&[0u8; 8]).unwrap_err();
-    assert!(start.elapsed() < Duration::from_secs(1));
-    assert!(matches!(err, HubError::WorkerDied { .. }), "{err}");
+    assert!(
+        matches!(&err, HubError::WorkerDied { why, .. }
+            if why.starts_with("died (") && why.contains("SIGABRT")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -186,16 +194,10 @@ fn dead_clients_leave_nothing_behind() {
     sigkill(pid);
     client.wait().unwrap();
     // Its worker goes with it (parent-death signal, or its owner watch)...
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while std::fs::read_to_string(format!("/proc/{worker}/stat"))
-        .is_ok_and(|stat| !stat.contains(") Z"))
-    {
-        assert!(
-            Instant::now() < deadline,
-            "worker {worker} outlived its client"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    eventually(&format!("worker {worker} exits with its client"), || {
+        !std::fs::read_to_string(format!("/proc/{worker}/stat"))
+            .is_ok_and(|stat| !stat.contains(") Z"))
+    });
     // ...and the next session in the namespace removes what the dead ones left (iceoryx2
     // cleans up dead nodes when a node is created): nothing here cleans up by hand.
     let mut env = t

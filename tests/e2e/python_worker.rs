@@ -7,10 +7,10 @@
 
 use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
 use envhub::{EnvConfig, HubError, Registry, VecEnv};
-use envhub_e2e::{PyModule, TestHub, kill_worker_expect_died, python_worker_available};
+use envhub_e2e::{PATIENCE, PyModule, TestHub, kill_worker_expect_died, python_worker_available};
 use rand::SeedableRng;
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Entries pinned to the Python host, beside the built-in (native) ones.
 const REGISTRY: &str = "
@@ -80,9 +80,11 @@ class BoomAdapter(envhub.EnvAdapter):
 /// A user adapter module that blocks at import.
 const HANG_AT_IMPORT: &str = "import time\n\ntime.sleep(3600)\n";
 
-/// A user adapter that cannot make its env and then hangs in its worker's exit.
+/// A user adapter that cannot make its env and then hangs in its worker's exit; it leaves
+/// its worker's pid in `worker.pid` beside its module.
 const STUCK_ADAPTER: &str = r#"
 import atexit
+import os
 import time
 
 import envhub
@@ -95,6 +97,8 @@ class StuckAdapter(envhub.EnvAdapter):
     description = "fails to make its env, then hangs on exit"
 
     def make(self, env_id, config):
+        with open(os.path.join(os.path.dirname(__file__), "worker.pid"), "w") as f:
+            f.write(str(os.getpid()))
         atexit.register(time.sleep, 3600)
         raise RuntimeError("cannot make Stuck-v0 on purpose")
 "#;
@@ -234,10 +238,8 @@ fn a_python_exception_names_the_env_and_carries_the_traceback() {
 }
 
 #[test]
-fn a_killed_python_worker_is_worker_died_within_a_second() {
-    if !python_worker_available(
-        "python_worker::a_killed_python_worker_is_worker_died_within_a_second",
-    ) {
+fn a_killed_python_worker_is_worker_died() {
+    if !python_worker_available("python_worker::a_killed_python_worker_is_worker_died") {
         return;
     }
     let t = hub("pykill");
@@ -268,12 +270,14 @@ fn an_adapter_that_hangs_at_import_is_named_and_stalls_nothing_else() {
     }
     let module = PyModule::write("pyhang", "e2e_hang_adapter", HANG_AT_IMPORT);
     // As above: this process's environment is the workers' (nextest runs each test alone).
+    // The describe's bound is far above a native make on a slow, busy machine, so the make
+    // below is done while the describe still hangs; the import itself hangs for an hour.
     unsafe {
         std::env::set_var(ENVHUB_ADAPTERS, "e2e_hang_adapter:HangAdapter");
         std::env::set_var("PYTHONPATH", module.pythonpath());
-        std::env::set_var(ENVHUB_DESCRIBE_TIMEOUT, "2");
+        std::env::set_var(ENVHUB_DESCRIBE_TIMEOUT, "10");
     }
-    let bound = Duration::from_secs(2);
+    let bound = Duration::from_secs(10);
     envhub::refresh_adapters();
     let t = std::sync::Arc::new(hub("pyhang"));
     // Resolved first, as every session of a native env does; Python is not asked for it.
@@ -283,50 +287,44 @@ fn an_adapter_that_hangs_at_import_is_named_and_stalls_nothing_else() {
     let (tx, python) = mpsc::channel();
     let hub_a = t.clone();
     std::thread::spawn(move || {
-        let start = Instant::now();
-        let result = hub_a.hub.make_vec("py-cartpole", 1, &workers(1)).map(drop);
-        let _ = tx.send((result, start.elapsed()));
+        let _ = tx.send(hub_a.hub.make_vec("py-cartpole", 1, &workers(1)).map(drop));
     });
     std::thread::sleep(Duration::from_millis(300));
 
-    // Meanwhile a native env is made and steps, without waiting for the hang.
-    let start = Instant::now();
+    // Meanwhile a native env is made and steps, without waiting for the hang: the hanging
+    // describe has not returned when it is done.
     let mut native = t.hub.make_vec("gym-cartpole", 2, &workers(1)).unwrap();
     native.reset(Some(0)).unwrap();
     native.step_i64(&[0, 1]).unwrap();
     assert!(
-        start.elapsed() < Duration::from_secs(1),
-        "a native make waited {:?}",
-        start.elapsed()
-    );
-    assert!(
         python.try_recv().is_err(),
-        "the hanging describe was still running meanwhile"
+        "the native make returned only after the hanging describe did"
     );
-    // And the catalog, which needs the Python worker too, waits at most the bound.
+    // And the catalog, which needs the Python worker too, waits about the bound, not the
+    // hour of the import (nor behind the hanging describe).
     let (tx, catalog) = mpsc::channel();
     let hub_b = t.clone();
     std::thread::spawn(move || {
         let _ = tx.send(hub_b.hub.adapters());
     });
     let listed = catalog
-        .recv_timeout(bound + Duration::from_secs(3))
+        .recv_timeout(bound + PATIENCE)
         .expect("the catalog waits at most the bound, not behind the hanging describe")
         .unwrap();
     let gymnasium = listed.iter().find(|a| a.name == "gymnasium").unwrap();
     assert!(!gymnasium.availability.is_available(), "{gymnasium:?}");
 
-    let (result, took) = python
-        .recv_timeout(Duration::from_secs(20))
+    let result = python
+        .recv_timeout(bound + PATIENCE)
         .expect("the make that hit the hanging import returns");
-    assert!(took < bound + Duration::from_secs(3), "it took {took:?}");
     let err = result.unwrap_err();
     let HubError::Unavailable { reason, hint, .. } = &err else {
         panic!("expected Unavailable, got {err:?}");
     };
+    // Ended by its bound: the describe was killed after the 10 s it was given.
     for needle in [
         "envhub.worker describe",
-        "did not finish within 2 s",
+        "did not finish within 10 s",
         "e2e_hang_adapter:HangAdapter",
     ] {
         assert!(reason.contains(needle), "no {needle:?} in: {reason}");
@@ -347,18 +345,30 @@ fn a_worker_that_hangs_after_reporting_an_error_is_killed() {
         std::env::set_var("PYTHONPATH", module.pythonpath());
     }
     envhub::refresh_adapters();
-    let t = hub("pystuck");
-    let start = Instant::now();
-    let Err(err) = t.hub.make_vec("py-stuck", 1, &workers(1)) else {
+    let t = std::sync::Arc::new(hub("pystuck"));
+    let (tx, made) = mpsc::channel();
+    let hub_a = t.clone();
+    std::thread::spawn(move || {
+        let _ = tx.send(hub_a.hub.make_vec("py-stuck", 1, &workers(1)).map(drop));
+    });
+    // Its exit would take an hour: the hub gives it a few seconds after its error line
+    // (`EXIT_AFTER_ERROR`, 5 s), then kills it.
+    let Ok(made) = made.recv_timeout(Duration::from_secs(5) + PATIENCE) else {
+        panic!("the make waited on the worker that hangs on exit");
+    };
+    let Err(err) = made else {
         panic!("py-stuck was made");
     };
-    let took = start.elapsed();
     assert!(
         matches!(&err, HubError::MakeFailed(m) if m.contains("cannot make Stuck-v0 on purpose")),
         "{err:?}"
     );
-    // The worker gets a few seconds to exit after its error line, then is killed.
-    assert!(took < Duration::from_secs(10), "it took {took:?}");
+    // Killed and reaped, not left behind hanging: its pid is gone.
+    let pid = std::fs::read_to_string(module.dir.join("worker.pid")).expect("the worker ran make");
+    assert!(
+        !std::path::Path::new(&format!("/proc/{}", pid.trim())).exists(),
+        "the worker {pid} that hung on exit still runs"
+    );
 }
 
 #[test]
