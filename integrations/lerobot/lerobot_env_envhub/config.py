@@ -32,12 +32,17 @@ class EnvhubEnv(EnvConfig):
 
     `--env.hub`: where the envs run (`local`, `all` live hubs, or hub names, comma-separated);
     `--env.workers`: worker processes per task (default: one per core, at most one per env);
+    `--env.step_timeout`: seconds a reset or step may take before its worker counts as hung;
     `--env.registry`: more registry files. The LIBERO options are LeRobot's `LiberoEnv`'s."""
 
     task: str | None = None
     fps: int = 0  # 0: the suite's (LIBERO 20, Meta-World 80, an entry's render_fps)
     hub: str | None = None
     workers: int | None = None
+    # Seconds a reset or step may take before its worker counts as hung (LIBERO's hard resets
+    # of several envs per worker take tens of seconds on a busy machine; LeRobot's own envs
+    # have no bound).
+    step_timeout: float = 600.0
     registry: list[str] = field(default_factory=list)
     # LeRobot's LIBERO options (the same names and defaults as its `LiberoEnv`).
     task_ids: list[int] | None = None
@@ -128,6 +133,7 @@ class EnvhubEnv(EnvConfig):
             registry=self.registry_files(),
             workers=self.workers,
             hubs=self._hubs(),
+            step_timeout=self.step_timeout,
             description=task.description,
             name=task.name,
             render=render,

@@ -9,6 +9,7 @@ evaluated them, `lerobot-train` closes them after every evaluation.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -19,6 +20,8 @@ from gymnasium.vector import AutoresetMode
 #: Reset-info keys the LIBERO adapter reports its task by; LeRobot's reset info has neither.
 TASK_KEYS = ("task_description", "task")
 NEW_ROLLOUT_OPTION = "lerobot_new_rollout"
+#: Seconds a worker may take to start (`ENVHUB_START_TIMEOUT`, where the user sets none).
+START_TIMEOUT_S = 900
 
 
 class LeRobotVectorEnv(gym.vector.VectorEnv):
@@ -43,6 +46,7 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
         name: str | None = None,
         workers: int | None = None,
         hubs: Any = None,
+        step_timeout: float | None = None,
         convert: Callable[[Any], Any] | None = None,
         success_key: str | None = None,
         passes_rollout_option: bool = True,
@@ -53,6 +57,7 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
         self.options = dict(options)
         self.registry = registry
         self.workers = workers
+        self.step_timeout = step_timeout
         self.hubs = hubs
         self.render_mode = "rgb_array" if render else None
         self.metadata = {"render_fps": render_fps, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -72,6 +77,9 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
         if self._vec is None:
             import envhub
 
+            # A suite's first worker in a fresh environment compiles its bytecode (LIBERO its
+            # numba caches too): minutes on a busy machine, past envhub's default 120 s.
+            os.environ.setdefault("ENVHUB_START_TIMEOUT", str(START_TIMEOUT_S))
             self._vec = envhub.make_vec(
                 self.entry,
                 self.num_envs,
@@ -80,6 +88,7 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
                 render_mode=self.render_mode,
                 registry=self.registry,
                 hubs=self.hubs,
+                step_timeout=self.step_timeout,
                 **self.options,
             )
             self.closed = False
