@@ -82,8 +82,8 @@ def _hold(fd: int, hold: str, removed: str) -> bool:
         fcntl.flock(held, fcntl.LOCK_SH)
         if not os.path.exists(hold):
             raise FileNotFoundError(2, "removed", hold)
-    except OSError as e:
-        _say(fd, {"error": f"{removed} ({e})"})
+    except OSError:
+        _say(fd, {"error": removed})
         return False
     return True
 
