@@ -6,11 +6,11 @@ use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
 use envhub_protocol::HubError;
 use envhub_session::{Launch, Process};
-use envhub_shm::{ReadySpec, WorkerIdentity, WorkerJob, WorkerPython, WorkerReply};
+use envhub_shm::{ReadySpec, WorkerJob, WorkerReply};
 use std::io::BufRead;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex, mpsc};
+use std::sync::Arc;
 use std::time::Duration;
 
 /// Who starts workers.
@@ -26,6 +26,9 @@ pub(crate) enum Launcher {
 pub(crate) enum WorkerProcess {
     /// Our child.
     Local(Child),
+    /// Forked by this process's fork server of its suite's environment (`fork_server.rs`),
+    /// held by a pidfd; its exit status stays with the server.
+    Forked(envhub_shm::PidFd),
     /// The daemon's child.
     Daemon {
         /// The process, held by a pidfd: killing it can never hit a process that took its
@@ -47,7 +50,7 @@ impl Process for WorkerProcess {
     fn pid(&self) -> u32 {
         match self {
             WorkerProcess::Local(child) => child.id(),
-            WorkerProcess::Daemon { pidfd, .. } => pidfd.pid(),
+            WorkerProcess::Forked(pidfd) | WorkerProcess::Daemon { pidfd, .. } => pidfd.pid(),
         }
     }
 
@@ -64,7 +67,7 @@ impl Process for WorkerProcess {
                 let _ = child.kill();
                 let _ = child.wait();
             }
-            WorkerProcess::Daemon { pidfd, .. } => pidfd.kill(),
+            WorkerProcess::Forked(pidfd) | WorkerProcess::Daemon { pidfd, .. } => pidfd.kill(),
         }
     }
 
@@ -78,6 +81,8 @@ impl Process for WorkerProcess {
                 WorkerProcess::Daemon { pidfd, daemon } => {
                     daemon.exit_status(pidfd.pid()).ok().flatten()
                 }
+                WorkerProcess::Forked(pidfd) => (!pidfd.is_alive())
+                    .then(|| "exited (its status went to the suite's fork server)".to_string()),
             };
             if status.is_some() || std::time::Instant::now() >= deadline {
                 return status;
@@ -95,6 +100,15 @@ impl Launch for Launcher {
     ) -> Result<(Box<dyn Process>, ReadySpec), HubError> {
         match self {
             Launcher::Local => {
+                // A suite's worker forks from the suite's warm interpreter where it can.
+                if job.python.is_some()
+                    && crate::fork_server::enabled()
+                    && let Some(forked) =
+                        crate::fork_server::launch(job, &UserAdapters::default(), start_timeout)
+                {
+                    let (pidfd, spec) = forked?;
+                    return Ok((Box::new(WorkerProcess::Forked(pidfd)), spec));
+                }
                 let (child, spec) = launch_local(job, &UserAdapters::default(), start_timeout)?;
                 Ok((Box::new(WorkerProcess::Local(child)), spec))
             }
@@ -172,7 +186,7 @@ pub(crate) fn launch_local(
     unsafe {
         command.pre_exec(move || envhub_shm::die_with_parent(parent));
     }
-    let mut child = spawn(command).map_err(|e| HubError::WorkerBinary {
+    let mut child = crate::spawner::spawn(command).map_err(|e| HubError::WorkerBinary {
         path: path.display().to_string(),
         reason: e.to_string(),
     })?;
@@ -181,7 +195,7 @@ pub(crate) fn launch_local(
         Ok(WorkerReply::Ready(spec)) => {
             tracing::debug!(pid, worker = ?spec.worker, "worker ready");
             if let Some(env) = &job.python
-                && let Err(e) = check_identity(env, &spec)
+                && let Err(e) = crate::python_host::check_identity(env, &spec)
             {
                 let _ = child.kill();
                 let _ = child.wait();
@@ -216,84 +230,6 @@ pub(crate) fn launch_local(
             })
         }
     }
-}
-
-/// A worker in a provisioned environment must speak this hub's protocol and run this
-/// install's `envhub` package (the one its overlay leads to); anything else would be
-/// another install's code behind this hub's shared memory.
-fn check_identity(env: &WorkerPython, spec: &ReadySpec) -> Result<(), HubError> {
-    let ours = WorkerIdentity::current(std::env::current_exe().unwrap_or_default());
-    let refused = |message: String| HubError::PythonEnv {
-        name: env.name.clone(),
-        message: format!(
-            "the worker in python env `{}` {message}\nhint: a `PYTHONPATH` its `env:` declares may lead to another envhub; else rebuild it (`envhub env remove {0}`, then `envhub env sync {0}`)",
-            env.name
-        ),
-    };
-    let Some(worker) = &spec.worker else {
-        return Err(refused(format!(
-            "reports no worker protocol: it runs an envhub older than this hub (protocol {}, envhub {})",
-            ours.protocol, ours.version
-        )));
-    };
-    if worker.protocol != ours.protocol {
-        return Err(refused(format!(
-            "speaks worker protocol {} (envhub {} at `{}`), this hub speaks {} (envhub {} at `{}`)",
-            worker.protocol,
-            worker.version,
-            worker.module.display(),
-            ours.protocol,
-            ours.version,
-            env.package.as_ref().unwrap_or(&ours.module).display()
-        )));
-    }
-    let same = |a: &std::path::Path, b: &std::path::Path| {
-        a == b
-            || a.canonicalize()
-                .ok()
-                .is_some_and(|a| b.canonicalize().ok() == Some(a))
-    };
-    match &env.package {
-        Some(package) if !same(package, &worker.module) => Err(refused(format!(
-            "runs envhub from `{}`, not this hub's `{}`",
-            worker.module.display(),
-            package.display()
-        ))),
-        _ => Ok(()),
-    }
-}
-
-/// Spawns `command` on the spawner thread, one thread that lives as long as the process.
-///
-/// Workers die with their parent through the kernel's parent-death signal (see
-/// [`envhub_shm::die_with_parent`]), which fires when the *thread* that forked the child
-/// ends; sessions start their workers from short-lived threads (one per worker, and Python
-/// users make envs in threads that end), so no worker is forked from those.
-fn spawn(command: Command) -> std::io::Result<Child> {
-    type Request = (Command, mpsc::Sender<std::io::Result<Child>>);
-    /// The spawner's channel, with the pid of the process it belongs to: a forked child
-    /// (Python's `multiprocessing`) inherits the channel but not the thread, and starts its own.
-    static SPAWNER: Mutex<Option<(u32, mpsc::Sender<Request>)>> = Mutex::new(None);
-    let gone = || std::io::Error::other("the thread that spawns workers is gone");
-    let (tx, rx) = mpsc::channel();
-    {
-        let mut spawner = SPAWNER.lock().unwrap_or_else(|e| e.into_inner());
-        let pid = std::process::id();
-        if spawner.as_ref().is_none_or(|(owner, _)| *owner != pid) {
-            let (requests, incoming) = mpsc::channel::<Request>();
-            std::thread::Builder::new()
-                .name("envhub-spawner".into())
-                .spawn(move || {
-                    for (mut command, reply) in incoming {
-                        let _ = reply.send(command.spawn());
-                    }
-                })?;
-            *spawner = Some((pid, requests));
-        }
-        let (_, requests) = spawner.as_ref().ok_or_else(gone)?;
-        requests.send((command, tx)).map_err(|_| gone())?;
-    }
-    rx.recv().map_err(|_| gone())?
 }
 
 /// Reads the worker's one-line reply, giving up after `timeout` or when it exits silently.

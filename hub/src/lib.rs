@@ -17,6 +17,7 @@ mod catalog;
 mod daemon;
 mod daemon_client;
 mod daemon_guard;
+mod fork_server;
 #[cfg(test)]
 mod fuzz;
 mod hub;
@@ -27,6 +28,7 @@ pub mod provision;
 mod python_host;
 mod routing;
 mod settings;
+mod spawner;
 mod worker_binary;
 
 pub use catalog::{AdapterInfo, Host, refresh_adapters};

@@ -6,8 +6,10 @@
 //! Rust worker binary, and starts it with `serve --job` for the adapters it reported.
 
 use crate::env_vars::{ENVHUB_ADAPTERS, ENVHUB_PYTHON, ENVHUB_WORKER_PROTOCOL};
+use envhub_protocol::HubError;
 /// User adapters beyond this hub's own, as they travel to a daemon.
 pub(crate) use envhub_protocol::daemon::UserAdapters;
+use envhub_shm::{ReadySpec, WorkerIdentity, WorkerPython};
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -284,6 +286,51 @@ pub(crate) const BUILTIN: &[(&str, &[&str])] = &[
     ("myosuite", &["myosuite"]),
     ("env_fns", &["env_fns"]),
 ];
+
+/// A worker in a provisioned environment must speak this hub's protocol and run this
+/// install's `envhub` package (the one its overlay leads to); anything else would be
+/// another install's code behind this hub's shared memory.
+pub(crate) fn check_identity(env: &WorkerPython, spec: &ReadySpec) -> Result<(), HubError> {
+    let ours = WorkerIdentity::current(std::env::current_exe().unwrap_or_default());
+    let refused = |message: String| HubError::PythonEnv {
+        name: env.name.clone(),
+        message: format!(
+            "the worker in python env `{}` {message}\nhint: a `PYTHONPATH` its `env:` declares may lead to another envhub; else rebuild it (`envhub env remove {0}`, then `envhub env sync {0}`)",
+            env.name
+        ),
+    };
+    let Some(worker) = &spec.worker else {
+        return Err(refused(format!(
+            "reports no worker protocol: it runs an envhub older than this hub (protocol {}, envhub {})",
+            ours.protocol, ours.version
+        )));
+    };
+    if worker.protocol != ours.protocol {
+        return Err(refused(format!(
+            "speaks worker protocol {} (envhub {} at `{}`), this hub speaks {} (envhub {} at `{}`)",
+            worker.protocol,
+            worker.version,
+            worker.module.display(),
+            ours.protocol,
+            ours.version,
+            env.package.as_ref().unwrap_or(&ours.module).display()
+        )));
+    }
+    let same = |a: &std::path::Path, b: &std::path::Path| {
+        a == b
+            || a.canonicalize()
+                .ok()
+                .is_some_and(|a| b.canonicalize().ok() == Some(a))
+    };
+    match &env.package {
+        Some(package) if !same(package, &worker.module) => Err(refused(format!(
+            "runs envhub from `{}`, not this hub's `{}`",
+            worker.module.display(),
+            package.display()
+        ))),
+        _ => Ok(()),
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -871,6 +871,27 @@ impl Session {
             .map_err(|e| self.error(py, e, None))
     }
 
+    /// EnvPool's contract: `recv` returns exactly `batch_size` envs, the first to finish.
+    fn set_batch_size(&self, py: Python<'_>, batch_size: usize) -> PyResult<()> {
+        self.check_pid(py)?;
+        py.detach(|| self.lock().vec.set_batch_size(batch_size))
+            .map_err(|e| self.error(py, e, None))
+    }
+
+    /// The EnvPool mode's batch size (`None` outside it).
+    #[getter]
+    fn batch_size(&self, py: Python<'_>) -> Option<usize> {
+        py.detach(|| self.lock().vec.batch_size())
+    }
+
+    /// EnvPool's `async_reset`: resets every env (env `i` with `seeds[i]`) without waiting;
+    /// `recv` returns them.
+    fn async_reset(&self, py: Python<'_>, seeds: Vec<Option<u64>>) -> PyResult<()> {
+        self.check_pid(py)?;
+        py.detach(|| self.lock().vec.async_reset_with(&seeds))
+            .map_err(|e| self.error(py, e, None))
+    }
+
     /// Waits for the first workers to finish; the results of exactly the envs they stepped,
     /// with their env ids as a 7th item.
     fn recv<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {

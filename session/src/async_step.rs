@@ -17,6 +17,9 @@ impl VecEnv {
     /// waiting; collect them with [`VecEnv::recv`]. A worker takes one request at a time, so
     /// an env whose worker still has results in flight or not yet received is refused; envs
     /// of other workers can be sent while those are stepping.
+    ///
+    /// In the EnvPool mode ([`VecEnv::set_batch_size`]) any env handed out may be sent: one
+    /// whose worker is busy waits on the client and goes out when the worker answers.
     pub fn send(&mut self, actions: &[u8], env_ids: &[usize]) -> Result<(), HubError> {
         match self.phase {
             Phase::Closed => return self.check_open(),
@@ -40,6 +43,9 @@ impl VecEnv {
         }
         self.validate_actions(actions, env_ids)?;
         self.check_not_failed(env_ids)?;
+        if self.env_pool.is_some() {
+            return self.env_pool_send(actions, env_ids);
+        }
         for w in &self.workers {
             let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
             if (w.pending || w.response.is_some())
@@ -77,9 +83,15 @@ impl VecEnv {
     /// results of exactly the envs it stepped — with those of other answered workers whose
     /// rows continue them in the same slot, so the results are one block viewed in place.
     /// The first worker to finish wakes the caller (an iceoryx2 WaitSet over all of them).
+    ///
+    /// In the EnvPool mode ([`VecEnv::set_batch_size`]): exactly `batch_size` envs, the
+    /// first to finish, in the order they finished.
     pub fn recv(&mut self) -> Result<Batch<'_>, HubError> {
         if self.phase == Phase::Closed {
             self.check_open()?;
+        }
+        if self.env_pool.is_some() {
+            return self.env_pool_recv();
         }
         if !self
             .workers
@@ -92,12 +104,12 @@ impl VecEnv {
         }
         self.wait_for_any()?;
         let group = self.answered_block();
-        self.take_results(&group)?;
+        self.take_results(&group, true)?;
         Ok(self.batch())
     }
 
     /// Polls every worker in flight; returns whether any has an answer waiting.
-    fn poll_all(&mut self, check_exit: bool) -> Result<bool, HubError> {
+    pub(crate) fn poll_all(&mut self, check_exit: bool) -> Result<bool, HubError> {
         let mut any = false;
         for i in 0..self.workers.len() {
             if self.workers[i].pending {
@@ -120,7 +132,7 @@ impl VecEnv {
     /// Waits until some worker has answered: a short adaptive spin (yielding the core), then
     /// blocking on all pending workers' listeners at once, checking liveness, the step
     /// timeout and the interrupt every tick.
-    fn wait_for_any(&mut self) -> Result<(), HubError> {
+    pub(crate) fn wait_for_any(&mut self) -> Result<(), HubError> {
         if self.poll_all(false)? {
             return Ok(());
         }

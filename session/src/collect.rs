@@ -85,7 +85,7 @@ impl VecEnv {
                 Err(e) => self.recover(i, e)?,
             }
         }
-        self.take_results(workers)
+        self.take_results(workers, true)
     }
 
     /// Handles a worker failure: restarts it if allowed (its envs reset into the same slot),
@@ -121,9 +121,14 @@ impl VecEnv {
     }
 
     /// Makes the received responses of `workers` (in env order, their envs one contiguous
-    /// run of one slot unless results are to be gathered) the session's results.
-    pub(crate) fn take_results(&mut self, workers: &[usize]) -> Result<(), HubError> {
-        self.steps_taken += 1;
+    /// run of one slot unless results are to be gathered) the session's results. With
+    /// `place` false the results are judged (statuses, infos, restarts) but left in their
+    /// rows: `results.env_ids` and `results.infos` say what arrived, for the EnvPool mode to
+    /// hand out later (`env_pool.rs`).
+    pub(crate) fn take_results(&mut self, workers: &[usize], place: bool) -> Result<(), HubError> {
+        if place {
+            self.steps_taken += 1;
+        }
         let mut failures = Vec::new();
         let mut infos: Vec<(usize, Option<serde_json::Value>)> = Vec::new();
         let mut any_info = false;
@@ -222,7 +227,17 @@ impl VecEnv {
             return Err(self.give_up(err));
         }
         let any_restart = workers.iter().any(|&i| self.workers[i].restarted);
-        self.place_results(workers)?;
+        if place {
+            self.place_results(workers)?;
+        } else {
+            self.results.place = Place::Nowhere;
+            self.results.env_ids.clear();
+            for &i in workers {
+                self.results
+                    .env_ids
+                    .extend_from_slice(&self.workers[i].sent);
+            }
+        }
         self.mark_restarts(workers);
         self.results.infos.clear();
         if any_info || any_restart {
@@ -267,15 +282,29 @@ impl VecEnv {
     /// Points the results at the workers' rows: in place when they are one contiguous run of
     /// one slot, else gathered.
     fn place_results(&mut self, workers: &[usize]) -> Result<(), HubError> {
+        let mut rows = std::mem::take(&mut self.results.rows);
+        rows.clear();
+        for &i in workers {
+            let w = &self.workers[i];
+            rows.extend(w.sent.iter().map(|&e| (w.slot, e)));
+        }
+        let placed = self.place_rows(&rows);
+        self.results.rows = rows;
+        placed
+    }
+
+    /// Makes the rows `(slot, env)` the session's results, in that order: viewed in place
+    /// when they are one ascending run of one slot, else gathered into a copy.
+    pub(crate) fn place_rows(&mut self, rows: &[(u32, usize)]) -> Result<(), HubError> {
         let r = &mut self.results;
         r.env_ids.clear();
-        for &i in workers {
-            r.env_ids.extend_from_slice(&self.workers[i].sent);
-        }
-        let slot = self.workers[workers[0]].slot;
+        r.env_ids.extend(rows.iter().map(|&(_, e)| e));
+        let slot = rows.first().map_or(0, |&(s, _)| s);
         let first = r.env_ids.first().copied().unwrap_or(0);
-        let contiguous = workers.iter().all(|&i| self.workers[i].slot == slot)
-            && r.env_ids.iter().enumerate().all(|(k, &e)| e == first + k);
+        let contiguous = rows
+            .iter()
+            .enumerate()
+            .all(|(k, &(s, e))| s == slot && e == first + k);
         if contiguous {
             r.place = Place::Slot { index: slot, first };
             let n = r.env_ids.len();
@@ -304,27 +333,23 @@ impl VecEnv {
         // Results from several slots, or envs picked out of a worker's: copy them together.
         let mut g = std::mem::take(&mut self.results.gathered);
         g.clear();
-        for &i in workers {
-            let slot = self.workers[i].slot;
-            for k in 0..self.workers[i].sent.len() {
-                let env = self.workers[i].sent[k];
-                let row = self.slot_rows(slot, env, 1)?;
-                let (Some(term), Some(trunc)) = (as_bools(row.terminated), as_bools(row.truncated))
-                else {
-                    return Err(DataPlaneError::Protocol(
-                        "a worker wrote done flags other than 0 and 1".into(),
-                    )
-                    .into());
-                };
-                g.push_obs(row.obs);
-                g.rewards.push(row.rewards[0]);
-                g.terminated.push(term[0]);
-                g.truncated.push(trunc[0]);
-                g.final_mask.extend_from_slice(row.final_mask);
-                g.final_obs.extend_from_slice(row.final_obs);
-                g.info_cols.extend_from_slice(row.info_cols);
-                self.obs_bytes_copied += row.obs.len() as u64;
-            }
+        for &(slot, env) in rows {
+            let row = self.slot_rows(slot, env, 1)?;
+            let (Some(term), Some(trunc)) = (as_bools(row.terminated), as_bools(row.truncated))
+            else {
+                return Err(DataPlaneError::Protocol(
+                    "a worker wrote done flags other than 0 and 1".into(),
+                )
+                .into());
+            };
+            g.push_obs(row.obs);
+            g.rewards.push(row.rewards[0]);
+            g.terminated.push(term[0]);
+            g.truncated.push(trunc[0]);
+            g.final_mask.extend_from_slice(row.final_mask);
+            g.final_obs.extend_from_slice(row.final_obs);
+            g.info_cols.extend_from_slice(row.info_cols);
+            self.obs_bytes_copied += row.obs.len() as u64;
         }
         self.results.gathered = g;
         self.results.place = Place::Gathered;
@@ -372,7 +397,16 @@ impl VecEnv {
                         }
                     }
                 }
-                Place::Nowhere => {}
+                // Judged but not placed (the EnvPool mode): the worker's own rows.
+                Place::Nowhere => {
+                    if let Some(slot) = self.pool.get(w.slot) {
+                        for &env in &w.sent {
+                            // SAFETY: as above: the worker has answered, and its rows are
+                            // handed to the caller only later.
+                            unsafe { slot.set_truncated(env) };
+                        }
+                    }
+                }
             }
         }
     }

@@ -14,6 +14,8 @@ mod async_step;
 mod batch;
 mod collect;
 mod env;
+mod env_pool;
+mod env_pool_state;
 mod launch;
 mod remote;
 mod results;

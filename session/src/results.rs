@@ -59,6 +59,8 @@ pub(crate) struct Results {
     /// One per env of `env_ids` when any reported info, else empty.
     pub(crate) infos: Vec<serde_json::Value>,
     pub(crate) gathered: Gathered,
+    /// Scratch for the `(slot, env)` rows being placed, kept to avoid allocating per step.
+    pub(crate) rows: Vec<(u32, usize)>,
 }
 
 impl Results {

@@ -48,6 +48,9 @@ pub struct VecEnv {
     pub(crate) steps_taken: u64,
     /// Opens and reaches the session's slices on other hubs (none: all envs are local).
     pub(crate) opener: Option<Arc<dyn SliceOpener>>,
+    /// EnvPool's contract (`set_batch_size`, `async_reset`): each env's place; `None`
+    /// outside that mode.
+    pub(crate) env_pool: Option<crate::env_pool_state::EnvPoolState>,
 }
 
 /// One link of a session to start: local worker `job`, or a remote hub's slice.
@@ -385,6 +388,7 @@ impl VecEnv {
             obs_bytes_copied: 0,
             steps_taken: 0,
             opener,
+            env_pool: None,
         })
     }
 
@@ -557,6 +561,15 @@ impl VecEnv {
             )));
         }
         if self
+            .env_pool
+            .as_ref()
+            .is_some_and(crate::env_pool_state::EnvPoolState::busy)
+        {
+            return Err(HubError::InvalidState(
+                "envs sent with `send` (or `async_reset`) have not all been received: in the EnvPool mode, step with `send`/`recv`, or `reset` (which drops what was not received)".into(),
+            ));
+        }
+        if self
             .workers
             .iter()
             .any(|w| w.pending || w.response.is_some())
@@ -586,6 +599,7 @@ impl VecEnv {
         mask: Option<&[bool]>,
         options: &envhub_core::ResetOptions,
     ) -> Result<Batch<'_>, HubError> {
+        self.drain_env_pool()?;
         self.check_open()?;
         if seeds.len() != self.num_envs || mask.is_some_and(|m| m.len() != self.num_envs) {
             return Err(HubError::InvalidAction {

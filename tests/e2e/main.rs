@@ -7,6 +7,7 @@ mod classic_rollouts;
 mod cli;
 mod concurrency;
 mod daemon;
+mod env_pool;
 mod failures;
 mod hub_bounds;
 mod lan_peer;

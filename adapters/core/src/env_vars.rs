@@ -23,6 +23,11 @@ pub const ENVHUB_NAMESPACE: &str = "ENVHUB_NAMESPACE";
 /// Control socket of a hub daemon (`envhub serve`) to use instead of the embedded hub.
 pub const ENVHUB_HUB: &str = "ENVHUB_HUB";
 
+/// `0` starts every worker of a suite's Python environment cold (a fresh interpreter that
+/// imports the suite) instead of forking it from the environment's fork server, which the
+/// embedded hub keeps per environment and adapter once a session has used it (default: on).
+pub const ENVHUB_WARM_WORKERS: &str = "ENVHUB_WARM_WORKERS";
+
 /// Python interpreter that runs Python-hosted adapters (`python -m envhub.worker`) and whose
 /// packages the adapters use (Gymnasium's MuJoCo assets, the `mujoco` wheel's libmujoco), and
 /// that the

@@ -92,6 +92,7 @@ def make_vec(
     pool_bytes: int | None = None,
     strict_actions: bool = False,
     hubs: HubsArg = None,
+    batch_size: int | None = None,
     **extra: Any,
 ) -> VectorEnv:
     """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
@@ -103,7 +104,11 @@ def make_vec(
     `hubs` places the envs on other machines' hubs (`envhub serve`, reached as
     `envhub.yaml`'s `zenoh:` and `ENVHUB_CONNECT` say): `"all"` live hubs, a list of names
     (`"local"` is this machine; envs spread in proportion to cores) or a dict of counts
-    (`{"box1": 48, "local": 16}`). `num_workers` then applies per machine."""
+    (`{"box1": 48, "local": 16}`). `num_workers` then applies per machine.
+
+    `batch_size` gives EnvPool's asynchronous contract: after `async_reset()`, `recv()`
+    returns exactly `batch_size` envs, the first to finish (`info["env_id"]`), and
+    `send(actions, env_id)` steps them again."""
     return VectorEnv(
         id,
         num_envs,
@@ -119,6 +124,7 @@ def make_vec(
         pool_bytes=pool_bytes,
         strict_actions=strict_actions,
         hubs=hubs,
+        batch_size=batch_size,
         **extra,
     )
 

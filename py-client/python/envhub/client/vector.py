@@ -53,8 +53,13 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
 
     `autoreset_mode` is Gymnasium's: `next_step` (default), `same_step` (`final_obs` and
     `final_info` in the step's info), or `disabled` (reset finished envs yourself with
-    `reset(options={"reset_mask": mask})`). EnvPool-style asynchronous stepping: `send`
-    actions to some envs, `recv` the results of the first workers to finish.
+    `reset(options={"reset_mask": mask})`).
+
+    EnvPool's asynchronous contract with `batch_size=M` (1 <= M <= `num_envs`):
+    `async_reset()`, then `recv()` returns exactly the first M envs to finish (their ids in
+    `info["env_id"]`, in the order they finished) and `send(actions, env_id)` steps envs
+    `recv` handed out. Without `batch_size`, `send`/`recv` are worker-granular: `recv`
+    returns the envs of the first workers to answer.
     """
 
     def __init__(
@@ -74,6 +79,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         pool_bytes: int | None = None,
         strict_actions: bool = False,
         hubs: HubsArg = None,
+        batch_size: int | None = None,
         _adapter: str | None = None,
         _info_row_bytes: int = INFO_ROW_BYTES,
         **extra: Any,
@@ -124,6 +130,15 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         # `seed=` seeds the first reset that is not given one (env `i` with `seed + i`).
         self._first_seed = check_seed(seed)
         self._sent = np.zeros(self.num_envs, dtype=np.bool_)
+        if batch_size is not None:
+            if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer):
+                self.close()
+                raise InvalidConfigError(f"batch_size must be an integer, got {batch_size!r}")
+            try:
+                s.set_batch_size(int(batch_size))
+            except BaseException:
+                self.close()
+                raise
 
     # Lock-step ------------------------------------------------------------------------------
 
@@ -132,17 +147,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     ) -> tuple[Any, dict[str, Any]]:
         """Resets every env (env `i` seeded with `seed + i`, or `seed[i]` from a list); with
         `options={"reset_mask": mask}` only the envs where `mask` is true."""
-        if isinstance(seed, list | tuple | np.ndarray):
-            if len(seed) != self.num_envs:
-                raise InvalidConfigError(f"got {len(seed)} seeds for {self.num_envs} envs; pass one per env")
-            seeds = [check_seed(s) for s in seed]
-            first = seeds[0]
-        else:
-            first = check_seed(seed)
-            if first is None and self._first_seed is not None:
-                first = self._first_seed
-            seeds = [None if first is None else first + i for i in range(self.num_envs)]
-        self._first_seed = None
+        seeds, first = self._seeds(seed)
         super().reset(seed=first)
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
@@ -170,6 +175,22 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._received.clear()
         self._sent[:] = False
         return self._codec.obs(raw), self._info(infos, None, self.num_envs, cols)
+
+    def _seeds(self, seed: int | list[int | None] | None) -> tuple[list[int | None], int | None]:
+        """One seed per env for a reset (env `i` gets `seed + i`, or `seed[i]` from a list;
+        the `seed` given at make if none), and the first."""
+        if isinstance(seed, list | tuple | np.ndarray):
+            if len(seed) != self.num_envs:
+                raise InvalidConfigError(f"got {len(seed)} seeds for {self.num_envs} envs; pass one per env")
+            seeds = [check_seed(s) for s in seed]
+            first = seeds[0]
+        else:
+            first = check_seed(seed)
+            if first is None and self._first_seed is not None:
+                first = self._first_seed
+            seeds = [None if first is None else first + i for i in range(self.num_envs)]
+        self._first_seed = None
+        return seeds, first
 
     def _keep_latest(self, raw: np.ndarray, keep: np.ndarray) -> None:
         """Writes the latest observation of each env in `keep` into its row of `raw` (the
@@ -204,8 +225,32 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
 
     # EnvPool-style asynchronous stepping ---------------------------------------------------
 
-    def send(self, actions: Any, env_ids: Any = None) -> None:
-        """Sends one action to each env in `env_ids` (all if `None`) without waiting."""
+    @property
+    def batch_size(self) -> int | None:
+        """EnvPool's `batch_size`: how many envs `recv` returns (`None`: the envs of the
+        first workers to answer)."""
+        return self._session.batch_size
+
+    def async_reset(self, *, seed: int | list[int | None] | None = None) -> None:
+        """EnvPool's `async_reset`: resets every env without waiting (env `i` seeded with
+        `seed + i`, or `seed[i]` from a list; the `seed` given to `make_vec` if none);
+        `recv` returns them `batch_size` at a time. Results not received yet are dropped.
+        Without `batch_size`, this sets it to `num_envs`."""
+        seeds, first = self._seeds(seed)
+        super().reset(seed=first)
+        self._session.async_reset(seeds)
+        self._last_obs = None
+        self._received.clear()
+        self._sent[:] = True
+
+    def send(self, actions: Any, env_id: Any = None, *, env_ids: Any = None) -> None:
+        """Sends one action to each env in `env_id` (EnvPool's name; `env_ids` is the same)
+        without waiting; all envs if `None`. With `batch_size`, pass the envs `recv` returned
+        (`info["env_id"]`): an env whose worker is busy waits and goes out when it answers."""
+        if env_ids is None:
+            env_ids = env_id
+        elif env_id is not None:
+            raise InvalidActionError("pass `env_id` or `env_ids`, not both")
         if env_ids is None:
             ids = np.arange(self.num_envs)
         else:
@@ -220,7 +265,8 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
 
     def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Waits for the first workers to finish and returns the results of the envs they
-        stepped; `info["env_id"]` says which envs they are."""
+        stepped; with `batch_size`, exactly that many envs, the first to finish.
+        `info["env_id"]` says which envs they are."""
         # The session has taken announced schemas out of `infos` already, so an announcing
         # env left out below loses nothing.
         raw, rewards, terminated, truncated, infos, final, ids, cols = self._session.recv()

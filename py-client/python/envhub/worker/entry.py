@@ -165,11 +165,13 @@ def render_fps(env: Any) -> float | None:
     return fps if math.isfinite(fps) and fps > 0 else None
 
 
-def serve(job_json: str) -> int:
-    # The ready line goes to the original stdout; everything printed later goes to stderr.
-    reply_fd = os.dup(1)
-    os.dup2(2, 1)
-    sys.stdout = sys.stderr
+def serve(job_json: str, reply_fd: int | None = None) -> int:
+    """Makes the job's envs and serves them; the one ready (or error) line goes to
+    `reply_fd` (default: the original stdout; everything printed later goes to stderr)."""
+    if reply_fd is None:
+        reply_fd = os.dup(1)
+        os.dup2(2, 1)
+        sys.stdout = sys.stderr
     job = json.loads(job_json)
     try:
         batch, obs_desc, act_desc, limit = make_batch(job)
