@@ -18,7 +18,7 @@ fuzz_target!(|data: &[u8]| {
     };
     assert_json_round_trip(&reply);
     let n = [1, 4, 1 << 20, usize::MAX / 4][usize::from(pick % 4)];
-    if let Ok((requests, rows, _key)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
+    if let Ok((requests, rows)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
         let spec = &reply.spec;
         let obs = spec.observation_space.byte_len();
         assert_eq!(rows.obs_bytes, obs);

@@ -345,7 +345,7 @@ mod targets {
                 return Ok(());
             };
             let n = [1, 4, 1 << 20, usize::MAX / 4][usize::from(pick % 4)];
-            if let Ok((req, rows, _key)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
+            if let Ok((req, rows)) = check_open_reply("fuzz", &reply, n, pick & 4 != 0) {
                 let obs = reply.spec.observation_space.byte_len();
                 if rows.obs_bytes != obs || req.act_bytes != reply.spec.action_space.byte_len() {
                     return Err("checked sizes differ from the spaces' own".into());

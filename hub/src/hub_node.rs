@@ -11,6 +11,7 @@ use crate::hub::Hub;
 use crate::launcher::Launcher;
 use crate::python_host::UserAdapters;
 use envhub_net::{NetConfig, ServePolicy, Sessions};
+use envhub_protocol::handshake::{Identity, SeenHellos, check_client_hello, hub_answer};
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use envhub_session::{SessionOptions, VecEnv};
 use serde_json::{Value, json};
@@ -111,6 +112,8 @@ pub fn join(
         policy,
         sessions: sessions.clone(),
         zenoh: session.clone(),
+        identity: envhub_net::identity::hub_identity()?,
+        hellos: std::sync::Mutex::new(SeenHellos::default()),
     });
     // Queries being answered now: each takes a thread (opening starts workers, seconds), so
     // their number is bounded; past it a query is answered "busy" on Zenoh's thread.
@@ -126,6 +129,17 @@ pub fn join(
         let q = session
             .declare_queryable(key)
             .callback(move |query| {
+                // An open request longer than any real one is refused by its length, here on
+                // Zenoh's thread: it is neither copied nor read, nor does it take a place
+                // among the queries answered at once.
+                if op == "open"
+                    && let Err(why) = envhub_protocol::untrusted::check_open_request_size(
+                        query.payload().map_or(0, |p| p.len()),
+                    )
+                {
+                    state.reply(&query, Err(state.unreadable_open(why)));
+                    return;
+                }
                 let Some(slot) = QuerySlot::take(&in_flight) else {
                     state.reply(&query, Err(state.busy(op)));
                     return;
@@ -309,6 +323,10 @@ struct State {
     policy: ServePolicy,
     sessions: Arc<Sessions>,
     zenoh: zenoh::Session,
+    /// This hub's identity in key exchanges (its user's, kept in their config folder).
+    identity: Identity,
+    /// Clients' exchange keys seen lately: a replayed open is refused.
+    hellos: std::sync::Mutex<SeenHellos>,
 }
 
 impl State {
@@ -326,6 +344,16 @@ impl State {
             ),
             "try again in a moment",
         )
+    }
+
+    /// An open request refused before it was parsed (too long, too deep, too many values)
+    /// or that did not parse.
+    fn unreadable_open(&self, why: String) -> HubError {
+        tracing::debug!(%why, "open request refused");
+        HubError::InvalidConfig {
+            what: "open request",
+            reason: why,
+        }
     }
 
     fn reply(&self, query: &zenoh::query::Query, result: Result<Value, HubError>) {
@@ -351,16 +379,32 @@ impl State {
                 Ok(serde_json::to_value(self.hub.adapters()?).expect("adapters serialize"))
             }
             "open" => {
-                let bytes = query
-                    .payload()
-                    .map(|p| p.to_bytes().into_owned())
-                    .unwrap_or_default();
-                let request: OpenRequest =
-                    serde_json::from_slice(&bytes).map_err(|e| HubError::InvalidConfig {
-                        what: "open request",
-                        reason: format!("unreadable: {e}"),
+                let bytes = query.payload().map(|p| p.to_bytes()).unwrap_or_default();
+                let message = envhub_protocol::untrusted::read_open_request(&bytes)
+                    .map_err(|why| self.unreadable_open(why))?;
+                // Who asks, and that it is not a replay, before anything else is looked at.
+                let now = unix_ms();
+                let exchange = check_client_hello(&self.name, &message.hello, now)
+                    .and_then(|exchange| {
+                        self.hellos
+                            .lock()
+                            .unwrap_or_else(|e| e.into_inner())
+                            .note(&exchange, now)
+                            .map(|()| exchange)
+                    })
+                    .map_err(|why| {
+                        self.refuse(
+                            format!("its key exchange was refused: {why}"),
+                            "open again (each open makes a new exchange); check that this machine's clock is right",
+                        )
                     })?;
-                Ok(serde_json::to_value(self.open(request)?).expect("replies serialize"))
+                let hello = Hello {
+                    identity: &message.hello.identity,
+                    exchange: &exchange,
+                    request: &bytes,
+                };
+                Ok(serde_json::to_value(self.open(message.request, hello)?)
+                    .expect("replies serialize"))
             }
             _ => unreachable!("only the ops declared above"),
         }
@@ -404,7 +448,7 @@ impl State {
         }
     }
 
-    fn open(&self, request: OpenRequest) -> Result<OpenReply, HubError> {
+    fn open(&self, request: OpenRequest, hello: Hello<'_>) -> Result<OpenReply, HubError> {
         let config = request.config;
         if !self.policy.allow_remote_files {
             if let Some(path) = &config.asset_path {
@@ -427,6 +471,20 @@ impl State {
                     "remote clients may pass numbers, booleans, strings that are not paths, and lists and maps of those; its owner can allow files with `envhub serve --allow-remote-files`",
                 ));
             }
+        }
+        // The session ends when the client's token goes: a client without one (an id made up,
+        // or another's) would hold it until the idle timeout.
+        let plain = !request.client.is_empty()
+            && request.client.len() <= 64
+            && request.client.bytes().all(|b| b.is_ascii_alphanumeric());
+        if !plain || !client_token_remains(&self.zenoh, &keys::client_token(&request.client)) {
+            return Err(self.refuse(
+                format!(
+                    "the client's liveliness token `{}` is not on the network",
+                    keys::client_token(&request.client).escape_debug()
+                ),
+                "a session lives as long as its client's token: open sessions from an envhub client",
+            ));
         }
         let num_envs = config.num_envs;
         let workers = envhub_session::workers_for(&config, num_envs.max(1));
@@ -462,7 +520,7 @@ impl State {
         // pass the limits.
         let reservation = self
             .sessions
-            .reserve(&request.client, num_envs, workers, &self.policy)
+            .reserve(hello.identity, num_envs, workers, &self.policy)
             .map_err(|(reason, hint)| self.refuse(reason, &hint))?;
         let vec = VecEnv::start(&request.id, route.clone(), options, &Launcher::local())?;
         let spec = envhub_shm::ReadySpec {
@@ -474,24 +532,53 @@ impl State {
             worker: None,
         };
         let workers = vec.num_workers();
-        let started = envhub_net::start(
+        let session = envhub_net::new_session_id()?;
+        let (answer, key) = hub_answer(
+            &self.identity,
+            &self.name,
+            &session,
+            hello.request,
+            hello.exchange,
+        )
+        .map_err(|e| HubError::InvalidState(format!("the key exchange failed: {e}")))?;
+        envhub_net::start(
             &self.sessions,
             &self.zenoh,
             &self.name,
-            &request.client,
+            session.clone(),
+            envhub_net::Client {
+                token: &request.client,
+                identity: hello.identity,
+            },
+            key,
             vec,
             reservation,
             self.policy.idle_timeout,
         )?;
-        tracing::info!(id = %request.id, num_envs, workers, client = %request.client, session = %started.id, "remote session opened");
+        tracing::info!(id = %request.id, num_envs, workers, client = %request.client, identity = hello.identity, %session, "remote session opened");
         Ok(OpenReply {
-            session: started.id,
+            session,
             spec,
             route,
             workers,
-            key: started.key,
+            hello: answer,
         })
     }
+}
+
+/// A checked client hello: who opens, its exchange key, and the open request's bytes as they
+/// arrived (the transcript covers them).
+struct Hello<'a> {
+    identity: &'a str,
+    exchange: &'a [u8; 32],
+    request: &'a [u8],
+}
+
+/// Now, in milliseconds since the Unix epoch.
+fn unix_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
 }
 
 /// Whether a client's token `key` is still held by someone (the client itself, when another

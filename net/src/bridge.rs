@@ -8,12 +8,13 @@
 //! unanswered, counted and logged at debug level, and takes no place in the session's queue;
 //! the session goes on. Each request carries a sequence number. The answer to the last
 //! one is kept: a request sent again (the client heard nothing back, e.g. across a reconnect)
-//! is answered again with the very same bytes, without stepping twice; an older one (a replay)
-//! is dropped. A sealed request that is unreadable is answered with an error naming what was
+//! is answered again with the very same bytes, without stepping twice, at most once per
+//! [`REPEAT_GAP`]; an older one, or a copy of one already queued (a replay), is dropped by its
+//! sequence number before its seal is checked. A sealed request that is unreadable is answered with an error naming what was
 //! wrong, and the session goes on.
 
 use crate::policy::{SESSION_QUEUE, ServePolicy};
-use envhub_protocol::seal::{Direction, KEY_LEN, SessionKey};
+use envhub_protocol::seal::{Direction, SessionKey};
 use envhub_protocol::wire::{self, RowsOut};
 use envhub_protocol::{HubError, keys};
 use envhub_session::{Batch, VecEnv};
@@ -29,7 +30,11 @@ use zenoh::Wait;
 const IDLE_TICK: Duration = Duration::from_millis(100);
 
 struct Entry {
+    /// The client's token key: the session ends when it goes.
     client: String,
+    /// The client's identity (its key, [`envhub_protocol::handshake`]): what per-client
+    /// limits count.
+    identity: String,
     envs: usize,
     workers: usize,
     requests: Option<SyncSender<Vec<u8>>>,
@@ -39,6 +44,8 @@ struct Entry {
     key: Arc<SessionKey>,
     /// The last sequence number it answered: older requests (replays) are not queued.
     answered: Arc<AtomicU64>,
+    /// What it let into its queue lately (replays of newer requests are not queued either).
+    gate: Arc<Mutex<Gate>>,
     stop: Arc<AtomicBool>,
 }
 
@@ -77,7 +84,7 @@ pub struct Sessions {
     starting: Mutex<Starting>,
 }
 
-/// Envs, workers and sessions (by client) set aside by sessions still starting.
+/// Envs, workers and sessions (by client identity) set aside by sessions still starting.
 #[derive(Default)]
 struct Starting {
     envs: usize,
@@ -133,8 +140,9 @@ impl Sessions {
             .fold((0, 0), |(e, w), s| (e + s.envs, w + s.workers))
     }
 
-    /// Sets aside `envs` and `workers` for a session of `client` if the limits allow; else
-    /// why not and what would fit.
+    /// Sets aside `envs` and `workers` for a session of the client of identity `client` (its
+    /// key: names a client cannot pick for another) if the limits allow; else why not and what
+    /// would fit.
     pub fn reserve(
         &self,
         client: &str,
@@ -152,7 +160,7 @@ impl Sessions {
                 (
                     e + s.envs,
                     w + s.workers,
-                    c + usize::from(s.client == client),
+                    c + usize::from(s.identity == client),
                 )
             })
         };
@@ -247,32 +255,35 @@ fn random<const N: usize>() -> Result<[u8; N], HubError> {
 
 /// A session id no one can guess (128 random bits from the OS). It names the session's keys,
 /// which every peer that sees its traffic learns: the session's secret is its key.
-fn session_id() -> Result<String, HubError> {
+pub fn new_session_id() -> Result<String, HubError> {
     let hex: String = random::<16>()?.iter().map(|b| format!("{b:02x}")).collect();
     Ok(format!("s{hex}"))
 }
 
-/// A started session: its id, and its key (hex) for the client's open reply alone.
-pub struct Started {
-    /// The session's id (part of its keys).
-    pub id: String,
-    /// Its secret key, 64 hex digits.
-    pub key: String,
+/// Who a session is for: the client's token key (the session ends when it goes) and its
+/// identity (what per-client limits count).
+pub struct Client<'a> {
+    /// Its liveliness token key.
+    pub token: &'a str,
+    /// Its identity (64 hex digits).
+    pub identity: &'a str,
 }
 
-/// Registers a started session and runs it on its own thread; returns its id and key.
+/// Registers started session `id` (its key agreed with the client,
+/// [`envhub_protocol::handshake`]) and runs it on its own thread.
+#[allow(clippy::too_many_arguments)]
 pub fn start(
     sessions: &Arc<Sessions>,
     zenoh: &zenoh::Session,
     hub: &str,
-    client: &str,
+    id: String,
+    client: Client<'_>,
+    key: SessionKey,
     vec: VecEnv,
     reservation: Reservation<'_>,
     idle_timeout: Option<Duration>,
-) -> Result<Started, HubError> {
-    let id = session_id()?;
-    let key_bytes = random::<KEY_LEN>()?;
-    let key = Arc::new(SessionKey::new(&key_bytes));
+) -> Result<(), HubError> {
+    let key = Arc::new(key);
     // A client that does not read its answers must not hold the hub's other sessions back:
     // what does not fit the link's queue is dropped (the client asks again after its resend
     // delay, and a repeat is answered from the kept answer).
@@ -297,18 +308,20 @@ pub fn start(
         .gone
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .contains(&keys::client_token(client));
+        .contains(&keys::client_token(client.token));
     let stop = Arc::new(AtomicBool::new(client_gone));
     entries.insert(
         id.clone(),
         Entry {
-            client: client.to_string(),
+            client: client.token.to_string(),
+            identity: client.identity.to_string(),
             envs: vec.num_envs(),
             workers: vec.num_workers(),
             requests: Some(tx),
             request_sizes: entry_sizes,
             key: key.clone(),
             answered: answered.clone(),
+            gate: Arc::default(),
             stop: stop.clone(),
         },
     );
@@ -338,10 +351,7 @@ pub fn start(
             tracing::info!(session = %thread_id, "remote session closed");
         })
         .map_err(|e| HubError::InvalidState(format!("cannot start a session thread: {e}")))?;
-    Ok(Started {
-        id,
-        key: envhub_protocol::seal::to_hex(&key_bytes),
-    })
+    Ok(())
 }
 
 /// Hands a request to its session's queue, opened, if it is sealed with the session's key and
@@ -360,20 +370,74 @@ pub fn dispatch(sessions: &Sessions, zenoh: &zenoh::Session, hub: &str, key: &st
     if !entry.request_sizes.contains(&payload.len()) {
         return dropped("not the size of this session's requests", id);
     }
-    let (key, answered) = (entry.key.clone(), entry.answered.clone());
+    let (key, answered, gate) = (
+        entry.key.clone(),
+        entry.answered.clone(),
+        entry.gate.clone(),
+    );
     drop(entries);
+    // Replays are dropped by their sequence number (in clear) before the seal is even
+    // checked; the gate is moved only by requests whose seal was.
+    let clear_seq = u64::from_le_bytes(payload[..8].try_into().expect("checked size"));
+    if let Err(why) = gate_of(&gate).admits(clear_seq, answered.load(Ordering::Acquire)) {
+        return dropped(why, id);
+    }
     let mut request = payload.to_vec();
     let Ok(seq) = key.open(Direction::Request, &mut request) else {
         return dropped("not sealed with the session's key", id);
     };
-    if seq < answered.load(Ordering::Acquire) {
-        return dropped("out of sequence (a replay)", id);
+    let mut gate = gate_of(&gate);
+    if let Err(why) = gate.admits(seq, answered.load(Ordering::Acquire)) {
+        return dropped(why, id);
     }
     match tx.try_send(request) {
-        Ok(()) => {}
+        Ok(()) => gate.passed(seq, answered.load(Ordering::Acquire)),
         Err(TrySendError::Full(_)) => dropped("the session's queue is full", id),
         Err(TrySendError::Disconnected(_)) => dropped("the session is closing", id),
     }
+}
+
+/// The shortest time between two repeats of a session's last answered request that are
+/// answered: a client repeats a request only after 1 s without an answer, so more are a
+/// replay flood, and each would make the hub publish its answer again.
+const REPEAT_GAP: Duration = Duration::from_millis(250);
+
+/// What a session let into its queue lately: replays are dropped before any work.
+#[derive(Debug, Default)]
+struct Gate {
+    /// The highest sequence number queued (a copy of one still queued or in work is dropped).
+    queued: u64,
+    /// When a repeat of the last answered request was last let in.
+    last_repeat: Option<Instant>,
+}
+
+impl Gate {
+    /// Whether request `seq` may go to the queue, the session having answered `answered`.
+    fn admits(&self, seq: u64, answered: u64) -> Result<(), &'static str> {
+        if seq < answered {
+            return Err("out of sequence (a replay)");
+        }
+        if seq == answered {
+            if self.last_repeat.is_some_and(|t| t.elapsed() < REPEAT_GAP) {
+                return Err("a repeat of the answered request too soon (a replay)");
+            }
+        } else if seq <= self.queued {
+            return Err("a copy of a request already queued (a replay)");
+        }
+        Ok(())
+    }
+
+    /// Notes that request `seq` (sealed, checked) went to the queue.
+    fn passed(&mut self, seq: u64, answered: u64) {
+        if seq == answered {
+            self.last_repeat = Some(Instant::now());
+        }
+        self.queued = self.queued.max(seq);
+    }
+}
+
+fn gate_of(gate: &Mutex<Gate>) -> std::sync::MutexGuard<'_, Gate> {
+    gate.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Answers a request of a session that ended lately that it is closed (sealed with its key,
@@ -721,12 +785,16 @@ mod tests {
                             id.clone(),
                             Entry {
                                 client: String::new(),
+                                identity: String::new(),
                                 envs: 1,
                                 workers: 1,
                                 requests: None,
                                 request_sizes: 0..=0,
-                                key: Arc::new(SessionKey::new(&[0; KEY_LEN])),
+                                key: Arc::new(SessionKey::new(
+                                    &[0; envhub_protocol::seal::KEY_LEN],
+                                )),
                                 answered: Arc::default(),
+                                gate: Arc::default(),
                                 stop: Arc::new(AtomicBool::new(false)),
                             },
                         );
@@ -745,6 +813,23 @@ mod tests {
             !over.load(Ordering::Relaxed),
             "more than {MAX} envs were open at once"
         );
+    }
+
+    #[test]
+    fn replays_are_not_queued_and_repeats_of_the_answer_are_spaced() {
+        let mut gate = Gate::default();
+        gate.admits(1, 0).expect("the first request");
+        gate.passed(1, 0);
+        assert!(gate.admits(1, 0).is_err(), "a copy of a queued request");
+        // Answered: a repeat (the client heard nothing) once, then not again at once.
+        gate.admits(1, 1).expect("a repeat of the answered request");
+        gate.passed(1, 1);
+        assert!(gate.admits(1, 1).is_err(), "a flood of repeats");
+        assert!(gate.admits(0, 1).is_err(), "an older request");
+        gate.admits(2, 1).expect("the next request");
+        gate.passed(2, 1);
+        std::thread::sleep(REPEAT_GAP);
+        gate.admits(2, 2).expect("a repeat after the gap");
     }
 
     #[test]

@@ -10,6 +10,8 @@
 //! what this does and does not stop).
 
 use crate::config::{self, NetConfig};
+use envhub_protocol::handshake;
+use envhub_protocol::seal::SessionKey;
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
@@ -103,6 +105,10 @@ impl Seen {
 pub struct Network {
     session: zenoh::Session,
     client_id: String,
+    /// This process's identity in key exchanges (what hubs' per-client limits count).
+    identity: envhub_protocol::handshake::Identity,
+    /// The hub identities this user pinned.
+    known: crate::identity::KnownHubs,
     _token: zenoh::liveliness::LivelinessToken,
     _watch: zenoh::pubsub::Subscriber<()>,
     liveness: Arc<Liveness>,
@@ -169,9 +175,13 @@ impl Network {
             .declare_token(keys::client_token(&client_id))
             .wait()
             .map_err(failed)?;
+        let identity = envhub_protocol::handshake::Identity::generate()
+            .map_err(|e| HubError::InvalidState(format!("cannot make a client identity: {e}")))?;
         Ok(Network {
             session,
             client_id,
+            identity,
+            known: crate::identity::KnownHubs::new(net.known_hubs.as_deref()),
             _token: token,
             _watch: watch,
             liveness,
@@ -345,20 +355,41 @@ impl Network {
     }
 
     /// Opens a session on `hub` (starting its workers takes up to `start_timeout`), with the
-    /// first answer from the hub's Zenoh id ([`Network::query`]).
+    /// first answer from the hub's Zenoh id ([`Network::query`]): the reply and the session's
+    /// key, agreed by a key exchange bound to the hub's pinned identity
+    /// ([`envhub_protocol::handshake`], [`crate::identity`]).
     pub(crate) fn open_session(
         &self,
         hub: &str,
         request: &OpenRequest,
         start_timeout: Duration,
-    ) -> Result<OpenReply, HubError> {
-        let payload = serde_json::to_vec(request).expect("requests serialize");
-        self.query(
+    ) -> Result<(OpenReply, SessionKey), HubError> {
+        let (hello, pending) = handshake::client_hello(&self.identity, hub, unix_ms())
+            .map_err(|e| HubError::InvalidState(format!("cannot start a key exchange: {e}")))?;
+        let payload = serde_json::to_vec(&serde_json::json!({"request": request, "hello": hello}))
+            .expect("requests serialize");
+        // A hub reads no longer request: say so here, naming the hub and the limit.
+        envhub_protocol::untrusted::check_open_request_size(payload.len()).map_err(|why| {
+            HubError::InvalidConfig {
+                what: "open request",
+                reason: format!(
+                    "the request to open `{}` on hub `{hub}` is {why}\nhint: pass large data to \
+                     the env some other way than kwargs (a registry entry on the hub)",
+                    request.id
+                ),
+            }
+        })?;
+        let reply: OpenReply = self.query(
             hub,
             &keys::hub_open(hub),
-            Some(payload),
+            Some(payload.clone()),
             start_timeout + Duration::from_secs(5),
-        )
+        )?;
+        let (identity, key) = pending
+            .finish(hub, &reply.session, &payload, &reply.hello)
+            .map_err(|e| envhub_protocol::untrusted::lying(hub, e))?;
+        self.known.check(hub, &identity)?;
+        Ok((reply, key))
     }
 
     /// Times `n` raw Zenoh round trips of `bytes`-byte messages to hub `hub`'s echo, with the
@@ -445,6 +476,13 @@ impl Network {
         inboxes.retain(|w| w.strong_count() > 0);
         inboxes.push(Arc::downgrade(inbox));
     }
+}
+
+/// Now, in milliseconds since the Unix epoch (a hello's time).
+pub(crate) fn unix_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
 }
 
 /// A hub's `{"ok": ...}` reply, or the error it sent.

@@ -37,6 +37,9 @@ pub struct NetConfig {
     pub multicast: Option<bool>,
     /// Link lease in milliseconds (default [`DEFAULT_LEASE_MS`]).
     pub lease_ms: Option<u64>,
+    /// The file of hub identities this client pinned (default: `ENVHUB_KNOWN_HUBS`, else
+    /// `known_hubs` in `~/.config/envhub`; see [`crate::identity`]).
+    pub known_hubs: Option<PathBuf>,
 }
 
 impl NetConfig {
@@ -123,6 +126,35 @@ fn json_list(items: &[String]) -> String {
     serde_json::to_string(items).expect("strings serialize")
 }
 
+/// How long a link into a hub may take to say who it is, in milliseconds (Zenoh's default:
+/// 10 s). A real peer does it within a round trip or two.
+pub const ACCEPT_TIMEOUT_MS: u64 = 2000;
+/// Links into a hub being accepted at once (Zenoh's default: 100, which 150 idle connections
+/// of another user filled, locking the owner's clients out).
+pub const ACCEPT_PENDING: usize = 4096;
+
+/// Raises this process's soft limit of open files to at least `wanted` (within the hard
+/// limit): a hub holds a file per link it is accepting.
+fn raise_open_files(wanted: u64) {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit/setrlimit with a valid resource and a pointer to a local struct.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) != 0 || limit.rlim_cur >= wanted {
+            return;
+        }
+        limit.rlim_cur = wanted.min(limit.rlim_max);
+        if libc::setrlimit(libc::RLIMIT_NOFILE, &limit) != 0 {
+            tracing::warn!(
+                wanted,
+                "cannot raise the limit of open files: many idle links could lock clients out"
+            );
+        }
+    }
+}
+
 /// A hub's Zenoh session and what its exposure rule decided.
 pub struct HubSession {
     /// The session.
@@ -144,17 +176,38 @@ pub fn open_hub(
 ) -> Result<HubSession, HubError> {
     use zenoh::Wait;
     let mut config = net.zenoh_config(true)?;
-    let exposure = crate::exposure::guard(&mut config, policy.insecure_listen, net.multicast)?;
-    // Zenoh drops larger messages before they reach envhub.
-    config
-        .insert_json5(
+    let exposure = crate::exposure::guard(
+        &mut config,
+        policy.insecure_listen,
+        policy.multicast_scouting,
+        net.multicast,
+    )?;
+    // Zenoh drops larger messages before they reach envhub. Links that connect and say
+    // nothing (held open by anyone who reaches the port) wait at most ACCEPT_TIMEOUT_MS in
+    // the queue of links being accepted, which holds ACCEPT_PENDING: past it Zenoh closes
+    // new links at once, the owner's clients' included.
+    for (key, value) in [
+        (
             "transport/link/rx/max_message_size",
-            &policy.max_request_bytes.to_string(),
-        )
-        .map_err(|e| HubError::InvalidConfig {
-            what: "zenoh config",
-            reason: format!("`transport/link/rx/max_message_size`: {e}"),
-        })?;
+            policy.max_request_bytes.to_string(),
+        ),
+        (
+            "transport/unicast/accept_timeout",
+            ACCEPT_TIMEOUT_MS.to_string(),
+        ),
+        (
+            "transport/unicast/accept_pending",
+            ACCEPT_PENDING.to_string(),
+        ),
+    ] {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| HubError::InvalidConfig {
+                what: "zenoh config",
+                reason: format!("`{key}`: {e}"),
+            })?;
+    }
+    raise_open_files(ACCEPT_PENDING as u64 * 2);
     let default_listener = config.get_json("listen/endpoints").ok()
         == Some(format!("[\"{}\"]", crate::LOOPBACK_LISTENER));
     if exposure.local_credential {

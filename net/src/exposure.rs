@@ -88,11 +88,14 @@ fn no_autoconnect(config: &mut zenoh::Config) -> Result<(), HubError> {
     set(config, "scouting/gossip/autoconnect", "[]")
 }
 
-/// Applies the exposure rule to a hub's Zenoh config. `multicast`: what the operator asked
-/// for (`None`: the default).
+/// Applies the exposure rule to a hub's Zenoh config. `insecure`: `--insecure-listen`;
+/// `scouting`: `--multicast-scouting`, the operator's explicit ask to send and answer
+/// multicast scouts; `multicast`: what the config asked for (`multicast:`,
+/// `ENVHUB_MULTICAST`; `None`: the default).
 pub(crate) fn guard(
     config: &mut zenoh::Config,
     insecure: bool,
+    scouting: bool,
     multicast: Option<bool>,
 ) -> Result<Exposure, HubError> {
     let credentials = Credentials::of(config);
@@ -116,9 +119,10 @@ pub(crate) fn guard(
         )?;
         listen = vec![LOOPBACK_LISTENER.to_string()];
         exposure.notice = Some(
-            "note: no credentials, so this hub listens on loopback only (this machine's clients); \
-             to serve other machines give credentials with `--zenoh-config` and `--listen` \
-             (docs/security.md), or `--insecure-listen` on a network you trust"
+            "note: no credentials, so this hub listens on loopback only (this machine's clients) \
+             and neither sends nor answers multicast scouts; to serve other machines give \
+             credentials with `--zenoh-config` and `--listen` (docs/security.md), or \
+             `--insecure-listen` on a network you trust"
                 .to_string(),
         );
     }
@@ -138,24 +142,7 @@ pub(crate) fn guard(
                 .filter(|e| !is_loopback(e) && !credentials.covers_out(e)),
         )
         .collect();
-    if insecure {
-        if exposed.is_empty() && exposure.loopback_only && uncredentialed && !assigned {
-            exposure.notice = Some(format!(
-                "warning: this hub listens on {} without credentials (`--insecure-listen`): \
-                 every user of this machine can run envs here; see docs/security.md",
-                quoted(&listen.iter().collect::<Vec<_>>())
-            ));
-        } else if !exposed.is_empty() {
-            exposure.notice = Some(format!(
-                "warning: this hub is open without credentials on {} (`--insecure-listen`): any \
-                 peer that reaches it can run envs here and read or steer every session; see \
-                 docs/security.md",
-                quoted(&exposed)
-            ));
-        }
-        return Ok(exposure);
-    }
-    if !exposed.is_empty() {
+    if !exposed.is_empty() && !insecure {
         return Err(HubError::InvalidConfig {
             what: "network exposure",
             reason: format!(
@@ -171,21 +158,67 @@ pub(crate) fn guard(
             ),
         });
     }
-    // Scouting and gossip name peers this hub has not authenticated: it connects to none.
+    // Scouting and gossip name peers this hub has not authenticated: it connects to none, in
+    // every mode (`--insecure-listen` included).
     no_autoconnect(config)?;
-    if exposure.loopback_only {
-        if multicast == Some(true) {
+    let asked = scouting || multicast == Some(true);
+    if exposure.loopback_only && asked {
+        return Err(HubError::InvalidConfig {
+            what: "network exposure",
+            reason: "multicast scouting was asked for (`--multicast-scouting`, \
+                     `multicast: true`, `ENVHUB_MULTICAST`), but this hub listens on loopback \
+                     only: its scouts and answers would reach the whole LAN and name an \
+                     address no one there can reach\n\
+                     hint: leave multicast off (this machine's clients find the hub without \
+                     it), or give credentials and `--listen` (docs/security.md)"
+                .to_string(),
+        });
+    }
+    // Without credentials on every listener, the hub scouts only when its operator says so
+    // with the flag (an `ENVHUB_MULTICAST=1` exported for clients is not enough).
+    let scouts = if exposure.loopback_only {
+        false
+    } else if uncredentialed {
+        if multicast == Some(true) && !scouting {
             return Err(HubError::InvalidConfig {
                 what: "network exposure",
                 reason: "multicast scouting was asked for (`multicast: true`, \
-                         `ENVHUB_MULTICAST`), but this hub listens on loopback only: its scouts \
-                         and answers would reach the whole LAN\n\
-                         hint: leave multicast off (this machine's clients find the hub \
-                         without it), or give credentials and `--listen` (docs/security.md)"
+                         `ENVHUB_MULTICAST=1`) on a hub without credentials: its answers would \
+                         tell the whole LAN where to open sessions\n\
+                         hint: pass `envhub serve --multicast-scouting` to do it anyway on a \
+                         network you trust, or unset `ENVHUB_MULTICAST` for the hub"
                     .to_string(),
             });
         }
+        scouting
+    } else {
+        multicast != Some(false)
+    };
+    if !scouts {
         no_scouting(config)?;
+    } else {
+        set(config, "scouting/multicast/enabled", "true")?;
+    }
+    if insecure && uncredentialed {
+        let reach = if scouts {
+            " and answers multicast scouts on the LAN (`--multicast-scouting`)"
+        } else {
+            "; it neither sends nor answers multicast scouts"
+        };
+        if exposed.is_empty() && exposure.loopback_only && !assigned {
+            exposure.notice = Some(format!(
+                "warning: this hub listens on {} without credentials (`--insecure-listen`): \
+                 every user of this machine can run envs here{reach}; see docs/security.md",
+                quoted(&listen.iter().collect::<Vec<_>>())
+            ));
+        } else if !exposed.is_empty() {
+            exposure.notice = Some(format!(
+                "warning: this hub is open without credentials on {} (`--insecure-listen`){reach}: \
+                 any peer that reaches it can run envs here and read or steer every session; see \
+                 docs/security.md",
+                quoted(&exposed)
+            ));
+        }
     }
     Ok(exposure)
 }
@@ -308,7 +341,7 @@ mod tests {
     #[test]
     fn a_hub_without_credentials_listens_on_loopback_only_and_scouts_nothing() {
         let mut c = config("mode = \"peer\"");
-        let exposure = guard(&mut c, false, None).unwrap();
+        let exposure = guard(&mut c, false, false, None).unwrap();
         let note = exposure.notice.expect("a note on how to open it up");
         assert!(
             note.contains("loopback only") && note.contains("--insecure-listen"),
@@ -325,7 +358,9 @@ mod tests {
         assert!(get("scouting/multicast/autoconnect").contains("[]"));
         assert!(get("scouting/gossip/autoconnect").contains("[]"));
         let mut c = config("mode = \"peer\"");
-        let err = guard(&mut c, false, Some(true)).unwrap_err().to_string();
+        let err = guard(&mut c, false, false, Some(true))
+            .unwrap_err()
+            .to_string();
         assert!(
             err.contains("multicast") && err.contains("loopback only"),
             "{err}"
@@ -335,16 +370,16 @@ mod tests {
     #[test]
     fn loopback_without_credentials_admits_only_this_users_processes() {
         let mut c = config("mode = \"peer\"");
-        assert!(guard(&mut c, false, None).unwrap().local_credential);
-        assert!(guard(&mut c, true, None).unwrap().local_credential);
+        assert!(guard(&mut c, false, false, None).unwrap().local_credential);
+        assert!(guard(&mut c, true, false, None).unwrap().local_credential);
         // A listener it was given, too: other users of the machine reach loopback.
         let given = "listen/endpoints = [\"tcp/127.0.0.1:7447\"]";
         let mut c = config(given);
-        let exposure = guard(&mut c, false, None).unwrap();
+        let exposure = guard(&mut c, false, false, None).unwrap();
         assert!(exposure.local_credential);
         assert_eq!(exposure.listen, ["tcp/127.0.0.1:7447"]);
         let mut c = config(given);
-        let exposure = guard(&mut c, true, None).unwrap();
+        let exposure = guard(&mut c, true, false, None).unwrap();
         assert!(!exposure.local_credential, "`--insecure-listen` shares it");
         let warning = exposure.notice.expect("a warning");
         assert!(
@@ -354,25 +389,78 @@ mod tests {
         // The operator's credentials, or a listener beyond loopback: not a local hub.
         let usrpwd = "transport/auth/usrpwd/dictionary_file = \"/etc/envhub/users.txt\"";
         let mut c = config(&format!("{given}\n{usrpwd}"));
-        assert!(!guard(&mut c, false, None).unwrap().local_credential);
+        assert!(!guard(&mut c, false, false, None).unwrap().local_credential);
         let mut c = config("listen/endpoints = [\"tcp/0.0.0.0:7447\"]");
-        assert!(!guard(&mut c, true, None).unwrap().local_credential);
+        assert!(!guard(&mut c, true, false, None).unwrap().local_credential);
+    }
+
+    /// `--insecure-listen` opens listeners, not scouting: every mode keeps scouting and
+    /// autoconnect off unless `--multicast-scouting` says otherwise, and the notice says so.
+    #[test]
+    fn insecure_listen_never_turns_scouting_or_autoconnect_back_on() {
+        let off = |c: &zenoh::Config| {
+            c.get_json("scouting/multicast/enabled").unwrap() == "false"
+                && c.get_json("scouting/gossip/enabled").unwrap() == "false"
+        };
+        let no_autoconnect = |c: &zenoh::Config| {
+            c.get_json("scouting/multicast/autoconnect")
+                .unwrap()
+                .contains("[]")
+                && c.get_json("scouting/gossip/autoconnect")
+                    .unwrap()
+                    .contains("[]")
+        };
+        for given in [
+            "mode = \"peer\"",
+            "listen/endpoints = [\"tcp/127.0.0.1:7447\"]",
+            "listen/endpoints = [\"tcp/0.0.0.0:7447\"]",
+        ] {
+            let mut c = config(given);
+            let exposure = guard(&mut c, true, false, None).unwrap();
+            assert!(
+                off(&c) && no_autoconnect(&c),
+                "{given}: scouting or autoconnect on"
+            );
+            if let Some(notice) = exposure.notice {
+                assert!(
+                    notice.contains("loopback only")
+                        || notice.contains("neither sends nor answers"),
+                    "{given}: {notice}"
+                );
+            }
+            // `ENVHUB_MULTICAST=1` (meant for clients) does not open a hub without credentials.
+            let mut c = config(given);
+            let err = guard(&mut c, true, false, Some(true))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("multicast"), "{given}: {err}");
+        }
+        // The flag, beyond loopback: scouts on, autoconnect still off, and the warning says so.
+        let mut c = config("listen/endpoints = [\"tcp/0.0.0.0:7447\"]");
+        let exposure = guard(&mut c, true, true, None).unwrap();
+        assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "true");
+        assert!(no_autoconnect(&c));
+        let warning = exposure.notice.unwrap();
+        assert!(warning.contains("--multicast-scouting"), "{warning}");
+        // On loopback the flag is refused: its answers would name an unreachable address.
+        let mut c = config("mode = \"peer\"");
+        assert!(guard(&mut c, true, true, None).is_err());
     }
 
     #[test]
     fn listening_beyond_loopback_without_credentials_needs_the_flag() {
         let mut c = config("listen/endpoints = [\"tcp/0.0.0.0:7447\"]");
-        let err = guard(&mut c, false, None).unwrap_err().to_string();
+        let err = guard(&mut c, false, false, None).unwrap_err().to_string();
         assert!(
             err.contains("tcp/0.0.0.0:7447") && err.contains("--insecure-listen"),
             "{err}"
         );
-        let exposure = guard(&mut c, true, None).unwrap();
+        let exposure = guard(&mut c, true, false, None).unwrap();
         let warning = exposure.notice.expect("a warning");
         assert!(warning.contains("tcp/0.0.0.0:7447"), "{warning}");
         let mut c = config("connect/endpoints = [\"tcp/10.0.0.5:7447\"]");
         assert!(
-            guard(&mut c, false, None).is_err(),
+            guard(&mut c, false, false, None).is_err(),
             "connecting out exposes the hub too"
         );
     }
@@ -383,7 +471,7 @@ mod tests {
         let mut c = config(&format!(
             "listen/endpoints = [\"tcp/0.0.0.0:7447\"]\n{usrpwd}"
         ));
-        let exposure = guard(&mut c, false, None).unwrap();
+        let exposure = guard(&mut c, false, false, None).unwrap();
         assert_eq!(exposure.notice, None);
         assert!(!exposure.loopback_only);
         assert!(
@@ -396,12 +484,12 @@ mod tests {
         let mut c = config(&format!(
             "listen/endpoints = [\"tcp/0.0.0.0:7447\"]\nconnect/endpoints = [\"tcp/10.0.0.9:7447\"]\n{usrpwd}"
         ));
-        let err = guard(&mut c, false, None).unwrap_err().to_string();
+        let err = guard(&mut c, false, false, None).unwrap_err().to_string();
         assert!(err.contains("tcp/10.0.0.9:7447"), "{err}");
         let mut c = config(
             "listen/endpoints = [\"tls/0.0.0.0:7447\", \"tcp/0.0.0.0:7448\"]\ntransport/link/tls/enable_mtls = true",
         );
-        let err = guard(&mut c, false, None).unwrap_err().to_string();
+        let err = guard(&mut c, false, false, None).unwrap_err().to_string();
         assert!(
             err.contains("tcp/0.0.0.0:7448") && !err.contains("tls/0.0.0.0:7447"),
             "mTLS covers tls/ only: {err}"
@@ -409,10 +497,13 @@ mod tests {
         let mut c = config(
             "listen/endpoints = [\"tls/0.0.0.0:7447\"]\nconnect/endpoints = [\"tls/10.0.0.9:7447\"]\ntransport/link/tls/enable_mtls = true",
         );
-        assert!(guard(&mut c, false, None).is_ok(), "mTLS covers links out");
+        assert!(
+            guard(&mut c, false, false, None).is_ok(),
+            "mTLS covers links out"
+        );
         // mTLS without a listener: Zenoh's default (tcp on every interface) is not covered.
         let mut c = config("transport/link/tls/enable_mtls = true");
-        assert!(guard(&mut c, false, None).unwrap().loopback_only);
+        assert!(guard(&mut c, false, false, None).unwrap().loopback_only);
     }
 
     #[test]

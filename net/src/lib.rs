@@ -10,12 +10,13 @@ mod bridge;
 mod client;
 mod config;
 mod exposure;
+pub mod identity;
 mod link;
 pub mod local;
 mod opener;
 mod policy;
 
-pub use bridge::{DROPPED, Sessions, Started, dispatch, start};
+pub use bridge::{Client, DROPPED, Sessions, dispatch, new_session_id, start};
 pub use client::{DISCOVERY, Network, unknown_hub};
 pub use config::{
     DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, HubSession, NetConfig, open, open_hub,

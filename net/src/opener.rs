@@ -40,11 +40,11 @@ impl SliceOpener for ZenohSlices {
         with_final: bool,
         start_timeout: Duration,
     ) -> Result<(OpenReply, Box<dyn RemoteSlice>), HubError> {
-        let reply = self.network.open_session(hub, request, start_timeout)?;
+        let (reply, key) = self.network.open_session(hub, request, start_timeout)?;
         let n = request.config.num_envs;
         // The hub's word on its spaces and session id is checked before any size is computed
         // from it.
-        let (layout, rows_layout, key) = check_open_reply(hub, &reply, n, with_final)?;
+        let (layout, rows_layout) = check_open_reply(hub, &reply, n, with_final)?;
         let conn = RemoteConn::connect(
             self.network.clone(),
             self.inbox.clone(),

@@ -49,6 +49,9 @@ pub struct ServePolicy {
     pub allow_provision: bool,
     /// Listen beyond loopback without credentials (`--insecure-listen`).
     pub insecure_listen: bool,
+    /// Send and answer multicast scouts without credentials (`--multicast-scouting`, with
+    /// `--insecure-listen` on a listener beyond loopback).
+    pub multicast_scouting: bool,
 }
 
 impl Default for ServePolicy {
@@ -63,6 +66,7 @@ impl Default for ServePolicy {
             allow_remote_files: false,
             allow_provision: false,
             insecure_listen: false,
+            multicast_scouting: false,
         }
     }
 }

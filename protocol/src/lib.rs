@@ -7,12 +7,14 @@
 //! blocks) are the data plane's, in `envhub-shm`; this crate frames them for the network.
 //!
 //! May depend on: `envhub-core`, `envhub-catalog` (its errors travel in [`HubError`]),
-//! `envhub-shm` (layouts only), `ring` (the AEAD that seals session messages). Must not depend
+//! `envhub-shm` (layouts only), `ring` (the AEAD that seals session messages, and the key
+//! exchange that agrees its key). Must not depend
 //! on: Zenoh, iceoryx2 services, processes.
 
 pub mod daemon;
 mod error;
 mod frame;
+pub mod handshake;
 mod ids;
 pub mod info_columns;
 pub mod keys;
@@ -25,5 +27,8 @@ pub mod wire;
 pub use error::HubError;
 pub use frame::Frame;
 pub use ids::session_id;
-pub use messages::{HubInfo, OpenReply, OpenRequest};
+pub use messages::{
+    HubInfo, MAX_OPEN_REQUEST_BYTES, MAX_OPEN_REQUEST_DEPTH, MAX_OPEN_REQUEST_VALUES, OpenReply,
+    OpenRequest,
+};
 pub use route::Route;

@@ -33,6 +33,18 @@ pub struct HubInfo {
     pub max_workers: Option<usize>,
 }
 
+/// The largest open request a hub reads, in bytes. An open request names a registry id and a
+/// config: a few hundred bytes, or some KiB of kwargs. Anything longer is refused by its length,
+/// before a byte of it is decoded (session messages, which carry observations and actions,
+/// are bounded apart: `envhub serve --max-request-bytes`).
+pub const MAX_OPEN_REQUEST_BYTES: usize = 256 << 10;
+/// The deepest nesting of lists and maps an open request may have (kwargs may nest 16 deep;
+/// the request, its config and its kwargs map add three).
+pub const MAX_OPEN_REQUEST_DEPTH: usize = 32;
+/// The most values (a list's or map's items, counted by their separators, and the lists and
+/// maps themselves) an open request may have: remote kwargs hold at most 10,000 values.
+pub const MAX_OPEN_REQUEST_VALUES: usize = 16_384;
+
 /// A request to open a session, as a client sends it.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -60,7 +72,7 @@ pub struct OpenReply {
     pub route: crate::Route,
     /// Worker processes it started for the session.
     pub workers: usize,
-    /// The session's secret key, 64 hex digits: every request and response of the session is
-    /// sealed with it ([`crate::seal`]). Only the client that asked gets this reply.
-    pub key: String,
+    /// The hub's half of the key exchange that gives the session's key (the key itself never
+    /// travels: [`crate::handshake`]).
+    pub hello: crate::handshake::HubHello,
 }

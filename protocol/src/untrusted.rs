@@ -3,7 +3,6 @@
 //! out-of-bounds write, or an error kind that means something else here (`Interrupted` is
 //! raised as Python's `KeyboardInterrupt`).
 
-use crate::seal::SessionKey;
 use crate::{HubError, OpenReply};
 use envhub_shm::{BatchLayout, Layout, ReadySpec};
 
@@ -37,6 +36,66 @@ pub fn check_worker_spaces(spec: &ReadySpec, num_envs: usize) -> Result<Layout, 
             "spaces whose batch of {num_envs} envs ({obs} bytes per observation, {act} per action) does not fit in memory"
         )),
     }
+}
+
+/// Reads an open request a client sent (the request and its hello), bounded before it is decoded: its length (at most
+/// [`MAX_OPEN_REQUEST_BYTES`]), then, in one pass over the bytes that allocates nothing, its
+/// nesting ([`MAX_OPEN_REQUEST_DEPTH`]) and its number of values
+/// ([`MAX_OPEN_REQUEST_VALUES`]); only then is it parsed, so what a parse can allocate is
+/// bounded by a small multiple of those. Returns what was wrong otherwise.
+///
+/// [`MAX_OPEN_REQUEST_BYTES`]: crate::MAX_OPEN_REQUEST_BYTES
+/// [`MAX_OPEN_REQUEST_DEPTH`]: crate::MAX_OPEN_REQUEST_DEPTH
+/// [`MAX_OPEN_REQUEST_VALUES`]: crate::MAX_OPEN_REQUEST_VALUES
+pub fn read_open_request(bytes: &[u8]) -> Result<crate::handshake::OpenMessage, String> {
+    use crate::{MAX_OPEN_REQUEST_DEPTH, MAX_OPEN_REQUEST_VALUES};
+    check_open_request_size(bytes.len())?;
+    let (mut depth, mut values) = (0usize, 0usize);
+    let (mut in_string, mut escaped) = (false, false);
+    for &b in bytes {
+        if in_string {
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => {}
+            }
+            continue;
+        }
+        match b {
+            b'"' => in_string = true,
+            b'[' | b'{' => {
+                depth += 1;
+                values += 1;
+                if depth > MAX_OPEN_REQUEST_DEPTH {
+                    return Err(format!(
+                        "nested deeper than {MAX_OPEN_REQUEST_DEPTH} levels"
+                    ));
+                }
+            }
+            b']' | b'}' => depth = depth.saturating_sub(1),
+            b',' => values += 1,
+            _ => {}
+        }
+        if values > MAX_OPEN_REQUEST_VALUES {
+            return Err(format!(
+                "more than {MAX_OPEN_REQUEST_VALUES} values (remote kwargs hold at most {MAX_KWARG_VALUES})"
+            ));
+        }
+    }
+    serde_json::from_slice(bytes).map_err(|e| format!("unreadable: {e}"))
+}
+
+/// Refuses an open request of `len` bytes, more than [`crate::MAX_OPEN_REQUEST_BYTES`]:
+/// checked before the bytes are copied or read.
+pub fn check_open_request_size(len: usize) -> Result<(), String> {
+    let max = crate::MAX_OPEN_REQUEST_BYTES;
+    if len > max {
+        return Err(format!(
+            "{len} bytes, more than the {max} an open request may have (its kwargs are too large)"
+        ));
+    }
+    Ok(())
 }
 
 /// The deepest nesting of a remote client's kwarg value.
@@ -175,7 +234,7 @@ pub fn check_open_reply(
     reply: &OpenReply,
     num_envs: usize,
     with_final_obs: bool,
-) -> Result<(Layout, BatchLayout, SessionKey), HubError> {
+) -> Result<(Layout, BatchLayout), HubError> {
     let spec = &reply.spec;
     let obs = spec.observation_space.check().map_err(|e| {
         lying(
@@ -208,19 +267,10 @@ pub fn check_open_reply(
             format_args!("spaces of which one takes no bytes (observation {obs}, action {act})"),
         ));
     }
-    let key = SessionKey::from_hex(&reply.key).ok_or_else(|| {
-        lying(
-            hub,
-            format_args!(
-                "a session key that is not {} hex digits",
-                2 * crate::seal::KEY_LEN
-            ),
-        )
-    })?;
     let requests = Layout::checked(num_envs, act);
     let rows = BatchLayout::checked(num_envs, obs, with_final_obs);
     match (requests, rows) {
-        (Some(requests), Some(rows)) => Ok((requests, rows, key)),
+        (Some(requests), Some(rows)) => Ok((requests, rows)),
         _ => Err(lying(
             hub,
             format_args!(
@@ -285,7 +335,7 @@ mod tests {
             },
             "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
             "workers": 1,
-            "key": "ab".repeat(32),
+            "hello": {"exchange": "ab".repeat(32), "identity": "cd".repeat(32), "proof": "ef".repeat(64)},
         }))
         .expect("an open reply")
     }
@@ -321,6 +371,36 @@ mod tests {
         assert!(matches!(&refused, HubError::Refused { hub, .. } if hub == "box1"));
         let invalid = from_hub("box1", HubError::InvalidState("reset first".into()));
         assert!(matches!(invalid, HubError::InvalidState(_)));
+    }
+
+    #[test]
+    fn open_requests_are_bounded_in_size_depth_and_values_before_they_are_parsed() {
+        let hello = r#"{"exchange":"ab","identity":"cd","time_ms":1,"proof":"ef"}"#;
+        let request = |kwargs: &str| {
+            format!(
+                r#"{{"request":{{"id":"gym-cartpole","config":{{"num_envs":1,"extra":{{"k":{kwargs}}}}},"client":"envhub/client/c","restart_on_crash":false,"step_timeout_ms":1000}},"hello":{hello}}}"#
+            )
+        };
+        let ok = read_open_request(request("[1,2,{\"a\":\"]]]\\\"[[\"}]").as_bytes())
+            .expect("a plain request (brackets inside strings do not count)");
+        assert_eq!(ok.request.id, "gym-cartpole");
+        // Too long: refused by its length alone, whatever it holds.
+        let long = vec![b' '; crate::MAX_OPEN_REQUEST_BYTES + 1];
+        let err = read_open_request(&long).unwrap_err();
+        assert!(err.contains("bytes, more than"), "{err}");
+        // Too deep: refused before serde's own recursion limit is reached.
+        let deep = format!("{}{}", "[".repeat(40), "]".repeat(40));
+        let err = read_open_request(request(&deep).as_bytes()).unwrap_err();
+        assert!(err.contains("nested deeper"), "{err}");
+        let fine = format!("{}{}", "[".repeat(20), "]".repeat(20));
+        read_open_request(request(&fine).as_bytes()).expect("20 levels are fine");
+        // Too many values, within the length.
+        let many = format!("[{}0]", "0,".repeat(crate::MAX_OPEN_REQUEST_VALUES));
+        assert!(many.len() < crate::MAX_OPEN_REQUEST_BYTES);
+        let err = read_open_request(request(&many).as_bytes()).unwrap_err();
+        assert!(err.contains("values"), "{err}");
+        let err = read_open_request(b"{\"id\": 3}").unwrap_err();
+        assert!(err.contains("unreadable"), "{err}");
     }
 
     #[test]
@@ -427,8 +507,7 @@ mod tests {
         let e = check_open_reply("box1", &reply(ok.clone(), "s1-2"), usize::MAX / 8, true)
             .expect_err("refused");
         assert!(e.to_string().contains("does not fit"), "{e}");
-        let (req, rows, _key) =
-            check_open_reply("box1", &reply(ok.clone(), "s1-2"), 4, true).unwrap();
+        let (req, rows) = check_open_reply("box1", &reply(ok.clone(), "s1-2"), 4, true).unwrap();
         assert_eq!((req.num_envs, rows.obs_bytes), (4, 1 << 20));
         // A session id that would change the key it is used in.
         for bad in ["", "a/b", "*", "s1/../x", "x?y"] {
@@ -436,10 +515,5 @@ mod tests {
                 check_open_reply("box1", &reply(ok.clone(), bad), 4, false).expect_err("refused");
             assert!(e.to_string().contains("session id"), "{bad}: {e}");
         }
-        // A reply without a usable key: the session could not be sealed.
-        let mut keyless = reply(ok, "s1-2");
-        keyless.key = "not a key".into();
-        let e = check_open_reply("box1", &keyless, 4, false).expect_err("refused");
-        assert!(e.to_string().contains("session key"), "{e}");
     }
 }

@@ -238,14 +238,25 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         restart_on_crash: true,
         step_timeout_ms: 30_000,
     };
-    add("open_request", "cartpole", json(&request));
+    let identity = envhub_protocol::handshake::Identity::generate().expect("an identity");
+    let (hello, _) = envhub_protocol::handshake::client_hello(&identity, "box1", 1_800_000_000_000)
+        .expect("a hello");
+    add(
+        "open_request",
+        "cartpole",
+        json(envhub_protocol::handshake::OpenMessage { request, hello }),
+    );
     for (name, spec) in [("cartpole", cartpole_spec()), ("nested", nested_spec())] {
         let reply = OpenReply {
             session: "1234-0-abc".into(),
             spec,
             route: route(),
             workers: 2,
-            key: "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff".into(),
+            hello: envhub_protocol::handshake::HubHello {
+                exchange: "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff".into(),
+                identity: "ffeeddccbbaa99887766554433221100ffeeddccbbaa99887766554433221100".into(),
+                proof: "ab".repeat(64),
+            },
         };
         add("open_reply", name, picked(json(&reply)));
     }
@@ -366,9 +377,7 @@ fn accepted(target: &str, bytes: &[u8]) -> Result<(), String> {
         "frames" => envhub_protocol::Frame::parse(bytes)
             .map(drop)
             .ok_or_else(|| "unparsed".into()),
-        "open_request" => serde_json::from_slice::<OpenRequest>(bytes)
-            .map(drop)
-            .map_err(|e| e.to_string()),
+        "open_request" => envhub_protocol::untrusted::read_open_request(bytes).map(drop),
         "open_reply" => {
             let reply: OpenReply = serde_json::from_slice(body).map_err(|e| e.to_string())?;
             check_open_reply("seed", &reply, 1, false)

@@ -263,3 +263,234 @@ fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() 
         peak.1
     );
 }
+
+/// `VmHWM` (peak resident memory, KiB) of process `pid`.
+fn peak_rss(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("the hub runs");
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .expect("VmHWM in /proc/<pid>/status")
+}
+
+/// The bound on what hostile opens may add to a hub's peak resident memory (the issue that
+/// led to it: three 60 MB opens took a hub from 25 MB to 6.27 GB).
+const OPEN_ATTACK_RSS_BOUND_KIB: u64 = 256 * 1024;
+
+/// Open requests as an attacker sends them: three of 60 MB (a kwarg list of 30 M zeros), then
+/// rounds of 32 at once of the largest length a hub reads, as many values as it reads (each
+/// parsed, then refused by the kwarg limit), and 32 at once just past each bound. Every one is
+/// answered with a refusal naming the open request, the hub's peak resident memory (`VmHWM`
+/// from `/proc`) grows by less than [`OPEN_ATTACK_RSS_BOUND_KIB`], and a session opens after.
+#[test]
+fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded() {
+    let a = RemoteHub::start("opens", &[], &[]);
+    let peer = zenoh::open(net_to(&[&a]).zenoh_config(false).unwrap())
+        .wait()
+        .unwrap();
+    let key = format!("envhub/hub/{}/open", a.name);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while peer
+        .liveliness()
+        .get(format!("envhub/hub/{}", a.name))
+        .timeout(Duration::from_millis(500))
+        .wait()
+        .unwrap()
+        .recv()
+        .is_err()
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the hub's token not seen in 20 s"
+        );
+    }
+    // Each open with a hello of its own, valid (an attacker is a client like any other): the
+    // hub reads the request past the key exchange's checks.
+    let identity = envhub_protocol::handshake::Identity::generate().unwrap();
+    let envelope = |kwarg: &str| {
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_millis() as u64;
+        let (hello, _) = envhub_protocol::handshake::client_hello(&identity, &a.name, now).unwrap();
+        format!(
+            r#"{{"request":{{"id":"gym-cartpole","config":{{"num_envs":1,"extra":{{"k":{kwarg}}}}},"client":"attacker","restart_on_crash":false,"step_timeout_ms":1000}},"hello":{}}}"#,
+            serde_json::to_string(&hello).unwrap()
+        )
+    };
+    // The largest request a hub parses: MAX_OPEN_REQUEST_VALUES - 16 strings, padded to the
+    // byte limit.
+    let max = envhub_protocol::MAX_OPEN_REQUEST_BYTES;
+    let n = envhub_protocol::MAX_OPEN_REQUEST_VALUES - 16;
+    let each = (max - envelope("[]").len()) / n - 3;
+    let item = format!("\"{}\"", "x".repeat(each));
+    let list = format!("[{}]", vec![item; n].join(","));
+    let largest = || envelope(&list);
+    let sample = largest();
+    assert!(
+        sample.len() <= max && sample.len() > max - n,
+        "{}",
+        sample.len()
+    );
+    let too_long = vec![b' '; max + 1];
+    let too_deep = envelope(&format!("{}{}", "[".repeat(64), "]".repeat(64)));
+    let too_many = envelope(&format!(
+        "[{}0]",
+        "0,".repeat(envhub_protocol::MAX_OPEN_REQUEST_VALUES)
+    ));
+    let huge = envelope(&format!("[{}0]", "0,".repeat(30_000_000)));
+    // Every query answered (a refusal), or the test fails naming what came back.
+    let ask = |payloads: Vec<Vec<u8>>| {
+        let replies: Vec<_> = payloads
+            .into_iter()
+            .map(|p| {
+                peer.get(&key)
+                    .payload(p)
+                    .timeout(Duration::from_secs(60))
+                    .wait()
+                    .unwrap()
+            })
+            .collect();
+        for r in replies {
+            let reply = r.recv().expect("an answer to every open");
+            let text = match reply.result() {
+                Ok(s) => String::from_utf8_lossy(&s.payload().to_bytes()).to_string(),
+                Err(e) => format!("error reply {:?}", e.payload().to_bytes()),
+            };
+            assert!(
+                text.contains("\"err\"")
+                    && (text.contains("open request")
+                        || text.contains("kwarg")
+                        || text.contains("busy")),
+                "a hostile open was not refused: {}",
+                &text[..text.len().min(300)]
+            );
+        }
+    };
+    let before = peak_rss(a.pid());
+    for _ in 0..3 {
+        ask(vec![huge.clone().into_bytes()]);
+    }
+    drop(huge);
+    let after_huge = peak_rss(a.pid());
+    for _ in 0..4 {
+        ask((0..32).map(|_| largest().into_bytes()).collect());
+    }
+    for bad in [too_long, too_deep.into_bytes(), too_many.into_bytes()] {
+        ask(vec![bad; 32]);
+    }
+    let after = peak_rss(a.pid());
+    // A well-formed open under a client id whose token is not on the network (a session that
+    // would outlive its client until the idle timeout) is refused, naming the token.
+    let orphan = peer
+        .get(&key)
+        .payload(envelope("1"))
+        .timeout(Duration::from_secs(30))
+        .wait()
+        .unwrap()
+        .recv()
+        .expect("an answer");
+    let text = String::from_utf8_lossy(&orphan.result().unwrap().payload().to_bytes()).to_string();
+    assert!(
+        text.contains("envhub/client/attacker") && text.contains("not on the network"),
+        "an open without a client token was not refused: {text}"
+    );
+    // The hub still opens sessions.
+    let hub = Hub::new(envhub::Registry::builtin()).with_network(net_to(&[&a]));
+    let mut env = hub
+        .make_vec_on(
+            "gym-cartpole",
+            1,
+            &EnvConfig::default(),
+            &Placement::Hubs(vec![a.name.clone()]),
+        )
+        .expect("a session after the attack");
+    env.reset(Some(0)).unwrap();
+    env.close();
+    eprintln!(
+        "hostile opens: peak RSS {} MiB before, {} MiB after three of {} MB, {} MiB after 4 x 32 \
+         of {} KiB ({} values) and 3 x 32 past each bound",
+        before / 1024,
+        after_huge / 1024,
+        (30_000_000 * 2) / 1_000_000,
+        after / 1024,
+        sample.len() / 1024,
+        envhub_protocol::MAX_OPEN_REQUEST_VALUES - 16
+    );
+    assert!(
+        after <= before + OPEN_ATTACK_RSS_BOUND_KIB,
+        "hostile opens took the hub's peak resident memory from {before} KiB to {after} KiB \
+         (bound: {OPEN_ATTACK_RSS_BOUND_KIB} KiB more)"
+    );
+}
+
+/// 150 raw TCP connections held open on a hub's port (no Zenoh byte sent; each one the hub
+/// drops is opened again), as another user of the machine can: the owner's clients still
+/// find the hub and run a session (Zenoh's default queue of links being accepted, 100 for
+/// 10 s each, was full and closed every new link).
+#[test]
+fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
+    const HELD: usize = 150;
+    let a = RemoteHub::start("held", &[], &[]);
+    let address = a.endpoint.trim_start_matches("tcp/").to_string();
+    let holding = Arc::new(AtomicBool::new(true));
+    let opened = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let holder = {
+        let (holding, opened, address) = (holding.clone(), opened.clone(), address.clone());
+        std::thread::spawn(move || {
+            let mut held: Vec<Option<std::net::TcpStream>> = (0..HELD).map(|_| None).collect();
+            while holding.load(Ordering::Relaxed) {
+                for slot in &mut held {
+                    let closed = slot.as_mut().is_none_or(|s| {
+                        let mut b = [0u8; 64];
+                        matches!(std::io::Read::read(s, &mut b), Ok(0))
+                    });
+                    if closed {
+                        *slot = std::net::TcpStream::connect(&address).ok().inspect(|s| {
+                            s.set_nonblocking(true).unwrap();
+                            opened.fetch_add(1, Ordering::Relaxed);
+                        });
+                    }
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+        })
+    };
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while opened.load(Ordering::Relaxed) < HELD {
+        assert!(
+            Instant::now() < deadline,
+            "could not open {HELD} connections"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Past Zenoh's default queue: the attack is on.
+    std::thread::sleep(Duration::from_millis(500));
+    let hub = Hub::new(envhub::Registry::builtin()).with_network(net_to(&[&a]));
+    let result = hub
+        .make_vec_on(
+            "gym-cartpole",
+            1,
+            &EnvConfig::default(),
+            &Placement::Hubs(vec![a.name.clone()]),
+        )
+        .and_then(|mut env| {
+            env.reset(Some(0))?;
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+            for _ in 0..20 {
+                let actions = env.sample_actions(&mut rng);
+                env.step(&actions)?;
+            }
+            env.close();
+            Ok(())
+        });
+    holding.store(false, Ordering::Relaxed);
+    holder.join().unwrap();
+    eprintln!(
+        "{} connections opened to hold {HELD} on the hub's port",
+        opened.load(Ordering::Relaxed)
+    );
+    result.expect("the owner's session with idle connections held on the hub's port");
+}

@@ -5,6 +5,7 @@
 //! go on where its other envs can.
 
 use envhub::{EnvConfig, Hub, HubError, NetConfig, Registry, SessionOptions};
+use envhub_protocol::handshake::{self, Identity};
 use envhub_protocol::seal::{Direction, SessionKey};
 use envhub_shm::BatchLayout;
 use serde_json::json;
@@ -31,15 +32,30 @@ enum Lie {
 
 const OBS: usize = 16; // CartPole: four float32
 
-fn cartpole_reply(observation_space: serde_json::Value) -> serde_json::Value {
-    envhub_e2e::intruder::cartpole_open_reply("s1-1", observation_space, KEY)
+/// The liar's answer to an open (`request`: its bytes): CartPole with `observation_space`,
+/// and the session's key, agreed with the client as a hub does (a hub that lies still seals:
+/// it is the session's hub).
+fn cartpole_reply(
+    identity: &Identity,
+    request: &[u8],
+    observation_space: serde_json::Value,
+) -> (serde_json::Value, SessionKey) {
+    let message = envhub_protocol::untrusted::read_open_request(request).unwrap();
+    let exchange = handshake::check_client_hello("liar", &message.hello, now_ms()).unwrap();
+    let (hello, key) = handshake::hub_answer(identity, "liar", "s1-1", request, &exchange).unwrap();
+    let reply = envhub_e2e::intruder::cartpole_open_reply(
+        "s1-1",
+        observation_space,
+        serde_json::to_value(hello).unwrap(),
+    );
+    (reply, key)
 }
 
-/// The session key the liar gives (a hub that lies still seals: it is the session's hub).
-const KEY: &str = "abababababababababababababababababababababababababababababababab";
-
-fn seal() -> SessionKey {
-    SessionKey::from_hex(KEY).unwrap()
+fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis() as u64
 }
 
 fn response(seq: u64, status: u32, n: u32, rows: &[u8], info: &[u8]) -> Vec<u8> {
@@ -73,17 +89,30 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
     let session = zenoh::open(net.zenoh_config(false).unwrap())
         .wait()
         .unwrap();
+    let key: Arc<Mutex<Option<SessionKey>>> = Arc::default();
+    let identity = Identity::generate().unwrap();
     let open = {
-        let lie = lie.clone();
+        let (lie, key) = (lie.clone(), key.clone());
         session
             .declare_queryable(format!("envhub/hub/{name}/open"))
             .callback(move |query| {
+                let request = query.payload().map(|p| p.to_bytes().into_owned()).unwrap();
                 let reply = match *lie.lock().unwrap() {
                     Lie::InterruptedOpen => json!({"error": {"kind": "interrupted"}}),
                     Lie::HugeSpace => {
-                        cartpole_reply(json!({"type": "multi_binary", "shape": [1u64 << 40]}))
+                        cartpole_reply(
+                            &identity,
+                            &request,
+                            json!({"type": "multi_binary", "shape": [1u64 << 40]}),
+                        )
+                        .0
                     }
-                    _ => cartpole_reply(obs_space.clone()),
+                    _ => {
+                        let (reply, session_key) =
+                            cartpole_reply(&identity, &request, obs_space.clone());
+                        *key.lock().unwrap() = Some(session_key);
+                        reply
+                    }
                 };
                 let _ = query
                     .reply(query.key_expr().clone(), reply.to_string())
@@ -98,7 +127,11 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
             .declare_subscriber(format!("envhub/session/{name}/*/req"))
             .callback(move |sample| {
                 let mut req = sample.payload().to_bytes().into_owned();
-                if seal().open(Direction::Request, &mut req).is_err() {
+                let key = key.lock().unwrap();
+                let Some(seal) = key.as_ref() else {
+                    return;
+                };
+                if seal.open(Direction::Request, &mut req).is_err() {
                     return;
                 }
                 let seq = u64::from_le_bytes(req[..8].try_into().unwrap());
@@ -121,7 +154,7 @@ fn liar(name: &str, endpoint: &str, obs_space: serde_json::Value, lie: Arc<Mutex
                 };
                 let key = sample.key_expr().as_str().replace("/req", "/rep");
                 let mut answer = answer;
-                seal().seal(Direction::Response, &mut answer);
+                seal.seal(Direction::Response, &mut answer);
                 let _ = z.put(key, answer).wait();
             })
             .wait()
@@ -162,6 +195,8 @@ fn client(endpoint: &str) -> Hub {
         .with_network(NetConfig {
             connect: vec![endpoint.to_string()],
             multicast: Some(false),
+            // The liar's identity is new in every run: pinned in a file of this run's.
+            known_hubs: Some(envhub_e2e::remote::known_hubs()),
             ..NetConfig::default()
         })
 }

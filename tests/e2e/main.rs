@@ -3,6 +3,7 @@
 mod actions;
 mod async_step;
 mod bad_input;
+mod capture;
 mod classic_rollouts;
 mod cli;
 mod concurrency;
@@ -19,6 +20,7 @@ mod remote_hubs;
 mod remote_impostor;
 mod remote_netns;
 mod rendering;
+mod replay_flood;
 mod serve_defaults;
 mod session_owner;
 mod small_shm;

@@ -22,8 +22,11 @@ struct Caught {
 
 /// The impostor's open answer: a well-formed session of its own on CartPole.
 fn lure(observation_space: &serde_json::Value) -> String {
-    let key = "cd".repeat(32);
-    envhub_e2e::intruder::cartpole_open_reply("rogue-1", observation_space.clone(), &key)
+    // A made-up half of a key exchange (the client never gets as far as checking it).
+    let hello = serde_json::json!({
+        "exchange": "cd".repeat(32), "identity": "ef".repeat(32), "proof": "ab".repeat(64)
+    });
+    envhub_e2e::intruder::cartpole_open_reply("rogue-1", observation_space.clone(), hello)
         .to_string()
 }
 

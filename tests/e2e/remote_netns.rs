@@ -12,6 +12,7 @@ use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
+use zenoh::Wait;
 
 /// Set (non-empty) to turn a skip into a failure, where the tests must run.
 const REQUIRED: &str = "ENVHUB_NETNS_REQUIRED";
@@ -247,7 +248,8 @@ impl TwoHosts {
     /// interface it picks, the veth (the only other one is loopback).
     fn hub_a(&self) -> Proc {
         let listen = format!("tcp/{}:7447", self.addr[0]);
-        // Beyond loopback without credentials: allowed by the flag, with a warning.
+        // Beyond loopback without credentials: allowed by the flag, with a warning; scouting
+        // by a flag of its own.
         let hub = self.envhub(
             0,
             "hub-a",
@@ -258,6 +260,7 @@ impl TwoHosts {
                 "--listen",
                 &listen,
                 "--insecure-listen",
+                "--multicast-scouting",
             ],
         );
         let deadline = Instant::now() + Duration::from_secs(15);
@@ -284,6 +287,27 @@ impl TwoHosts {
                 ns_of("self", kind).unwrap(),
                 "the hub shares this test's {kind} namespace"
             );
+        }
+        hub
+    }
+
+    /// Starts `envhub serve --name NAME ARGS` on host 0 and waits (at most 15 s) until it
+    /// says it is on the network.
+    fn hub_on_a(&self, name: &str, args: &[&str]) -> Proc {
+        let mut all = vec!["serve", "--name", name];
+        all.extend_from_slice(args);
+        let hub = self.envhub(0, &format!("hub-{name}"), &all);
+        let deadline = Instant::now() + Duration::from_secs(15);
+        while !hub
+            .stdout()
+            .contains(&format!("on the network as hub `{name}`"))
+        {
+            assert!(
+                Instant::now() < deadline,
+                "hub `{name}` did not join the network within 15 s; {}",
+                hub.said()
+            );
+            std::thread::sleep(Duration::from_millis(20));
         }
         hub
     }
@@ -648,4 +672,114 @@ fn netns_a_link_flap_shorter_than_the_lease_loses_no_step() {
         "link down for {flap:?} mid-rollout: completed in {:.2} s with {resends} resent requests, same as locally ({} episodes, mean return {})",
         remote["seconds"], local["episodes"], local["mean_return"]
     );
+}
+
+/// A peer on host 1's LAN, as an attacker runs one (a default Zenoh peer: scouting, gossip and
+/// autoconnect on, no credentials, listening on the veth), never reaches a hub on host 0 that
+/// `--insecure-listen` opened without `--multicast-scouting`: neither by its scouts nor by the
+/// hub's (a hub never connects to what scouting names). With the flag, the same peer finds the
+/// hub: the probe can see a hub that is reachable.
+#[test]
+fn netns_a_lan_peer_never_reaches_an_insecure_listen_hub_unless_it_scouts() {
+    let test = "netns_a_lan_peer_never_reaches_an_insecure_listen_hub_unless_it_scouts";
+    let Some(hosts) = TwoHosts::new(test) else {
+        return;
+    };
+    let listen_lan = format!("tcp/{}:7447", hosts.addr[0]);
+    let (peer_addr, lure) = (
+        hosts.addr[1].clone(),
+        format!("envhub/hub/lure-{}", std::process::id()),
+    );
+    // The attacker lives on its own thread in host 1's namespace (this thread stays here).
+    let (to_peer, jobs) = std::sync::mpsc::channel::<(String, bool)>();
+    let (to_test, seen) = std::sync::mpsc::channel();
+    let enter = hosts.ns[1].clone();
+    let attacker = std::thread::spawn(move || {
+        let hosts_ns = format!("/var/run/netns/{enter}");
+        let file = std::fs::File::open(&hosts_ns).expect("namespace file");
+        use std::os::fd::AsRawFd;
+        // SAFETY: setns with an open namespace file and its type: it changes this thread's
+        // network namespace only (the Zenoh runtime threads it starts later inherit it).
+        assert_eq!(
+            unsafe { libc::setns(file.as_raw_fd(), libc::CLONE_NEWNET) },
+            0
+        );
+        for (hub, reachable) in jobs {
+            // A fresh peer per hub, as one that joins the LAN after the hub started.
+            let mut config = zenoh::Config::default();
+            config
+                .insert_json5("listen/endpoints", &format!("[\"tcp/{peer_addr}:0\"]"))
+                .unwrap();
+            let peer = zenoh::open(config)
+                .wait()
+                .expect("the attacker's peer opens");
+            let _lure = peer.liveliness().declare_token(&lure).wait().unwrap();
+            // Scouting runs for seconds: a hub that scouts or answers scouts has time to be
+            // found (a reachable one is waited for, up to 20 s).
+            let deadline = Instant::now() + Duration::from_secs(if reachable { 20 } else { 5 });
+            let mut got = envhub_e2e::intruder::probe(&peer, &hub);
+            while Instant::now() < deadline && (!reachable || got.peers.is_empty()) {
+                std::thread::sleep(Duration::from_millis(250));
+                got = envhub_e2e::intruder::probe(&peer, &hub);
+            }
+            let tokens: Vec<String> = got.tokens.into_iter().filter(|t| *t != lure).collect();
+            to_test.send((got.peers, tokens, got.open_answers)).unwrap();
+        }
+    });
+    let cases: [(&str, Vec<&str>, bool); 4] = [
+        ("plain", vec!["--insecure-listen"], false),
+        (
+            "loopback",
+            vec!["--insecure-listen", "--listen", "tcp/127.0.0.1:7448"],
+            false,
+        ),
+        (
+            "lan",
+            vec!["--insecure-listen", "--listen", &listen_lan],
+            false,
+        ),
+        (
+            "scouting",
+            vec![
+                "--insecure-listen",
+                "--listen",
+                &listen_lan,
+                "--multicast-scouting",
+            ],
+            true,
+        ),
+    ];
+    for (name, args, reachable) in cases {
+        let hub = hosts.hub_on_a(name, &args);
+        let said = hub.stderr();
+        if !reachable {
+            assert!(
+                said.contains("loopback only") || said.contains("neither sends nor answers"),
+                "hub `{name}` did not say it keeps off scouting; {}",
+                hub.said()
+            );
+        }
+        to_peer.send((name.to_string(), reachable)).unwrap();
+        let (peers, tokens, opens) = seen.recv().expect("the attacker answers");
+        eprintln!(
+            "hub `{name}`: the LAN peer got links {peers:?}, tokens {tokens:?}, {opens} open answers"
+        );
+        if reachable {
+            assert!(
+                !peers.is_empty() && tokens.iter().any(|t| t == &format!("envhub/hub/{name}")),
+                "the control failed: a hub told to scout was not found by the LAN peer; {}",
+                hub.said()
+            );
+        } else {
+            assert!(
+                peers.is_empty() && tokens.is_empty() && opens == 0,
+                "hub `{name}` ({args:?}) was reached by a LAN peer: links {peers:?}, tokens \
+                 {tokens:?}, {opens} open answers; {}",
+                hub.said()
+            );
+        }
+        drop(hub);
+    }
+    drop(to_peer);
+    attacker.join().expect("the attacker thread");
 }

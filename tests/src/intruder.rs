@@ -57,11 +57,12 @@ pub fn probe(peer: &zenoh::Session, hub: &str) -> Seen {
 }
 
 /// A well-formed answer to a `gym-cartpole` open, as a fake hub gives it: session `session`,
-/// observation space `observation_space`, sealing key `key` (64 hex digits).
+/// observation space `observation_space`, its half of the key exchange `hello`
+/// (`envhub_protocol::handshake::HubHello`).
 pub fn cartpole_open_reply(
     session: &str,
     observation_space: serde_json::Value,
-    key: &str,
+    hello: serde_json::Value,
 ) -> serde_json::Value {
     serde_json::json!({"ok": {
         "session": session,
@@ -73,6 +74,6 @@ pub fn cartpole_open_reply(
         },
         "route": {"adapter": "classic_control", "env_id": "CartPole-v1", "config": {}},
         "workers": 1,
-        "key": key,
+        "hello": hello,
     }})
 }

@@ -114,13 +114,23 @@ impl Drop for RemoteHub {
     }
 }
 
-/// The network settings of a client that reaches `hubs` by their endpoints, multicast off.
+/// The network settings of a client that reaches `hubs` by their endpoints, multicast off,
+/// pinning hub identities in a file of this test process ([`known_hubs`]).
 pub fn net_to(hubs: &[&RemoteHub]) -> NetConfig {
     NetConfig {
         connect: hubs.iter().map(|h| h.endpoint.clone()).collect(),
         multicast: Some(false),
+        known_hubs: Some(known_hubs()),
         ..NetConfig::default()
     }
+}
+
+/// A `known_hubs` file of this test process, in a folder of its own (fake hubs have new
+/// identities in every run: they are not pinned in the user's file).
+pub fn known_hubs() -> std::path::PathBuf {
+    std::env::temp_dir()
+        .join(format!("e2e-known-hubs-{}", std::process::id()))
+        .join("known_hubs")
 }
 
 /// A client hub (own namespace, short timeouts) that reaches `hubs`.

@@ -26,6 +26,12 @@ pub(crate) struct Args {
     /// on it. Prints a warning.
     #[arg(long)]
     insecure_listen: bool,
+    /// Send and answer multicast scouts on the LAN without credentials (with
+    /// `--insecure-listen` and a `--listen` beyond loopback), so clients that scout
+    /// (`ENVHUB_MULTICAST=1`) find this hub. Off otherwise, `--insecure-listen` included; the
+    /// hub never connects to what scouting names.
+    #[arg(long)]
+    multicast_scouting: bool,
     /// Stay off the network: serve only this machine's clients on the Unix socket.
     #[arg(long)]
     local_only: bool,
@@ -84,6 +90,7 @@ pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outco
             allow_remote_files: args.allow_remote_files,
             allow_provision: args.allow_provision,
             insecure_listen: args.insecure_listen,
+            multicast_scouting: args.multicast_scouting,
         };
         let node = envhub::join(hub.clone(), &name, &net, policy)?;
         if let Some(notice) = node.exposure_notice() {

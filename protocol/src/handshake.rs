@@ -1,0 +1,443 @@
+//! How a session's key is agreed without it ever being sent: an X25519 key exchange whose
+//! result only the client and the hub can compute, bound to the hub's identity.
+//!
+//! The client sends, with its open request, an ephemeral X25519 public key and its identity
+//! (an Ed25519 public key of this client process) with a signature over the hub's name, the
+//! exchange key and the time ([`ClientHello`]). The hub checks the signature and the time,
+//! draws an ephemeral key of its own, and answers with its public half, its identity (a static
+//! Ed25519 key kept in its user's private folder) and a signature over the transcript: the
+//! hub's name, the session id, a digest of the open request as it arrived, both exchange keys
+//! and its identity ([`HubHello`]). Both ends derive the session key with HKDF-SHA256 from the
+//! X25519 shared secret, salted with the transcript. A peer that records every byte of the
+//! link has the two public keys but neither private one; a peer that changes a byte of the
+//! request or the reply makes the client's check of the hub's signature fail; a hub's identity
+//! is pinned by its clients (trust on first use, `envhub-net`'s `known_hubs`).
+//!
+//! `ring` does all of it (it is the AEAD's crate already): `agreement` (X25519, whose private
+//! keys it keeps ephemeral — hence a separate Ed25519 key for the hub's static identity, as
+//! TLS 1.3 does), `hkdf`, `digest` and `signature` (Ed25519, keys stored as PKCS#8).
+
+use crate::seal::{KEY_LEN, SessionKey};
+use ring::agreement::{self, EphemeralPrivateKey, UnparsedPublicKey, X25519};
+use ring::rand::SystemRandom;
+use ring::signature::{ED25519, Ed25519KeyPair, KeyPair};
+
+/// An Ed25519 public key to verify with.
+fn ed25519(key: [u8; PUBLIC_LEN]) -> ring::signature::UnparsedPublicKey<[u8; PUBLIC_LEN]> {
+    ring::signature::UnparsedPublicKey::new(&ED25519, key)
+}
+use serde::{Deserialize, Serialize};
+
+/// How far a client's clock may be from the hub's, in milliseconds: a hello older or newer
+/// than this is refused (and one seen before within twice this is a replay).
+pub const HELLO_FRESH_MS: u64 = 120_000;
+
+/// Bytes of an X25519 or Ed25519 public key.
+const PUBLIC_LEN: usize = 32;
+
+/// What a client adds to its open request: its half of the key exchange and who it is.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClientHello {
+    /// The client's ephemeral X25519 public key, 64 hex digits (one per open).
+    pub exchange: String,
+    /// The client's identity: an Ed25519 public key, 64 hex digits. Per-client limits count
+    /// identities.
+    pub identity: String,
+    /// When the client sent it, in milliseconds since the Unix epoch.
+    pub time_ms: u64,
+    /// The identity's signature (128 hex digits) over the hub's name, `exchange` and
+    /// `time_ms`: no peer can open sessions in another client's name.
+    pub proof: String,
+}
+
+/// What a hub adds to its open reply: its half of the key exchange, bound to its identity.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HubHello {
+    /// The hub's ephemeral X25519 public key, 64 hex digits.
+    pub exchange: String,
+    /// The hub's identity: an Ed25519 public key, 64 hex digits (pinned by its clients).
+    pub identity: String,
+    /// The identity's signature (128 hex digits) over the transcript.
+    pub proof: String,
+}
+
+/// An open request as it travels: the request and the client's hello.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpenMessage {
+    /// What to open.
+    pub request: crate::OpenRequest,
+    /// The client's half of the key exchange.
+    pub hello: ClientHello,
+}
+
+/// An Ed25519 identity: a hub's (static, stored as PKCS#8) or a client process's.
+pub struct Identity {
+    pair: Ed25519KeyPair,
+}
+
+impl std::fmt::Debug for Identity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Identity({})", self.public_hex())
+    }
+}
+
+impl Identity {
+    /// A new identity's PKCS#8 document (what a hub stores).
+    pub fn generate_pkcs8() -> Result<Vec<u8>, String> {
+        Ed25519KeyPair::generate_pkcs8(&SystemRandom::new())
+            .map(|d| d.as_ref().to_vec())
+            .map_err(|_| "the OS random source failed".to_string())
+    }
+
+    /// The identity stored in `pkcs8`.
+    pub fn from_pkcs8(pkcs8: &[u8]) -> Result<Identity, String> {
+        Ed25519KeyPair::from_pkcs8(pkcs8)
+            .map(|pair| Identity { pair })
+            .map_err(|e| format!("not an Ed25519 key in PKCS#8: {e}"))
+    }
+
+    /// A new identity that lives as long as this value (a client process's).
+    pub fn generate() -> Result<Identity, String> {
+        Identity::from_pkcs8(&Identity::generate_pkcs8()?)
+    }
+
+    /// Its public key, 64 hex digits.
+    pub fn public_hex(&self) -> String {
+        hex(self.pair.public_key().as_ref())
+    }
+
+    fn sign(&self, message: &[u8]) -> String {
+        hex(self.pair.sign(message).as_ref())
+    }
+}
+
+/// A client's open in progress: the private half of its exchange key, used once.
+pub struct PendingOpen {
+    private: EphemeralPrivateKey,
+    exchange: [u8; PUBLIC_LEN],
+}
+
+impl std::fmt::Debug for PendingOpen {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PendingOpen(..)")
+    }
+}
+
+/// A client's hello to hub `hub` at `time_ms`, and what it needs to finish the exchange.
+pub fn client_hello(
+    identity: &Identity,
+    hub: &str,
+    time_ms: u64,
+) -> Result<(ClientHello, PendingOpen), String> {
+    let private = EphemeralPrivateKey::generate(&X25519, &SystemRandom::new())
+        .map_err(|_| "the OS random source failed".to_string())?;
+    let public = private
+        .compute_public_key()
+        .map_err(|_| "cannot compute an X25519 public key".to_string())?;
+    let exchange: [u8; PUBLIC_LEN] = public.as_ref().try_into().expect("32-byte X25519 keys");
+    let identity_key = identity.pair.public_key().as_ref();
+    let proof = identity.sign(&hello_digest(hub, &exchange, identity_key, time_ms));
+    Ok((
+        ClientHello {
+            exchange: hex(&exchange),
+            identity: hex(identity_key),
+            time_ms,
+            proof,
+        },
+        PendingOpen { private, exchange },
+    ))
+}
+
+/// What a hub checks of a client's hello to it (`hub`) at its time `now_ms`: the keys are
+/// keys, the signature is the identity's, the time is within [`HELLO_FRESH_MS`]. Returns the
+/// client's identity (64 hex digits) and its exchange key, or what is wrong.
+pub fn check_client_hello(
+    hub: &str,
+    hello: &ClientHello,
+    now_ms: u64,
+) -> Result<[u8; PUBLIC_LEN], String> {
+    let exchange =
+        unhex::<PUBLIC_LEN>(&hello.exchange).ok_or("an exchange key that is not 64 hex digits")?;
+    let identity =
+        unhex::<PUBLIC_LEN>(&hello.identity).ok_or("an identity that is not 64 hex digits")?;
+    let proof = unhex::<64>(&hello.proof).ok_or("a proof that is not 128 hex digits")?;
+    if hello.time_ms.abs_diff(now_ms) > HELLO_FRESH_MS {
+        return Err(format!(
+            "a hello sent {} s from this hub's clock (more than {} s: a replay, or a clock that is off)",
+            (hello.time_ms as i128 - now_ms as i128) / 1000,
+            HELLO_FRESH_MS / 1000
+        ));
+    }
+    ed25519(identity)
+        .verify(
+            &hello_digest(hub, &exchange, &identity, hello.time_ms),
+            &proof,
+        )
+        .map_err(|_| "a hello whose proof is not its identity's signature".to_string())?;
+    Ok(exchange)
+}
+
+/// The hub's answer to a checked hello: its [`HubHello`] and the session's key. `request`:
+/// the open request's bytes as they arrived (the transcript covers them).
+pub fn hub_answer(
+    identity: &Identity,
+    hub: &str,
+    session: &str,
+    request: &[u8],
+    client_exchange: &[u8; PUBLIC_LEN],
+) -> Result<(HubHello, SessionKey), String> {
+    let private = EphemeralPrivateKey::generate(&X25519, &SystemRandom::new())
+        .map_err(|_| "the OS random source failed".to_string())?;
+    let public = private
+        .compute_public_key()
+        .map_err(|_| "cannot compute an X25519 public key".to_string())?;
+    let exchange: [u8; PUBLIC_LEN] = public.as_ref().try_into().expect("32-byte X25519 keys");
+    let identity_key: [u8; PUBLIC_LEN] = identity
+        .pair
+        .public_key()
+        .as_ref()
+        .try_into()
+        .expect("32-byte Ed25519 keys");
+    let transcript = transcript(
+        hub,
+        session,
+        request,
+        client_exchange,
+        &exchange,
+        &identity_key,
+    );
+    let key = derive(private, client_exchange, &transcript)?;
+    Ok((
+        HubHello {
+            exchange: hex(&exchange),
+            identity: hex(&identity_key),
+            proof: identity.sign(&transcript),
+        },
+        key,
+    ))
+}
+
+impl PendingOpen {
+    /// Finishes the exchange with hub `hub`'s answer for session `session` to the request
+    /// sent as `request` (bytes): checks the hub's signature over the transcript and derives
+    /// the session key. Returns the hub's identity (64 hex digits, for pinning) and the key.
+    pub fn finish(
+        self,
+        hub: &str,
+        session: &str,
+        request: &[u8],
+        answer: &HubHello,
+    ) -> Result<(String, SessionKey), String> {
+        let exchange = unhex::<PUBLIC_LEN>(&answer.exchange)
+            .ok_or("an exchange key that is not 64 hex digits")?;
+        let identity =
+            unhex::<PUBLIC_LEN>(&answer.identity).ok_or("an identity that is not 64 hex digits")?;
+        let proof = unhex::<64>(&answer.proof).ok_or("a proof that is not 128 hex digits")?;
+        let transcript = transcript(hub, session, request, &self.exchange, &exchange, &identity);
+        ed25519(identity).verify(&transcript, &proof).map_err(|_| {
+            "a reply whose proof is not its identity's signature of this exchange (changed \
+                 on the way, or not from the hub that holds that identity)"
+                .to_string()
+        })?;
+        let key = derive(self.private, &exchange, &transcript)?;
+        Ok((answer.identity.clone(), key))
+    }
+}
+
+/// Exchange keys seen lately, so a replayed hello is refused (a bounded map; entries older
+/// than twice [`HELLO_FRESH_MS`] are forgotten, since such a hello is refused by its time).
+#[derive(Debug, Default)]
+pub struct SeenHellos {
+    seen: std::collections::HashMap<[u8; PUBLIC_LEN], u64>,
+}
+
+impl SeenHellos {
+    /// The most hellos remembered: past it (after forgetting the old ones) new opens are
+    /// refused until some age out.
+    pub const MAX: usize = 65_536;
+
+    /// Notes a hello's exchange key at `now_ms`; an error if it was seen (a replay) or the
+    /// memory is full.
+    pub fn note(&mut self, exchange: &[u8; PUBLIC_LEN], now_ms: u64) -> Result<(), String> {
+        if self.seen.contains_key(exchange) {
+            return Err("a hello seen before (a replay)".into());
+        }
+        if self.seen.len() >= Self::MAX {
+            self.seen
+                .retain(|_, t| now_ms.saturating_sub(*t) <= 2 * HELLO_FRESH_MS);
+            if self.seen.len() >= Self::MAX {
+                return Err("too many opens lately".into());
+            }
+        }
+        self.seen.insert(*exchange, now_ms);
+        Ok(())
+    }
+}
+
+fn hello_digest(hub: &str, exchange: &[u8], identity: &[u8], time_ms: u64) -> [u8; 32] {
+    digest(&[
+        b"envhub client hello v1",
+        hub.as_bytes(),
+        exchange,
+        identity,
+        &time_ms.to_le_bytes(),
+    ])
+}
+
+fn transcript(
+    hub: &str,
+    session: &str,
+    request: &[u8],
+    client_exchange: &[u8],
+    hub_exchange: &[u8],
+    hub_identity: &[u8],
+) -> [u8; 32] {
+    let request = ring::digest::digest(&ring::digest::SHA256, request);
+    digest(&[
+        b"envhub open v1",
+        hub.as_bytes(),
+        session.as_bytes(),
+        request.as_ref(),
+        client_exchange,
+        hub_exchange,
+        hub_identity,
+    ])
+}
+
+/// SHA-256 of `parts`, each prefixed with its length (no two lists of parts collide).
+fn digest(parts: &[&[u8]]) -> [u8; 32] {
+    let mut context = ring::digest::Context::new(&ring::digest::SHA256);
+    for part in parts {
+        context.update(&(part.len() as u64).to_le_bytes());
+        context.update(part);
+    }
+    context
+        .finish()
+        .as_ref()
+        .try_into()
+        .expect("32-byte digests")
+}
+
+/// The session key: HKDF-SHA256 of the X25519 shared secret, salted with the transcript.
+fn derive(
+    private: EphemeralPrivateKey,
+    peer: &[u8; PUBLIC_LEN],
+    transcript: &[u8; 32],
+) -> Result<SessionKey, String> {
+    struct Len;
+    impl ring::hkdf::KeyType for Len {
+        fn len(&self) -> usize {
+            KEY_LEN
+        }
+    }
+    agreement::agree_ephemeral(private, &UnparsedPublicKey::new(&X25519, peer), |shared| {
+        let mut key = [0u8; KEY_LEN];
+        ring::hkdf::Salt::new(ring::hkdf::HKDF_SHA256, transcript)
+            .extract(shared)
+            .expand(&[b"envhub session key v1"], Len)
+            .and_then(|okm| okm.fill(&mut key))
+            .map(|()| SessionKey::new(&key))
+    })
+    .map_err(|_| "an exchange key that gives no shared secret".to_string())?
+    .map_err(|_| "the session key's derivation failed".to_string())
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn unhex<const N: usize>(text: &str) -> Option<[u8; N]> {
+    if text.len() != 2 * N || !text.is_ascii() {
+        return None;
+    }
+    let mut out = [0u8; N];
+    for (i, byte) in out.iter_mut().enumerate() {
+        *byte = u8::from_str_radix(&text[2 * i..2 * i + 2], 16).ok()?;
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::seal::Direction;
+
+    fn exchange(hub: &str, request: &[u8]) -> (HubHello, SessionKey, PendingOpen, Identity) {
+        let client = Identity::generate().unwrap();
+        let hub_id = Identity::generate().unwrap();
+        let (hello, pending) = client_hello(&client, hub, 1_000_000).unwrap();
+        let ex = check_client_hello(hub, &hello, 1_000_500).unwrap();
+        let (answer, key) = hub_answer(&hub_id, hub, "s1", request, &ex).unwrap();
+        (answer, key, pending, hub_id)
+    }
+
+    fn opens(sealer: &SessionKey, opener: &SessionKey) -> bool {
+        let mut m = 7u64.to_le_bytes().to_vec();
+        m.extend_from_slice(b"observation");
+        sealer.seal(Direction::Response, &mut m);
+        opener.open(Direction::Response, &mut m).is_ok()
+    }
+
+    #[test]
+    fn both_ends_derive_the_same_key_and_nothing_sent_is_it() {
+        let (answer, hub_key, pending, hub_id) = exchange("lab", b"request");
+        let (identity, client_key) = pending.finish("lab", "s1", b"request", &answer).unwrap();
+        assert_eq!(identity, hub_id.public_hex());
+        assert!(opens(&hub_key, &client_key));
+        // Nothing that travelled is the key: not the exchange keys, identity or proof.
+        for sent in [&answer.exchange, &answer.identity] {
+            let bytes = unhex::<32>(sent).unwrap();
+            assert!(!opens(&hub_key, &SessionKey::new(&bytes)));
+        }
+    }
+
+    #[test]
+    fn a_changed_request_session_or_reply_fails_the_client_s_check() {
+        let (answer, _, pending, _) = exchange("lab", b"request");
+        assert!(pending.finish("lab", "s1", b"requesT", &answer).is_err());
+        let (answer, _, pending, _) = exchange("lab", b"request");
+        assert!(pending.finish("lab", "s2", b"request", &answer).is_err());
+        let (answer, _, pending, _) = exchange("lab", b"request");
+        assert!(pending.finish("other", "s1", b"request", &answer).is_err());
+        // Another identity's signature (an impostor who signs with its own key but claims
+        // the hub's identity).
+        let (mut answer, _, pending, _) = exchange("lab", b"request");
+        let (other, _, _, _) = exchange("lab", b"request");
+        answer.proof = other.proof;
+        let err = pending
+            .finish("lab", "s1", b"request", &answer)
+            .unwrap_err();
+        assert!(err.contains("proof"), "{err}");
+        // Garbage in every field.
+        let (answer, _, pending, _) = exchange("lab", b"request");
+        let bad = HubHello {
+            exchange: "zz".into(),
+            ..answer
+        };
+        assert!(pending.finish("lab", "s1", b"request", &bad).is_err());
+    }
+
+    #[test]
+    fn a_client_hello_is_checked_for_its_hub_signature_time_and_replay() {
+        let client = Identity::generate().unwrap();
+        let (hello, _) = client_hello(&client, "lab", 1_000_000).unwrap();
+        assert!(check_client_hello("lab", &hello, 1_000_000).is_ok());
+        assert!(check_client_hello("other", &hello, 1_000_000).is_err());
+        let late = check_client_hello("lab", &hello, 1_000_000 + HELLO_FRESH_MS + 1).unwrap_err();
+        assert!(late.contains("replay"), "{late}");
+        // Another identity claimed with this proof.
+        let other = Identity::generate().unwrap();
+        let claimed = ClientHello {
+            identity: other.public_hex(),
+            ..hello.clone()
+        };
+        assert!(check_client_hello("lab", &claimed, 1_000_000).is_err());
+        let mut seen = SeenHellos::default();
+        let ex = check_client_hello("lab", &hello, 1_000_000).unwrap();
+        seen.note(&ex, 1_000_000).unwrap();
+        assert!(seen.note(&ex, 1_000_001).unwrap_err().contains("replay"));
+    }
+}
