@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 from conftest import once_per_run
 from lerobot_envs import (
+    LIBERO_FIRST,
+    LIBERO_REFERENCE,
     METAWORLD_REFERENCE,
     Unavailable,
     libero_config,
@@ -208,3 +210,24 @@ def test_metaworld_same_episodes_as_lerobots_env(lerobot_python, plugin_site, tm
             assert np.array_equal(theirs[key], mine[key]), key
         assert set(theirs["first/observation.image"].shape) == {2, 3, 480}
         assert theirs["rewards"].std() > 0
+
+
+# slow: LIBERO's hard resets and 40 steps of 2 envs in each of two fresh interpreters
+@pytest.mark.slow
+def test_libero_same_episodes_as_lerobots_env(lerobot_python, plugin_site, tmp_path):
+    """LeRobot's `--env.type=libero` (`lerobot[libero]` in LeRobot's interpreter) and
+    `--env.type=envhub` (LIBERO in envhub's environment pinned as that install): the same
+    first observations after LeRobot's preprocessing (its `LiberoProcessorStep`), the same
+    `render` frames, the same rewards, ends, `is_success` and observations for a fixed action
+    sequence, from the task's fixed initial states 0 and 1 (128x128 cameras)."""
+    reference_python = reference(lerobot_python, "libero", LIBERO_REFERENCE, LIBERO_FIRST)
+    config = {"task": "libero_spatial", "task_ids": [0], "observation_height": 128, "observation_width": 128}
+    spec = {"n_envs": 2, "seeds": [10, 11], "steps": 40, "config": config}
+    theirs = rollout(reference_python, None, {**spec, "type": "libero"}, tmp_path, "ref")
+    mine = rollout(lerobot_python, plugin_site, {**spec, "type": "envhub"}, tmp_path, "mine")
+    assert sorted(theirs) == sorted(mine)
+    for key in theirs:
+        assert theirs[key].dtype == mine[key].dtype, key
+        assert np.array_equal(theirs[key], mine[key]), key
+    assert theirs["first/observation.state"].shape == (2, 8)
+    assert int(theirs["max_episode_steps"][0]) == 280
