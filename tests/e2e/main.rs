@@ -10,6 +10,7 @@ mod daemon;
 mod failures;
 mod hub_bounds;
 mod lan_peer;
+mod local_files;
 mod lying_hub;
 mod other_user;
 mod python_worker;
