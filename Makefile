@@ -268,6 +268,8 @@ fmt:
 BROWSER_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && echo 1)
 # As root (CI), the network-namespace tests of hubs across machines must run, not skip.
 NETNS_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v ip >/dev/null && command -v unshare >/dev/null && echo 1)
+# As root (CI), the tests of another local user against envhub's files (uid 65534) must run.
+OTHER_USER_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && echo 1)
 # Tests run in the release profile: they reuse `make build`'s compiled tree (dependencies are
 # optimised in every profile anyway), and end-to-end tests start the release binaries.
 # Two tests per core: most end-to-end tests wait (hubs and workers starting, the bounds they
@@ -275,9 +277,9 @@ NETNS_REQUIRED := $(shell [ "$$(id -u)" = 0 ] && command -v ip >/dev/null && com
 RUST_TEST_THREADS ?= $(shell echo $$(( $$(nproc) * 2 )))
 rust-test: setup py-install
 	@if $(CARGO) nextest --version >/dev/null 2>&1; then \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) --test-threads $(RUST_TEST_THREADS) $${CI:+--profile ci}; \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) ENVHUB_OTHER_USER_REQUIRED=$(OTHER_USER_REQUIRED) $(CARGO) nextest run $(PROFILE) --workspace $(FEATURES) --test-threads $(RUST_TEST_THREADS) $${CI:+--profile ci}; \
 	else \
-		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
+		ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_NETNS_REQUIRED=$(NETNS_REQUIRED) ENVHUB_OTHER_USER_REQUIRED=$(OTHER_USER_REQUIRED) $(CARGO) test $(PROFILE) --workspace $(FEATURES); \
 	fi
 	$(CARGO) test $(PROFILE) --workspace --doc $(FEATURES)
 

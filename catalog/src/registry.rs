@@ -187,7 +187,8 @@ impl Registry {
         self.add_yaml_locked(
             DEFAULT_REGISTRY,
             &name,
-            &crate::builtin_assets::builtin_dir(),
+            &crate::builtin_assets::builtin_dir()
+                .map_err(|message| RegistryError::Assets { message })?,
             &lock,
         )
     }

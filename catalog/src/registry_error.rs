@@ -86,6 +86,12 @@ pub enum RegistryError {
         /// What is wrong.
         message: String,
     },
+    /// The built-in catalog's model files have no folder of this user's to live in.
+    #[error("the built-in catalog's model files cannot be written: {message}")]
+    Assets {
+        /// Which folder, what is wrong with it, and the fix.
+        message: String,
+    },
     /// No entry has this id.
     #[error("unknown environment id `{id}`{}\nhint: `envhub envs` lists every id", did_you_mean(.closest))]
     UnknownId {

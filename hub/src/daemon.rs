@@ -27,14 +27,12 @@ use std::process::Child;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// The default control socket: `$XDG_RUNTIME_DIR/envhub.sock`, else
-/// `/tmp/envhub-<uid>/envhub.sock` in a folder only this user may enter (a socket directly
-/// in the world-writable `/tmp` could be taken first by another user).
-pub fn default_socket() -> PathBuf {
-    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
-        Some(dir) => Path::new(&dir).join("envhub.sock"),
-        None => crate::daemon_guard::private_dir().join("envhub.sock"),
-    }
+/// The default control socket: `envhub.sock` in this user's private folder
+/// (`$XDG_RUNTIME_DIR/envhub`, else `~/.cache/envhub/run`, [`envhub_core::private_dir`]),
+/// made and checked on every component (a socket in a folder of the world-writable `/tmp`
+/// could be taken first by another user), or why there is none.
+pub fn default_socket() -> Result<PathBuf, envhub_core::private_dir::PrivateDirError> {
+    envhub_core::private_dir::runtime_dir("").map(|dir| dir.join("envhub.sock"))
 }
 
 /// Binds `socket` (replacing a stale one, refusing a live one) and serves clients until the
@@ -44,9 +42,10 @@ pub fn serve(socket: &Path, hub: Arc<Hub>, on_ready: impl FnOnce()) -> Result<()
         socket: socket.display().to_string(),
         reason,
     };
-    if socket.parent() == Some(crate::daemon_guard::private_dir().as_path()) {
-        crate::daemon_guard::ensure_private_dir(&crate::daemon_guard::private_dir())
-            .map_err(fail)?;
+    if crate::daemon_guard::in_default_dir(socket)
+        && let Some(dir) = socket.parent()
+    {
+        envhub_core::private_dir::ensure(dir).map_err(|e| fail(e.to_string()))?;
     }
     if socket.exists() {
         if UnixStream::connect(socket).is_ok() {

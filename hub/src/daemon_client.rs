@@ -40,14 +40,13 @@ impl DaemonClient {
     /// Connects to the daemon listening on `socket`.
     pub fn connect(socket: &Path) -> Result<Arc<DaemonClient>, HubError> {
         // The default folder must be this user's: else the socket in it may be another's.
-        if socket.parent() == Some(crate::daemon_guard::private_dir().as_path())
-            && socket.exists()
-            && let Err(reason) =
-                crate::daemon_guard::check_private_dir(&crate::daemon_guard::private_dir())
+        if crate::daemon_guard::in_default_dir(socket)
+            && let Some(dir) = socket.parent()
+            && let Err(e) = envhub_core::private_dir::check(dir)
         {
             return Err(HubError::Daemon {
                 socket: socket.display().to_string(),
-                reason,
+                reason: e.to_string(),
             });
         }
         let stream = UnixStream::connect(socket).map_err(|e| HubError::Daemon {

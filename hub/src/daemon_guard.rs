@@ -3,59 +3,26 @@
 //! (`SO_PEERCRED`): only the daemon's own user (or root) is served. Requests carry adapter
 //! paths, pickles and `PYTHONPATH`, so another user on the machine must never get through.
 
-use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::os::unix::fs::PermissionsExt;
 use std::os::unix::io::AsRawFd;
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 
 fn uid() -> u32 {
-    // SAFETY: getuid has no preconditions.
-    unsafe { libc::getuid() }
+    envhub_core::private_dir::uid()
 }
 
-/// The folder of the default socket when `XDG_RUNTIME_DIR` is unset: `<tmp>/envhub-<uid>`.
-pub(crate) fn private_dir() -> PathBuf {
-    std::env::temp_dir().join(format!("envhub-{}", uid()))
+/// The folder of the default socket: this user's private folder
+/// ([`envhub_core::private_dir`]), whose every component is checked before it is used.
+pub(crate) fn default_dir() -> Option<PathBuf> {
+    envhub_core::private_dir::base().ok()
 }
 
-/// Creates `dir` (mode 0700) if missing and checks that it is this user's and closed to
-/// everyone else: a folder another user made first, or opened up, is refused.
-pub(crate) fn ensure_private_dir(dir: &Path) -> Result<(), String> {
-    match std::fs::create_dir(dir) {
-        Ok(()) => {
-            std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
-                .map_err(|e| format!("cannot make `{}` private: {e}", dir.display()))?;
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(format!("cannot create `{}`: {e}", dir.display())),
-    }
-    check_private_dir(dir)
-}
-
-/// Checks that `dir` is a folder (not a link) of this user that no one else may enter.
-pub(crate) fn check_private_dir(dir: &Path) -> Result<(), String> {
-    let meta = std::fs::symlink_metadata(dir)
-        .map_err(|e| format!("cannot inspect `{}`: {e}", dir.display()))?;
-    if !meta.is_dir() {
-        return Err(format!("`{}` is not a folder", dir.display()));
-    }
-    if meta.uid() != uid() {
-        return Err(format!(
-            "`{}` belongs to uid {}, not to this user (uid {}); another user may have made it first\nhint: remove it, or set XDG_RUNTIME_DIR or `--socket` to a folder of your own",
-            dir.display(),
-            meta.uid(),
-            uid()
-        ));
-    }
-    if meta.mode() & 0o077 != 0 {
-        return Err(format!(
-            "`{}` has mode {:o}; other users could reach the socket in it\nhint: `chmod 700 {}`",
-            dir.display(),
-            meta.mode() & 0o777,
-            dir.display()
-        ));
-    }
-    Ok(())
+/// Whether `socket` lies in the default folder: then that folder must pass the check.
+pub(crate) fn in_default_dir(socket: &Path) -> bool {
+    socket
+        .parent()
+        .is_some_and(|p| Some(p) == default_dir().as_deref())
 }
 
 /// Makes a freshly bound socket readable and writable by its user alone.

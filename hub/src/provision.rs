@@ -27,20 +27,25 @@ use std::time::Duration;
 const WORKER_REQUIREMENTS: &[&str] = &["numpy", "gymnasium"];
 
 /// The cache folder: `ENVHUB_PYENV_DIR`, else `$XDG_CACHE_HOME/envhub/pyenvs`, else
-/// `~/.cache/envhub/pyenvs`.
-pub fn cache_dir() -> PathBuf {
+/// `~/.cache/envhub/pyenvs`; never a predictable name in the shared temporary folder, where
+/// another user could plant the environments a suite's workers run.
+pub fn cache_dir() -> Result<PathBuf, String> {
     let var = |name: &str| {
         std::env::var_os(name)
             .filter(|v| !v.is_empty())
             .map(PathBuf::from)
     };
     if let Some(dir) = var(ENVHUB_PYENV_DIR) {
-        return dir;
+        return Ok(dir);
     }
     let cache = var("XDG_CACHE_HOME")
         .or_else(|| var("HOME").map(|h| h.join(".cache")))
-        .unwrap_or_else(std::env::temp_dir);
-    cache.join("envhub").join("pyenvs")
+        .ok_or_else(|| {
+            format!(
+                "no folder for Python environments: `{ENVHUB_PYENV_DIR}`, `XDG_CACHE_HOME` and `HOME` are all unset\nhint: set `{ENVHUB_PYENV_DIR}` to a folder of your own"
+            )
+        })?;
+    Ok(cache.join("envhub").join("pyenvs"))
 }
 
 /// Whether environments are built on first need here (`ENVHUB_PROVISION`, default `auto`).
@@ -88,7 +93,7 @@ fn make_store() -> Result<Store, String> {
         Ok(v) if !v.trim().is_empty() => matches!(v.trim(), "1" | "true" | "yes"),
         _ => crate::settings::Settings::discover(None).is_ok_and(|s| s.python_install),
     };
-    Ok(Store::new(cache_dir(), uv, python)
+    Ok(Store::new(cache_dir()?, uv, python)
         .with_python_install(install)
         .with_extra_requirements(WORKER_REQUIREMENTS.iter().map(|s| s.to_string()).collect())
         .with_packages(vec![package])

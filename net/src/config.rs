@@ -269,9 +269,9 @@ pub fn open_hub(
 fn check_local_credential(config: &mut zenoh::Config) -> Result<(), HubError> {
     let credential = crate::local::credential().map_err(|e| HubError::Network {
         reason: format!("cannot make this user's local credential: {e}"),
-        hint: "check that the folder of local hubs (`ENVHUB_LOCAL_HUBS`, \
-               `$XDG_RUNTIME_DIR/envhub-hubs`) is this user's; or give credentials \
-               (docs/security.md)"
+        hint: "the folder of local hubs (`ENVHUB_LOCAL_HUBS`, else `hubs/` in \
+               `$XDG_RUNTIME_DIR/envhub` or `~/.cache/envhub/run`) must be this user's alone; \
+               or give credentials (docs/security.md)"
             .into(),
     })?;
     config

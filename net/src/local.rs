@@ -3,69 +3,40 @@
 //! would reach the LAN).
 //!
 //! A hub that listens on loopback only writes its endpoint to a file in a folder only its user
-//! can enter (`$XDG_RUNTIME_DIR/envhub-hubs`, else `<tmp>/envhub-<uid>/hubs`, mode 0700, as the
-//! daemon's socket folder), and removes it when it leaves. A client given no endpoint and no
-//! Zenoh config connects to the loopback endpoints listed there (of hubs whose process is
-//! alive).
+//! can enter (`hubs/` of this user's private folder, [`envhub_core::private_dir`]: every
+//! component of its path checked, as for the daemon's socket), and removes it when it leaves.
+//! A client given no endpoint and no Zenoh config connects to the loopback endpoints listed
+//! there (of hubs whose process is alive).
 //!
 //! Loopback is open to every user of the machine, so the folder also holds this user's local
 //! credential ([`credential`]): a password only this user can read, which a default hub
 //! checks every link into it against (Zenoh's user/password), and which this user's clients
 //! present to their local hubs.
 
-use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
+use envhub_core::private_dir;
+use std::os::unix::fs::MetadataExt;
 use std::path::{Path, PathBuf};
 
-/// The folder of this user's local hubs (tests: a folder of their own).
-pub const ENVHUB_LOCAL_HUBS: &str = "ENVHUB_LOCAL_HUBS";
+pub use envhub_core::env_vars::ENVHUB_LOCAL_HUBS;
 
 fn uid() -> u32 {
-    // SAFETY: getuid has no preconditions.
-    unsafe { libc::getuid() }
+    private_dir::uid()
 }
 
-/// The folder where this user's local hubs say where they listen.
-pub fn dir() -> PathBuf {
-    if let Some(d) = std::env::var_os(ENVHUB_LOCAL_HUBS).filter(|d| !d.is_empty()) {
-        return PathBuf::from(d);
-    }
-    match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
-        Some(run) => PathBuf::from(run).join("envhub-hubs"),
-        None => std::env::temp_dir()
-            .join(format!("envhub-{}", uid()))
-            .join("hubs"),
+/// The folder where this user's local hubs say where they listen: `ENVHUB_LOCAL_HUBS`, else
+/// `hubs/` of this user's private folder; not made, not checked.
+fn path() -> Result<PathBuf, String> {
+    match std::env::var_os(ENVHUB_LOCAL_HUBS).filter(|d| !d.is_empty()) {
+        Some(d) => Ok(PathBuf::from(d)),
+        None => Ok(private_dir::base().map_err(|e| e.to_string())?.join("hubs")),
     }
 }
 
-/// Whether `dir` is a folder (not a link) of this user that no one else may enter.
-fn private(dir: &Path) -> Result<(), String> {
-    let meta = std::fs::symlink_metadata(dir)
-        .map_err(|e| format!("cannot inspect `{}`: {e}", dir.display()))?;
-    if !meta.is_dir() || meta.uid() != uid() || meta.mode() & 0o077 != 0 {
-        return Err(format!(
-            "`{}` is not a folder of this user closed to others (uid {}, mode {:o})",
-            dir.display(),
-            meta.uid(),
-            meta.mode() & 0o777
-        ));
-    }
-    Ok(())
-}
-
-/// Creates `dir` (and its parent, the daemon's folder, when missing) with mode 0700.
-fn ensure(dir: &Path) -> Result<(), String> {
-    for d in [dir.parent(), Some(dir)].into_iter().flatten() {
-        if d.exists() || d == Path::new("/") {
-            continue;
-        }
-        match std::fs::create_dir(d) {
-            Ok(()) => std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o700))
-                .map_err(|e| format!("cannot make `{}` private: {e}", d.display()))?,
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(e) => return Err(format!("cannot create `{}`: {e}", d.display())),
-        }
-    }
-    private(dir)
+/// [`path`], made where missing (mode 0700) and checked on every component.
+pub fn dir() -> Result<PathBuf, String> {
+    let dir = path()?;
+    private_dir::ensure(&dir).map_err(|e| e.to_string())?;
+    Ok(dir)
 }
 
 /// A hub's entry in the folder; removed when dropped.
@@ -80,12 +51,11 @@ impl Drop for Published {
 
 /// Writes that hub `name` listens on `endpoints` (mode 0600, in the private folder).
 pub fn publish(name: &str, endpoints: &[String]) -> Result<Published, String> {
-    let dir = dir();
-    ensure(&dir)?;
+    let dir = dir()?;
     let pid = std::process::id();
     let path = dir.join(format!("{pid}.json"));
     let body = serde_json::json!({ "name": name, "endpoints": endpoints, "pid": pid }).to_string();
-    write_private(&dir, &path, &body, true)?;
+    write_private(&path, &body, true)?;
     Ok(Published(path))
 }
 
@@ -105,8 +75,7 @@ pub struct Credential {
 /// This user's local credential, made on first need in the private folder (0600 files, in a
 /// folder only this user can enter), so only this user's processes can present it.
 pub fn credential() -> Result<Credential, String> {
-    let dir = dir();
-    ensure(&dir)?;
+    let dir = dir()?;
     let secret = dir.join("credential");
     let dictionary = dir.join("usrpwd");
     let password = match read_private(&secret)? {
@@ -121,13 +90,13 @@ pub fn credential() -> Result<Credential, String> {
             .map_err(|e| format!("cannot read /dev/urandom: {e}"))?;
             let made: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
             // Two processes may make it at once: the first link wins and both read it back.
-            write_private(&dir, &secret, &made, false)?;
+            write_private(&secret, &made, false)?;
             read_private(&secret)?.ok_or_else(|| format!("`{}` vanished", secret.display()))?
         }
     };
     let line = format!("{LOCAL_USER}:{password}\n");
     if read_private(&dictionary)?.as_deref() != Some(line.trim_end()) {
-        write_private(&dir, &dictionary, &line, true)?;
+        write_private(&dictionary, &line, true)?;
     }
     Ok(Credential {
         password,
@@ -137,50 +106,19 @@ pub fn credential() -> Result<Credential, String> {
 
 /// A file of this user that no one else can read, trimmed; `None` when there is none.
 fn read_private(path: &Path) -> Result<Option<String>, String> {
-    let meta = match std::fs::symlink_metadata(path) {
-        Ok(m) => m,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(format!("cannot inspect `{}`: {e}", path.display())),
-    };
-    if !meta.is_file() || meta.uid() != uid() || meta.mode() & 0o077 != 0 || meta.len() > 4096 {
-        return Err(format!(
-            "`{}` is not a file of this user closed to others (uid {}, mode {:o})",
-            path.display(),
-            meta.uid(),
-            meta.mode() & 0o777
-        ));
+    match private_dir::read_file(path, 4096) {
+        Ok(body) => Ok(body.map(|b| String::from_utf8_lossy(&b).trim().to_string())),
+        Err(e) => Err(format!("cannot read `{}`: {e}", path.display())),
     }
-    std::fs::read_to_string(path)
-        .map(|t| Some(t.trim().to_string()))
-        .map_err(|e| format!("cannot read `{}`: {e}", path.display()))
 }
 
-/// Writes `path` (mode 0600) whole through a temporary file: renamed over it (`replace`), or
-/// linked to it only where there is none yet (a file another process made first stays).
-fn write_private(dir: &Path, path: &Path, body: &str, replace: bool) -> Result<(), String> {
-    use std::io::Write;
-    let name = path.file_name().unwrap_or_default().to_string_lossy();
-    let tmp = dir.join(format!(".{name}-{}.tmp", std::process::id()));
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .mode(0o600)
-            .open(&tmp)?;
-        f.write_all(body.as_bytes())?;
-        f.sync_all()?;
-        if replace {
-            return std::fs::rename(&tmp, path);
-        }
-        let linked = std::fs::hard_link(&tmp, path);
-        let _ = std::fs::remove_file(&tmp);
-        match linked {
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
-            other => other,
-        }
-    };
-    write().map_err(|e| format!("cannot write `{}`: {e}", path.display()))
+/// Writes `path` (mode 0600) whole through a fresh temporary file (`O_EXCL|O_NOFOLLOW`, a
+/// random name): renamed over it (`replace`), or linked to it only where there is none yet
+/// (a file another process made first stays).
+fn write_private(path: &Path, body: &str, replace: bool) -> Result<(), String> {
+    private_dir::write_file(path, body.as_bytes(), 0o600, replace)
+        .map(drop)
+        .map_err(|e| format!("cannot write `{}`: {e}", path.display()))
 }
 
 fn alive(pid: i32) -> bool {
@@ -193,11 +131,15 @@ fn alive(pid: i32) -> bool {
 /// The loopback endpoints of this user's live local hubs, sorted. A folder that is not this
 /// user's alone is ignored (with a warning): another user could list endpoints in it.
 pub fn endpoints() -> Vec<String> {
-    let dir = dir();
-    if !dir.exists() {
-        return Vec::new();
-    }
-    if let Err(e) = private(&dir) {
+    let dir = match path() {
+        Ok(dir) if dir.exists() => dir,
+        Ok(_) => return Vec::new(),
+        Err(e) => {
+            tracing::debug!("no local hubs: {e}");
+            return Vec::new();
+        }
+    };
+    if let Err(e) = private_dir::check(&dir) {
         tracing::warn!("local hubs ignored: {e}");
         return Vec::new();
     }
@@ -245,6 +187,7 @@ pub(crate) fn free_port() -> std::io::Result<u16> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::os::unix::fs::PermissionsExt;
 
     #[test]
     fn a_published_hub_is_listed_until_it_is_dropped_and_only_loopback_counts() {
@@ -274,7 +217,31 @@ mod tests {
         let _again = publish("a", &["tcp/127.0.0.1:17001".to_string()]).unwrap();
         std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
         assert!(endpoints().is_empty());
+        let e = publish("b", &[]).unwrap_err();
+        assert!(
+            e.contains(&format!("`{}` has mode 777", dir.display())),
+            "{e}"
+        );
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).unwrap();
+
+        // The credential's files: a link planted in the place of either is refused, naming
+        // it, and never read or written through.
+        let victim = dir.with_extension("victim");
+        std::fs::write(&victim, "precious").unwrap();
+        for name in ["usrpwd", "credential"] {
+            let _ = std::fs::remove_file(dir.join(name));
+            std::os::unix::fs::symlink(&victim, dir.join(name)).unwrap();
+            let e = credential().unwrap_err();
+            assert!(e.contains(name) && e.contains("symbolic link"), "{e}");
+            assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+            std::fs::remove_file(dir.join(name)).unwrap();
+        }
+        let made = credential().unwrap();
+        let dictionary = std::fs::read_to_string(&made.dictionary).unwrap();
+        assert_eq!(dictionary, format!("{LOCAL_USER}:{}\n", made.password));
+        assert_eq!(credential().unwrap().password, made.password);
         unsafe { std::env::remove_var(ENVHUB_LOCAL_HUBS) };
         let _ = std::fs::remove_dir_all(&dir);
+        let _ = std::fs::remove_file(&victim);
     }
 }

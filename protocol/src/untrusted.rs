@@ -108,15 +108,26 @@ const MAX_KWARG_STRING: usize = 1024;
 /// Checks the kwargs a remote client asks a hub to pass to its env, against an allowlist:
 /// numbers, booleans, `null`, strings that cannot name a file, and lists and maps of those
 /// (bounded in depth, count and length). A string names a file when it holds a `/` or `\`,
-/// starts with `~` or `.`, or ends in an extension (`ant.xml`) — anything an adapter could
+/// starts with `~` or `.`, ends in an extension (`ant.xml`), or names an entry of the hub's
+/// working folder, where its workers start (`passwd` in `/etc`) — anything an adapter could
 /// open relative to its folder. Keys must be plain names. Returns the path of the first value
 /// refused (`kwargs.robot[2].model`) and why.
 pub fn check_remote_kwargs(
     kwargs: &std::collections::BTreeMap<String, serde_json::Value>,
 ) -> Result<(), String> {
+    // No working folder to resolve against: every bare name is then refused.
+    let here = std::env::current_dir().unwrap_or_default();
+    check_remote_kwargs_in(kwargs, &here)
+}
+
+/// [`check_remote_kwargs`], with `folder` as the workers' working folder.
+fn check_remote_kwargs_in(
+    kwargs: &std::collections::BTreeMap<String, serde_json::Value>,
+    folder: &std::path::Path,
+) -> Result<(), String> {
     let mut count = 0;
     for (key, value) in kwargs {
-        check_kwarg(&format!("kwargs.{key}"), key, value, 0, &mut count)?;
+        check_kwarg(&format!("kwargs.{key}"), key, value, 0, &mut count, folder)?;
     }
     Ok(())
 }
@@ -127,6 +138,7 @@ fn check_kwarg(
     value: &serde_json::Value,
     depth: usize,
     count: &mut usize,
+    folder: &std::path::Path,
 ) -> Result<(), String> {
     use serde_json::Value;
     *count += 1;
@@ -160,15 +172,22 @@ fn check_kwarg(
             if names_a_file(text) {
                 return Err(format!("`{at}` = {:?} may name a file on the hub", text));
             }
+            if !text.is_empty()
+                && (folder.as_os_str().is_empty() || folder.join(text).symlink_metadata().is_ok())
+            {
+                return Err(format!(
+                    "`{at}` = {:?} names a file or folder where the hub's workers start",
+                    text
+                ));
+            }
             Ok(())
         }
-        Value::Array(items) => items
-            .iter()
-            .enumerate()
-            .try_for_each(|(i, v)| check_kwarg(&format!("{at}[{i}]"), key, v, depth + 1, count)),
-        Value::Object(map) => map
-            .iter()
-            .try_for_each(|(k, v)| check_kwarg(&format!("{at}.{k}"), k, v, depth + 1, count)),
+        Value::Array(items) => items.iter().enumerate().try_for_each(|(i, v)| {
+            check_kwarg(&format!("{at}[{i}]"), key, v, depth + 1, count, folder)
+        }),
+        Value::Object(map) => map.iter().try_for_each(|(k, v)| {
+            check_kwarg(&format!("{at}.{k}"), k, v, depth + 1, count, folder)
+        }),
     }
 }
 
@@ -440,6 +459,23 @@ mod tests {
         assert!(e.contains("deeper"), "{e}");
         let many = json!({"many": vec![0; 20_000]});
         assert!(check_remote_kwargs(&kwargs(many)).is_err());
+        // A bare name without an extension is refused where it names an entry of the
+        // workers' folder (`passwd` for a hub started in `/etc`), and passes where it does not.
+        let etc = std::env::temp_dir().join(format!("envhub-kwargs-{}", std::process::id()));
+        std::fs::create_dir_all(&etc).unwrap();
+        std::fs::write(etc.join("passwd"), "root:x:0:0").unwrap();
+        let passwd = kwargs(json!({"model": "passwd", "mode": "rgb_array"}));
+        let e = check_remote_kwargs_in(&passwd, &etc).expect_err("refused");
+        assert!(e.contains("kwargs.model") && e.contains("passwd"), "{e}");
+        let elsewhere = etc.join("empty");
+        std::fs::create_dir_all(&elsewhere).unwrap();
+        assert_eq!(check_remote_kwargs_in(&passwd, &elsewhere), Ok(()));
+        assert_eq!(
+            check_remote_kwargs_in(&kwargs(json!({"nested": [{"m": "passwd"}]})), &etc)
+                .expect_err("refused nested"),
+            "`kwargs.nested[0].m` = \"passwd\" names a file or folder where the hub's workers start"
+        );
+        std::fs::remove_dir_all(&etc).unwrap();
     }
 
     #[test]

