@@ -19,6 +19,7 @@ from ..wire.batched import env_value as _env_value
 from ..wire.info_schema import SCHEMA_KEY
 from ..wire.pickled import encode_info
 from ..wire.spaces import _Leaf, _tree
+from ..wire.strict import zip_strict
 from .column_writer import ColumnWriter
 
 
@@ -283,7 +284,7 @@ class HostedBatch:
         return np.frombuffer(final_obs, dtype=np.uint8).reshape(self.num_envs, -1)
 
     def render_rgb(self, selected: list[bool]) -> list[tuple[int, int, bytes] | None]:
-        return [_rgb(env.render()) for env, s in zip(self.envs, selected, strict=True) if s]
+        return [_rgb(env.render()) for env, s in zip_strict(self.envs, selected) if s]
 
     def close(self) -> None:
         for env in self.envs:
@@ -390,7 +391,7 @@ def _vector_seed(seeds: list[int | None], mask: np.ndarray) -> int | list[int | 
     """The `seed` argument of a vector env's reset: None when no env is seeded, one int when
     the envs get `s, s + 1, ...` (what an int seed means to Gymnasium's vector envs, and what
     `envhub`'s `reset(seed=s)` sends), else one seed (or None) per env."""
-    chosen = [s if m else None for s, m in zip(seeds, mask, strict=True)]
+    chosen = [s if m else None for s, m in zip_strict(seeds, mask)]
     if all(s is None for s in chosen):
         return None
     first = chosen[0]

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..wire.info_schema import SCHEMA_KEY
+from ..wire.strict import zip_strict
 
 # Keys that never go into a column: the data plane's own, and Gymnasium's same_step keys.
 _RESERVED = frozenset({SCHEMA_KEY, "__envhub_pickle__", "__envhub_types__", "final_info", "final_obs"})
@@ -45,7 +46,7 @@ class _Schema:
         self.types = tuple(spec[4] for spec in specs)  # exact Python types of the values
         self.specs = specs
         fmt, offset, columns = ["<Q"], 8, []
-        for key, (code, dtype, shape, kind, _) in zip(keys, specs, strict=True):
+        for key, (code, dtype, shape, kind, _) in zip_strict(keys, specs):
             item = np.dtype(dtype).itemsize
             size = item * int(np.prod(shape, dtype=np.int64))
             pad = -offset % item
@@ -151,7 +152,7 @@ class ColumnWriter:
 
     @staticmethod
     def _arrays_match(s: _Schema, info: dict[str, Any]) -> bool:
-        for value, (_, dtype, shape, kind, _) in zip(info.values(), s.specs, strict=True):
+        for value, (_, dtype, shape, kind, _) in zip_strict(info.values(), s.specs):
             if kind == "array" and (value.dtype.str != dtype or value.shape != shape):
                 return False
         return True
@@ -176,7 +177,7 @@ class ColumnWriter:
             common = [k for k in keys if k in old.index]
             if [k for k in old.keys if k in specs] == common:
                 merged = list(old.keys) + [k for k in keys if k not in old.index]
-                spec_of = {**dict(zip(old.keys, old.specs, strict=True)), **specs}
+                spec_of = {**dict(zip_strict(old.keys, old.specs)), **specs}
                 # The info's own keys must keep its order in the merged list.
                 positions = [merged.index(k) for k in keys]
                 if positions == sorted(positions):
