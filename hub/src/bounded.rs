@@ -101,11 +101,13 @@ mod tests {
 
     #[test]
     fn a_command_that_hangs_is_killed_at_the_bound() {
+        // The mechanism, not the clock: killed at the bound ends it long before the sleep
+        // would, even on a machine many times slower.
         let start = Instant::now();
         let err =
             output_within(Command::new("sleep").arg("30"), Duration::from_millis(200)).unwrap_err();
         assert!(
-            start.elapsed() < Duration::from_secs(5),
+            start.elapsed() < Duration::from_secs(20),
             "{:?}",
             start.elapsed()
         );
