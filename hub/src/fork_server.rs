@@ -306,6 +306,8 @@ fn read_ready(
     };
     match serde_json::from_str::<WorkerReply>(&line) {
         Ok(WorkerReply::Ready(spec)) => {
+            // The same line as a cold start's (`launcher`), so logs read alike either way.
+            tracing::debug!(pid = pidfd.pid(), worker = ?spec.worker, "worker ready");
             if let Some(env) = &job.python
                 && let Err(e) = crate::python_host::check_identity(env, &spec)
             {

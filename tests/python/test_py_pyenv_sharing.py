@@ -202,12 +202,19 @@ CLIENT = textwrap.dedent(
     import numpy as np
     import envhub
 
-    def worker():
-        # The living worker (the session's pid list is the first one's).
-        for task in os.listdir("/proc/self/task"):
-            for pid in open(f"/proc/self/task/{task}/children").read().split():
-                if b"envhub.worker" in open(f"/proc/{pid}/cmdline", "rb").read():
-                    return int(pid)
+    def children(pid):
+        out = []
+        for task in os.listdir(f"/proc/{pid}/task"):
+            out += open(f"/proc/{pid}/task/{task}/children").read().split()
+        return out
+
+    def worker(pid="self"):
+        # The living worker (the session's pid list is the first one's): a child, or with
+        # warm workers a child of the suite's fork server (a worker itself), so the deepest.
+        for child in children(pid):
+            if b"envhub.worker" in open(f"/proc/{child}/cmdline", "rb").read():
+                return worker(child) or int(child)
+        return None
 
     def report(envs):
         pid = worker()
@@ -237,7 +244,7 @@ def start_client(package: Path, cache: Path, log: Path) -> subprocess.Popen:
     env = {
         **os.environ,
         "ENVHUB_PYENV_DIR": str(cache),
-        "ENVHUB_LOG": "warn,envhub::launcher=debug",
+        "ENVHUB_LOG": "warn,envhub::launcher=debug,envhub::fork_server=debug",
     }
     env.pop("ENVHUB_PYTHON", None)
     env.pop("PYTHONPATH", None)
