@@ -70,6 +70,13 @@ def ensure(path: str) -> str:
         except FileNotFoundError:
             try:
                 os.mkdir(nxt, 0o700)
+                # The mode exactly: the umask is process-wide, and a library in another
+                # thread may have narrowed it for a moment (0o177 made this folder 0600).
+                fd = os.open(nxt, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+                try:
+                    os.fchmod(fd, 0o700)
+                finally:
+                    os.close(fd)
             except FileExistsError:
                 pass
             st = os.lstat(nxt)
