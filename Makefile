@@ -190,8 +190,8 @@ $(LIBERO_STAMP): requirements-libero.txt
 # The `envhub` package (the one `make py-install` built, same Python version) on its path, the
 # assets, then the adapter's verdict as the hub sees it (through ENVHUB_PYTHON).
 libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
-	echo "$(abspath py-client/python)" > $$($(LIBERO_VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/envhub.pth
-	$(LIBERO_VPY) -c 'from envhub.hosted.libero import main; raise SystemExit(main(download=True))'
+	echo "$(abspath python)" > $$($(LIBERO_VPY) -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/envhub.pth
+	$(LIBERO_VPY) -c 'from envhub.worker.hosted.libero import main; raise SystemExit(main(download=True))'
 	ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) ./target/release/envhub adapters --all | grep -E '^(ADAPTER|libero) '
 	touch $(LIBERO_READY)
 
@@ -216,7 +216,7 @@ lerobot-next: $(LEROBOT_NEXT_STAMP)
 # (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py;
 # rapier's worker is part of the rest: `make build-all`).
 # MAKEFLAGS cleared: under `make -j` cargo would take make's job slots (one) for its own.
-BUILD_PACKAGES := -p envhub -p envhub-worker -p envhub-py
+BUILD_PACKAGES := -p envhub-hub -p envhub-worker -p envhub-python
 # The crates (Cargo.lock's pins) are downloaded while .venv/ and libmujoco are set up, which the
 # build waits for (mujoco-rs's build script checks the library): 4 s of a fresh machine's demo.
 # Those of this machine's platform only (336 MB unpacked, not the lock's 667 MB for every one).
@@ -245,13 +245,13 @@ demo:
 	./target/release/envhub run gym-cartpole --num-envs 64 --steps 300000
 	./target/release/envhub run gym-pendulum --num-envs 8 --steps 100000
 	./target/release/envhub run mujoco-ant --num-envs 8 --workers 1 --steps 16000
-	$(VPY) py-client/examples/rollout.py
+	$(VPY) python/examples/rollout.py
 
 lint: setup lint-rust
 	$(VPY) scripts/check_layers.py
 	$(VPY) scripts/check_untested_targets.py
-	$(VPY) -m ruff check py-client tests scripts integrations
-	cd py-client/python && $(abspath $(VPY)) -m mypy --config-file ../pyproject.toml --cache-dir $(abspath .build/mypy)
+	$(VPY) -m ruff check python tests scripts integrations
+	cd python && $(abspath $(VPY)) -m mypy --config-file pyproject.toml --cache-dir $(abspath .build/mypy)
 
 # Every target (tests, benches, examples) built once with clippy's lints, warnings denied: the
 # tests reuse the build.
@@ -295,23 +295,23 @@ PY_SITE = $(shell $(VPY) -c 'import sysconfig; print(sysconfig.get_paths()["pure
 # for one interpreter, `_envhub.cpython-311-*.so`, would win over it there and is removed).
 PY_EXT_SUFFIX := .abi3.so
 py-install: build $(VENV_STAMP)
-	rm -f py-client/python/envhub/_envhub.cpython-*.so
-	cp target/release/lib_envhub.so py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
-	mv -f py-client/python/envhub/_envhub$(PY_EXT_SUFFIX).tmp py-client/python/envhub/_envhub$(PY_EXT_SUFFIX)
+	rm -f python/envhub/_envhub.cpython-*.so
+	cp target/release/lib_envhub.so python/envhub/_envhub$(PY_EXT_SUFFIX).tmp
+	mv -f python/envhub/_envhub$(PY_EXT_SUFFIX).tmp python/envhub/_envhub$(PY_EXT_SUFFIX)
 	rm -f $(PY_SITE)/envhub.pth $(PY_SITE)/_envhub.pth
 	$(VPY) -m pip uninstall --quiet --yes envhub 2>/dev/null || true
-	echo "$(abspath py-client/python)" > $(PY_SITE)/envhub.pth
-	mkdir -p py-client/python/envhub/bin
+	echo "$(abspath python)" > $(PY_SITE)/envhub.pth
+	mkdir -p python/envhub/bin
 	for b in $(PY_BINARIES); do \
 		if [ -f target/release/$$b ]; then \
-			cp target/release/$$b py-client/python/envhub/bin/$$b.tmp && mv -f py-client/python/envhub/bin/$$b.tmp py-client/python/envhub/bin/$$b; \
-		else rm -f py-client/python/envhub/bin/$$b; fi; \
+			cp target/release/$$b python/envhub/bin/$$b.tmp && mv -f python/envhub/bin/$$b.tmp python/envhub/bin/$$b; \
+		else rm -f python/envhub/bin/$$b; fi; \
 	done
 
 # The wheel: the package, the extension module and the binaries of `make build`, zipped by
-# py-client/build_wheel.py (no second compile, unlike `maturin build`; see the script).
+# python/build_wheel.py (no second compile, unlike `maturin build`; see the script).
 wheel: build-all
-	$(VPY) py-client/build_wheel.py --out dist
+	$(VPY) python/build_wheel.py --out dist
 	$(VPY) integrations/lerobot/build_wheel.py --out dist
 
 # Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt
@@ -362,8 +362,8 @@ check: lint py-install
 # Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
 # cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. CI runs it after
 # `make test` (.ci/run, 5 s each); not in `make test`, as its AddressSanitizer build of the
-# targets takes minutes: `make test` runs the quick tier (hub/src/fuzz.rs) and checks the seed
-# corpora (protocol/tests/fuzz_seeds.rs).
+# targets takes minutes: `make test` runs the quick tier (crates/hub/src/fuzz.rs) and checks the seed
+# corpora (crates/protocol/tests/fuzz_seeds.rs).
 FUZZ_SECONDS ?= 10
 fuzz:
 	scripts/fuzz.sh $(FUZZ_SECONDS)

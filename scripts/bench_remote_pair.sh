@@ -2,13 +2,13 @@
 # Remote round trip (null-small x1) and CartPole x1024 remote throughput, `envhub bench --hub`,
 # for two builds back to back on one machine (before and after a change):
 #   scripts/bench_remote_pair.sh /path/to/checkout-before /path/to/checkout-after
-# Each root needs its installed binaries (py-client/python/envhub/bin/envhub). The client reads
+# Each root needs its installed binaries (python/envhub/bin/envhub). The client reads
 # the hub's loopback credential from the same ENVHUB_LOCAL_HUBS folder (docs/security.md).
 set -u
 i=0
 for root in "$@"; do
   i=$((i + 1)); side=b$i
-  bin=$root/py-client/python/envhub/bin/envhub
+  bin=$root/python/envhub/bin/envhub
   port=$((17500 + RANDOM % 400))
   ENVHUB_TEST_ADAPTERS=1 ENVHUB_NAMESPACE=benchhub_${side}_ ENVHUB_MULTICAST=0 ENVHUB_LOCAL_HUBS=/tmp/bench-local-$side \
     $bin --registry @default --registry $root/configs/bench/data_plane.yaml \

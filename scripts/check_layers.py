@@ -5,7 +5,8 @@ Two rules, read from the sources (no build needed):
 
 1. Crates: each workspace crate sits on a layer (``LAYERS`` below); its manifest may depend
    only on crates of lower layers, and never on the external crates its layer forbids
-   (``FORBIDDEN``: the catalog compiles without shared memory or a network, say).
+   (``FORBIDDEN``: the catalog compiles without shared memory or a network, say). A crate's
+   folder is its name without ``envhub-`` (``crates/session`` is ``envhub-session``).
 2. Modules: inside each crate, the modules that name one another through ``crate::`` and
    ``super::`` paths form no cycle.
 3. The Python package: ``check_py_layers.py`` (its layers: wire, worker side, client,
@@ -33,8 +34,8 @@ LAYERS: list[list[str]] = [
     ["envhub-protocol", "envhub-worker", "envhub-pyenv"],
     ["envhub-session", "envhub-worker-rapier"],
     ["envhub-net"],
-    ["envhub"],
-    ["envhub-py", "envhub-e2e"],
+    ["envhub-hub"],
+    ["envhub-python", "envhub-e2e"],
 ]
 
 # External crates a crate must not depend on (what its top doc promises).
@@ -49,6 +50,10 @@ FORBIDDEN: dict[str, list[str]] = {
     # The worker the demo runs builds without rapier: `envhub-worker-rapier` hosts it.
     "envhub-worker": ["envhub-rapier", "rapier3d"],
 }
+
+
+# A crate's folder is its name without the `envhub-` prefix, but for these.
+FOLDER_NAMES = {"tests": "envhub-e2e"}
 
 
 def layer_of(crate: str) -> int | None:
@@ -68,6 +73,9 @@ def check_crates(members: list[Path]) -> list[str]:
     for member in members:
         manifest = tomllib.loads((member / "Cargo.toml").read_text())
         name = manifest["package"]["name"]
+        folder = member.relative_to(ROOT).as_posix()
+        if FOLDER_NAMES.get(folder, "envhub-" + member.name) != name:
+            problems.append(f"crate `{name}` lives in `{folder}`: a crate's folder is its name without `envhub-`")
         layer = layer_of(name)
         if layer is None:
             problems.append(f"crate `{name}` ({member.relative_to(ROOT)}) has no layer: add it to LAYERS in {Path(__file__).name}")

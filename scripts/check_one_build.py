@@ -4,11 +4,11 @@ same way, so the second reuses the first.
 
 Cargo resolves features per build: a feature that only a dev-dependency turns on changes that
 crate, and every crate above it, in the build of the tests, and they are compiled twice
-(hub/Cargo.toml asks for those features in the normal build too). This compares the two unit
+(crates/hub/Cargo.toml asks for those features in the normal build too). This compares the two unit
 graphs (`cargo build --unit-graph`, unstable: RUSTC_BOOTSTRAP=1) and names each crate whose
 features differ.
 
-    python scripts/check_one_build.py -- --release -p envhub -p envhub-worker -p envhub-py --features envhub-worker/mujoco
+    python scripts/check_one_build.py -- --release -p envhub-hub -p envhub-worker -p envhub-python --features envhub-worker/mujoco
 """
 
 import json
@@ -82,7 +82,7 @@ def main() -> int:
         print(
             "check_one_build: these crates are compiled with other features for the tests, so "
             "they and every crate above them are compiled twice; ask for the tests' features in "
-            "hub/Cargo.toml:\n" + "\n".join(differ),
+            "crates/hub/Cargo.toml:\n" + "\n".join(differ),
             file=sys.stderr,
         )
         return 1

@@ -2,7 +2,7 @@
 """Checks that the Python package `envhub`'s arrows point one way (the Python twin of
 ``check_layers.py``, which runs it).
 
-It reads every import of every module of ``py-client/python/envhub`` with ``ast``, lazy ones
+It reads every import of every module of ``python/envhub`` with ``ast``, lazy ones
 inside functions included, resolves relative imports, and fails on:
 
 1. an arrow up: a module importing one of a higher layer (``LAYERS``; the worker side
@@ -22,13 +22,13 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGE = ROOT / "py-client" / "python" / "envhub"
+PACKAGE = ROOT / "python" / "envhub"
 
 # Lowest first; a module belongs to the first prefix it matches. A module may import modules
 # of its own layer or lower ones only.
 LAYERS: list[tuple[str, list[str]]] = [
     ("wire", ["envhub._envhub", "envhub.wire"]),
-    ("worker side", ["envhub.hosted", "envhub.worker"]),
+    ("worker side", ["envhub.worker.hosted", "envhub.worker"]),
     ("client", ["envhub.client"]),
     ("integrations", ["envhub.registration", "envhub.sb3", "envhub.recording", "envhub.evaluation", "envhub._cli"]),
     ("facade", ["envhub.errors", "envhub"]),

@@ -2,8 +2,8 @@
 //! them (the env clips them), refused with `strict_actions`; NaN and infinities refused either
 //! way.
 
-use envhub::{EnvConfig, HubError, VecEnv};
 use envhub_e2e::TestHub;
+use envhub_hub::{EnvConfig, HubError, VecEnv};
 
 fn strict() -> EnvConfig {
     EnvConfig {

@@ -1,7 +1,7 @@
 //! EnvPool-style asynchronous stepping: `send` to some envs, `recv` what finished first.
 
-use envhub::EnvConfig;
 use envhub_e2e::TestHub;
+use envhub_hub::EnvConfig;
 
 fn config(workers: usize) -> EnvConfig {
     EnvConfig {
@@ -75,7 +75,7 @@ fn async_misuse_is_an_error() {
     assert!(err.contains("for 2 envs"), "{err}");
 }
 
-fn null(t: &TestHub, num_envs: usize, workers: usize, sleep_ms: u64) -> envhub::VecEnv {
+fn null(t: &TestHub, num_envs: usize, workers: usize, sleep_ms: u64) -> envhub_hub::VecEnv {
     let mut config = EnvConfig {
         num_envs,
         ..config(workers)

@@ -1,8 +1,8 @@
 //! Bad input gets a clear error naming what is wrong and what is valid; never a panic or hang.
 
-use envhub::{EnvConfig, HubError};
 use envhub_core::ResetOptions;
 use envhub_e2e::TestHub;
+use envhub_hub::{EnvConfig, HubError};
 
 fn msg(e: HubError) -> String {
     e.to_string()
@@ -134,7 +134,7 @@ fn unknown_framework_and_adapter() {
         "environments:\n  - {id: odd, name: Odd, framework: bullet, env_id: X-v0, robot_type: arm, env_type: tabletop}\n  - {id: pinned, name: P, framework: gym, env_id: CartPole-v1, robot_type: custom, env_type: floor, adapter: nope}\n  - {id: nonnative, name: N, framework: gym, env_id: NoSuchEnv-v0, robot_type: custom, env_type: floor}\n",
     )
     .unwrap();
-    let hub = envhub::Hub::new(envhub::Registry::load(&[&file]).unwrap())
+    let hub = envhub_hub::Hub::new(envhub_hub::Registry::load(&[&file]).unwrap())
         .with_options(t.hub.options().clone());
     let err = hub
         .make("odd", &EnvConfig::default())

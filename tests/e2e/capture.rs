@@ -4,8 +4,8 @@
 //! session's messages keeps the sealed requests and answers. No 32 bytes of the capture, raw
 //! or written as 64 hex digits, open any of them: the session key never travelled.
 
-use envhub::{EnvConfig, Hub, NetConfig, Placement, Registry};
 use envhub_e2e::remote::{RemoteHub, known_hubs};
+use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry};
 use envhub_protocol::seal::{Direction, KEY_LEN, SessionKey};
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

@@ -1,10 +1,10 @@
 //! Random rollouts of the five classic-control envs through the hub, checked against the same
 //! envs stepped in this process.
 
-use envhub::{AutoresetMode, EnvConfig};
 use envhub_classic::ClassicControl;
 use envhub_core::{Env, EnvAdapter, Info, ResetOptions, TimeLimit};
 use envhub_e2e::TestHub;
+use envhub_hub::{AutoresetMode, EnvConfig};
 use rand::SeedableRng;
 
 const IDS: [(&str, &str); 5] = [

@@ -1,8 +1,8 @@
 //! Several client processes at once, each with its own workers: nothing lost, nothing out of
 //! order, no crosstalk.
 
-use envhub::EnvConfig;
 use envhub_e2e::TestHub;
+use envhub_hub::EnvConfig;
 use std::time::{Duration, Instant};
 
 const CLIENTS: usize = 8;
@@ -51,10 +51,12 @@ fn client_process() {
         return;
     };
     let k: usize = k.parse().unwrap();
-    let hub = envhub::Hub::new(envhub::Registry::builtin()).with_options(envhub::SessionOptions {
-        namespace: ns,
-        ..envhub::SessionOptions::default()
-    });
+    let hub = envhub_hub::Hub::new(envhub_hub::Registry::builtin()).with_options(
+        envhub_hub::SessionOptions {
+            namespace: ns,
+            ..envhub_hub::SessionOptions::default()
+        },
+    );
     // Null-v0 writes its step count into the first observation: every step must show the
     // next number, in every env, or a response was lost, repeated or crossed.
     let n = 1 + k % 3;

@@ -1,8 +1,8 @@
 //! `envhub serve`: one hub daemon shared by several client processes.
 
-use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_HUB, ENVHUB_NAMESPACE, ENVHUB_REGISTRY};
-use envhub::{EnvConfig, Host, Hub, HubError, Registry, SessionOptions};
 use envhub_e2e::{PATIENCE, PyModule, binary, eventually, python_worker_available};
+use envhub_hub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_HUB, ENVHUB_NAMESPACE, ENVHUB_REGISTRY};
+use envhub_hub::{EnvConfig, Host, Hub, HubError, Registry, SessionOptions};
 use rand::SeedableRng;
 use std::ffi::OsString;
 use std::io::BufRead;
@@ -380,7 +380,7 @@ fn errors_through_the_daemon_are_the_embedded_hubs() {
         assert_eq!(through.to_string(), here.to_string(), "`{id}`");
     }
     match make_error(&remote, "mujoco-antt", &EnvConfig::default()) {
-        HubError::Registry(envhub::RegistryError::UnknownId { id, closest }) => {
+        HubError::Registry(envhub_hub::RegistryError::UnknownId { id, closest }) => {
             assert_eq!(id, "mujoco-antt");
             assert!(closest.iter().any(|c| c == "mujoco-ant"), "{closest:?}");
         }

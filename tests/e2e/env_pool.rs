@@ -2,18 +2,18 @@
 //! handed out, `recv` of exactly the first M to finish — and every env's trajectory the same
 //! as in a lock-step run, whatever order the envs come back in.
 
-use envhub::EnvConfig;
 use envhub_e2e::{TestHub, mujoco_available};
+use envhub_hub::EnvConfig;
 use rand::SeedableRng;
 
 /// Env `e`'s action at its step `t`: the same in every run, whatever the order.
-fn action(env: &envhub::VecEnv, e: usize, t: usize, out: &mut [u8]) {
+fn action(env: &envhub_hub::VecEnv, e: usize, t: usize, out: &mut [u8]) {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(((e as u64) << 32) | t as u64);
     env.action_space().sample_into(&mut rng, out);
 }
 
 /// One env's results of a reset or step as bytes: observation, reward, done flags.
-fn record(b: &envhub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
+fn record(b: &envhub_hub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
     let mut row = b.obs[k * ob..(k + 1) * ob].to_vec();
     row.extend(b.rewards[k].to_le_bytes());
     row.extend([b.terminated[k] as u8, b.truncated[k] as u8]);
@@ -21,7 +21,7 @@ fn record(b: &envhub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
 }
 
 /// Per env, the reset and `steps` steps in lock step.
-fn lock_step(env: &mut envhub::VecEnv, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
+fn lock_step(env: &mut envhub_hub::VecEnv, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
     let (n, ob, ab) = (
         env.num_envs(),
         env.observation_space().byte_len(),
@@ -47,7 +47,7 @@ fn lock_step(env: &mut envhub::VecEnv, seed: u64, steps: usize) -> Vec<Vec<Vec<u
 
 /// Per env, the reset and at least `steps` steps through `async_reset`/`send`/`recv` with
 /// `batch_size` M: each `recv` must hold exactly M distinct envs.
-fn env_pool(env: &mut envhub::VecEnv, m: usize, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
+fn env_pool(env: &mut envhub_hub::VecEnv, m: usize, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
     let (n, ob, ab) = (
         env.num_envs(),
         env.observation_space().byte_len(),
@@ -130,7 +130,7 @@ fn mujoco_trajectories_per_env_equal_the_lock_step_run() {
     assert_same_per_env("mujoco-hopper", &sync, &pool, steps);
 }
 
-fn null(t: &TestHub, num_envs: usize, workers: usize) -> envhub::VecEnv {
+fn null(t: &TestHub, num_envs: usize, workers: usize) -> envhub_hub::VecEnv {
     let config = EnvConfig {
         num_envs,
         workers: Some(workers),

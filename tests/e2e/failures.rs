@@ -2,8 +2,8 @@
 //! other sessions keep working. A death is noticed by the hub's watch on the process, a hang
 //! by the step timeout; the tests tell them apart by what the error says, not by a clock.
 
-use envhub::{EnvConfig, HubError};
 use envhub_e2e::{TestHub, eventually, kill_worker_expect_died, shm_files, sigkill};
+use envhub_hub::{EnvConfig, HubError};
 use std::time::{Duration, Instant};
 
 fn null_config(extra: &[(&str, u64)], workers: usize) -> EnvConfig {
@@ -221,10 +221,12 @@ fn child_that_gets_killed() {
     let Ok(ns) = std::env::var("E2E_CHILD_NAMESPACE") else {
         return;
     };
-    let hub = envhub::Hub::new(envhub::Registry::builtin()).with_options(envhub::SessionOptions {
-        namespace: ns,
-        ..envhub::SessionOptions::default()
-    });
+    let hub = envhub_hub::Hub::new(envhub_hub::Registry::builtin()).with_options(
+        envhub_hub::SessionOptions {
+            namespace: ns,
+            ..envhub_hub::SessionOptions::default()
+        },
+    );
     let mut env = hub
         .make_vec("gym-cartpole", 2, &EnvConfig::default())
         .unwrap();

@@ -3,8 +3,8 @@
 //! hub's thread count and resident memory stay bounded (figures printed, for
 //! `docs/security.md`) and another client's session keeps stepping, bit for bit as it would.
 
-use envhub::{EnvConfig, Hub, Placement};
 use envhub_e2e::remote::{RemoteHub, net_to};
+use envhub_hub::{EnvConfig, Hub, Placement};
 use rand::SeedableRng;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -65,10 +65,10 @@ fn stalled_peer_process() {
     let Ok(endpoint) = std::env::var("E2E_STALLED_PEER_OF") else {
         return;
     };
-    let net = envhub::NetConfig {
+    let net = envhub_hub::NetConfig {
         connect: vec![endpoint],
         multicast: Some(false),
-        ..envhub::NetConfig::default()
+        ..envhub_hub::NetConfig::default()
     };
     let peer = zenoh::open(net.zenoh_config(false).unwrap())
         .wait()
@@ -88,7 +88,7 @@ fn stalled_peer_process() {
     std::process::exit(0);
 }
 
-fn rollout(env: &mut envhub::VecEnv, steps: usize) -> Vec<Vec<u8>> {
+fn rollout(env: &mut envhub_hub::VecEnv, steps: usize) -> Vec<Vec<u8>> {
     envhub_e2e::rollout_bytes(env, 3, 5, steps)
 }
 
@@ -96,7 +96,7 @@ fn rollout(env: &mut envhub::VecEnv, steps: usize) -> Vec<Vec<u8>> {
 fn flaps_oversized_requests_and_a_stalled_subscriber_leave_a_live_hub_bounded() {
     let a = RemoteHub::start("bounds", &[], &[]);
     let on_a = Placement::Hubs(vec![a.name.clone()]);
-    let hub = Hub::new(envhub::Registry::builtin()).with_network(net_to(&[&a]));
+    let hub = Hub::new(envhub_hub::Registry::builtin()).with_network(net_to(&[&a]));
     let mut quiet = hub
         .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &on_a)
         .unwrap();
@@ -398,7 +398,7 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
         "an open without a client token was not refused: {text}"
     );
     // The hub still opens sessions.
-    let hub = Hub::new(envhub::Registry::builtin()).with_network(net_to(&[&a]));
+    let hub = Hub::new(envhub_hub::Registry::builtin()).with_network(net_to(&[&a]));
     let mut env = hub
         .make_vec_on(
             "gym-cartpole",
@@ -468,7 +468,7 @@ fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
     }
     // Past Zenoh's default queue: the attack is on.
     std::thread::sleep(Duration::from_millis(500));
-    let hub = Hub::new(envhub::Registry::builtin()).with_network(net_to(&[&a]));
+    let hub = Hub::new(envhub_hub::Registry::builtin()).with_network(net_to(&[&a]));
     let result = hub
         .make_vec_on(
             "gym-cartpole",

@@ -108,12 +108,12 @@ impl Scene {
             .env("TMPDIR", &self.shared)
             .env_remove("XDG_RUNTIME_DIR")
             .env_remove("XDG_CACHE_HOME")
-            .env_remove(envhub::local::ENVHUB_LOCAL_HUBS)
-            .env_remove(envhub::env_vars::ENVHUB_HUB)
-            .env_remove(envhub::ENVHUB_CONNECT)
-            .env(envhub::ENVHUB_MULTICAST, "0")
+            .env_remove(envhub_hub::local::ENVHUB_LOCAL_HUBS)
+            .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
+            .env_remove(envhub_hub::ENVHUB_CONNECT)
+            .env(envhub_hub::ENVHUB_MULTICAST, "0")
             .env(
-                envhub::env_vars::ENVHUB_NAMESPACE,
+                envhub_hub::env_vars::ENVHUB_NAMESPACE,
                 format!("e2e_lf_{}_", std::process::id()),
             )
             .current_dir(&self.base)

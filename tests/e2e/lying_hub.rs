@@ -4,7 +4,7 @@
 //! `Interrupted` would be raised as Python's `KeyboardInterrupt`) — and a session that can
 //! go on where its other envs can.
 
-use envhub::{EnvConfig, Hub, HubError, NetConfig, Registry, SessionOptions};
+use envhub_hub::{EnvConfig, Hub, HubError, NetConfig, Registry, SessionOptions};
 use envhub_protocol::handshake::{self, Identity};
 use envhub_protocol::seal::{Direction, SessionKey};
 use envhub_shm::BatchLayout;
@@ -222,7 +222,7 @@ fn a_lying_hub_gets_errors_that_name_it_and_the_session_goes_on() {
     local.close();
     let _liar = liar("liar", &endpoint, obs_space, lie.clone());
     let config = EnvConfig::default();
-    let on = |p: &str| p.parse::<envhub::Placement>().unwrap();
+    let on = |p: &str| p.parse::<envhub_hub::Placement>().unwrap();
     // Until the liar's token has arrived, it is an unknown hub.
     *lie.lock().unwrap() = Lie::InterruptedOpen;
     let live = std::time::Instant::now();

@@ -50,9 +50,9 @@ fn start(tag: &str, args: &[&str]) -> LoopbackHub {
         .arg(dir.join("hub.sock"))
         .args(args)
         .env("ENVHUB_NAMESPACE", format!("e2e_uid_{tag}_{pid}_"))
-        .env(envhub::local::ENVHUB_LOCAL_HUBS, &local)
-        .env(envhub::ENVHUB_MULTICAST, "0")
-        .env_remove(envhub::ENVHUB_CONNECT)
+        .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, &local)
+        .env(envhub_hub::ENVHUB_MULTICAST, "0")
+        .env_remove(envhub_hub::ENVHUB_CONNECT)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -88,10 +88,10 @@ fn hubs(binary: &Path, local: &Path, args: &[&str], uid: Option<u32>) -> String 
     let mut cmd = Command::new(binary);
     cmd.args(["hubs", "--json"])
         .args(args)
-        .env(envhub::local::ENVHUB_LOCAL_HUBS, local)
-        .env_remove(envhub::ENVHUB_MULTICAST)
-        .env_remove(envhub::ENVHUB_CONNECT)
-        .env_remove(envhub::env_vars::ENVHUB_HUB)
+        .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, local)
+        .env_remove(envhub_hub::ENVHUB_MULTICAST)
+        .env_remove(envhub_hub::ENVHUB_CONNECT)
+        .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
         .stdin(Stdio::null());
     if let Some(uid) = uid {
         cmd.uid(uid).gid(uid).current_dir("/");

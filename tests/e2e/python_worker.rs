@@ -5,9 +5,9 @@
 //! Each test skips (with the reason) when the interpreter the hub uses cannot import the
 //! compiled `envhub._envhub`, unless `ENVHUB_PY_REQUIRED` is set.
 
-use envhub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
-use envhub::{EnvConfig, HubError, Registry, VecEnv};
 use envhub_e2e::{PATIENCE, PyModule, TestHub, kill_worker_expect_died, python_worker_available};
+use envhub_hub::env_vars::{ENVHUB_ADAPTERS, ENVHUB_DESCRIBE_TIMEOUT};
+use envhub_hub::{EnvConfig, HubError, Registry, VecEnv};
 use rand::SeedableRng;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -194,7 +194,7 @@ fn a_python_exception_names_the_env_and_carries_the_traceback() {
         std::env::set_var(ENVHUB_ADAPTERS, "e2e_boom_adapter:BoomAdapter");
         std::env::set_var("PYTHONPATH", module.pythonpath());
     }
-    envhub::refresh_adapters();
+    envhub_hub::refresh_adapters();
     let t = hub("pyboom");
     let mut other = t.hub.make_vec("py-cartpole", 2, &workers(1)).unwrap();
     other.reset(Some(0)).unwrap();
@@ -278,7 +278,7 @@ fn an_adapter_that_hangs_at_import_is_named_and_stalls_nothing_else() {
         std::env::set_var(ENVHUB_DESCRIBE_TIMEOUT, "10");
     }
     let bound = Duration::from_secs(10);
-    envhub::refresh_adapters();
+    envhub_hub::refresh_adapters();
     let t = std::sync::Arc::new(hub("pyhang"));
     // Resolved first, as every session of a native env does; Python is not asked for it.
     t.hub.make_vec("gym-cartpole", 1, &workers(1)).unwrap();
@@ -344,7 +344,7 @@ fn a_worker_that_hangs_after_reporting_an_error_is_killed() {
         std::env::set_var(ENVHUB_ADAPTERS, "e2e_stuck_adapter:StuckAdapter");
         std::env::set_var("PYTHONPATH", module.pythonpath());
     }
-    envhub::refresh_adapters();
+    envhub_hub::refresh_adapters();
     let t = std::sync::Arc::new(hub("pystuck"));
     let (tx, made) = mpsc::channel();
     let hub_a = t.clone();

@@ -2,9 +2,9 @@
 //! batches with one worker and with two, in each autoreset mode; the first observations equal
 //! the same envs reset in this process.
 
-use envhub::{AutoresetMode, EnvConfig};
 use envhub_core::{Env, EnvAdapter, Info, ResetOptions};
 use envhub_e2e::TestHub;
+use envhub_hub::{AutoresetMode, EnvConfig};
 use envhub_rapier::Rapier;
 use rand::SeedableRng;
 

@@ -1,9 +1,9 @@
 //! Hubs across machines, simulated on loopback: several `envhub serve` processes, each with its
 //! own iceoryx2 namespace, multicast off and explicit endpoints; real Zenoh sessions.
 
-use envhub::{EnvConfig, Hub, HubError, Placement};
 use envhub_e2e::remote::{RemoteHub, client, net_to};
 use envhub_e2e::{TestHub, mujoco_available, sigkill};
+use envhub_hub::{EnvConfig, Hub, HubError, Placement};
 use rand::SeedableRng;
 use std::time::{Duration, Instant};
 
@@ -14,8 +14,8 @@ fn hubs(names: &[&RemoteHub]) -> Placement {
 /// Steps `remote` and `local` (same id, config, seeds, actions) side by side and asserts
 /// every result is equal bit for bit.
 pub(crate) fn assert_same_rollout(
-    remote: &mut envhub::VecEnv,
-    local: &mut envhub::VecEnv,
+    remote: &mut envhub_hub::VecEnv,
+    local: &mut envhub_hub::VecEnv,
     steps: usize,
 ) {
     let a = remote.reset(Some(11)).unwrap();
@@ -124,7 +124,7 @@ fn local_and_remote_envs_mix_in_one_session() {
 }
 
 /// Steps until an error; it must be `HubLost` naming `hub`, within `limit` of `since`.
-fn expect_lost(env: &mut envhub::VecEnv, hub: &str, since: Instant, limit: Duration) {
+fn expect_lost(env: &mut envhub_hub::VecEnv, hub: &str, since: Instant, limit: Duration) {
     let actions = vec![0u8; env.num_envs() * 8];
     let err = loop {
         match env.step(&actions) {
@@ -201,7 +201,7 @@ fn a_dead_client_s_sessions_end_on_their_hubs() {
             "--steps",
             "1000000000000",
         ])
-        .env(envhub::ENVHUB_MULTICAST, "0")
+        .env(envhub_hub::ENVHUB_MULTICAST, "0")
         .env(
             "ENVHUB_NAMESPACE",
             format!("e2e_deadclient_{}_", std::process::id()),
@@ -304,8 +304,8 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
         .unwrap();
     let mut net = net_to(&[&a]);
     net.connect.push(spy_endpoint);
-    let hub = Hub::new(envhub::Registry::builtin()).with_network(net);
-    let rollout = |env: &mut envhub::VecEnv| envhub_e2e::rollout_bytes(env, 1, 9, STEPS);
+    let hub = Hub::new(envhub_hub::Registry::builtin()).with_network(net);
+    let rollout = |env: &mut envhub_hub::VecEnv| envhub_e2e::rollout_bytes(env, 1, 9, STEPS);
     // The session nobody attacks.
     let mut quiet = hub
         .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &hubs(&[&a]))
@@ -369,7 +369,7 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
             .wait()
             .unwrap()
     };
-    let unsealed_before = envhub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed);
+    let unsealed_before = envhub_hub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed);
     let mut victim = hub
         .make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &hubs(&[&a]))
         .unwrap();
@@ -405,7 +405,8 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
         got == expected,
         "the attacked rollout differs from the quiet one"
     );
-    let unsealed = envhub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed) - unsealed_before;
+    let unsealed =
+        envhub_hub::UNSEALED.load(std::sync::atomic::Ordering::Relaxed) - unsealed_before;
     assert!(
         unsealed >= forged as u64,
         "{forged} forged answers were sent, {unsealed} were dropped as unsealed"
@@ -419,7 +420,7 @@ fn an_observer_of_a_session_can_neither_steer_it_nor_forge_its_answers() {
     eprintln!("{forged} rounds of forgeries, {unsealed} answers dropped as unsealed");
 }
 
-fn expect_refused(result: Result<envhub::VecEnv, HubError>, needle: &str) {
+fn expect_refused(result: Result<envhub_hub::VecEnv, HubError>, needle: &str) {
     match result {
         Err(e @ HubError::Refused { .. }) => {
             assert!(e.to_string().contains(needle), "{e}");
@@ -510,7 +511,7 @@ fn a_client_with_wrong_credentials_sees_no_hub() {
         .unwrap();
         let mut net = net_to(&[&a]);
         net.config = Some(file);
-        Hub::new(envhub::Registry::builtin()).with_network(net)
+        Hub::new(envhub_hub::Registry::builtin()).with_network(net)
     };
     let intruder = with_credentials("trainer", "wrong");
     assert!(
@@ -573,7 +574,7 @@ fn with_restart_on_crash_a_lost_hub_s_envs_move_to_the_hubs_that_remain() {
     let a = RemoteHub::start("ra", &[], &[]);
     let b = RemoteHub::start("rb", &[], &[]);
     let hub = client("replace", &[&a, &b]);
-    let options = envhub::SessionOptions {
+    let options = envhub_hub::SessionOptions {
         restart_on_crash: true,
         ..hub.options().clone()
     };

@@ -5,9 +5,9 @@
 //! identity token names: its session is the real hub's, and steps bit for bit as a local one.
 
 use crate::remote_hubs::assert_same_rollout;
-use envhub::{EnvConfig, NetConfig, Placement};
 use envhub_e2e::TestHub;
 use envhub_e2e::remote::{RemoteHub, client, free_port};
+use envhub_hub::{EnvConfig, NetConfig, Placement};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};

@@ -36,7 +36,7 @@ exec "$@""#;
 /// (`/tmp/ci/checkout/...` → `/tmp/ci`), for `ENVHUB_NETNS_KEEP`.
 fn kept_under_tmp() -> String {
     let mut keep: Vec<PathBuf> = Vec::new();
-    for path in [envhub_e2e::bin_dir(), envhub::python_interpreter()] {
+    for path in [envhub_e2e::bin_dir(), envhub_hub::python_interpreter()] {
         let mut parts = path.components();
         let top = match (parts.next(), parts.next(), parts.next()) {
             (Some(std::path::Component::RootDir), Some(tmp), Some(first))
@@ -59,12 +59,12 @@ fn kept_under_tmp() -> String {
 /// Envhub settings from the caller's environment that would reach outside the namespaces or
 /// change what runs.
 const SCRUBBED: [&str; 6] = [
-    envhub::ENVHUB_CONNECT,
-    envhub::ENVHUB_MULTICAST,
-    envhub::env_vars::ENVHUB_HUB,
-    envhub::env_vars::ENVHUB_NAMESPACE,
-    envhub::env_vars::ENVHUB_CONFIG,
-    envhub::env_vars::ENVHUB_ADAPTERS,
+    envhub_hub::ENVHUB_CONNECT,
+    envhub_hub::ENVHUB_MULTICAST,
+    envhub_hub::env_vars::ENVHUB_HUB,
+    envhub_hub::env_vars::ENVHUB_NAMESPACE,
+    envhub_hub::env_vars::ENVHUB_CONFIG,
+    envhub_hub::env_vars::ENVHUB_ADAPTERS,
 ];
 
 /// Prints why `test` cannot run here and returns false (panics if `ENVHUB_NETNS_REQUIRED`).
@@ -229,7 +229,7 @@ impl TwoHosts {
         if side == 1 {
             // The clients' host finds hub `a` across the veth by multicast: a client scouts
             // the LAN only when told to (it trusts this one).
-            cmd.env(envhub::ENVHUB_MULTICAST, "1");
+            cmd.env(envhub_hub::ENVHUB_MULTICAST, "1");
         }
         cmd.envs(vars.iter().copied());
         // `ip netns exec`, `unshare` and `sh` each exec the next: the child is envhub itself
@@ -636,7 +636,10 @@ fn netns_a_link_flap_shorter_than_the_lease_loses_no_step() {
         1,
         "run-flap",
         &rollout("a"),
-        &[(envhub::env_vars::ENVHUB_LOG, "warn,envhub::remote=debug")],
+        &[(
+            envhub_hub::env_vars::ENVHUB_LOG,
+            "warn,envhub_hub::remote=debug",
+        )],
     );
     hub.wait_for_workers(&mut client);
     std::thread::sleep(Duration::from_millis(300));

@@ -1,8 +1,8 @@
 //! Frames rendered in a worker reach the client (`render_mode = "rgb_array"`).
 
-use envhub::EnvConfig;
 use envhub_core::ResetOptions;
 use envhub_e2e::{TestHub, mujoco_available};
+use envhub_hub::EnvConfig;
 
 #[test]
 fn frames_come_through_the_hub() {

@@ -7,8 +7,8 @@
 //! lower of the others). Another client holds as many sessions of its own meanwhile as its
 //! identity may.
 
-use envhub::{EnvConfig, Hub, Placement, Registry};
 use envhub_e2e::remote::{RemoteHub, net_to};
+use envhub_hub::{EnvConfig, Hub, Placement, Registry};
 use rand::SeedableRng;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -25,7 +25,7 @@ const BLOCKS: usize = 5;
 const FLOOD_PER_S: u64 = 2000;
 
 /// Steps/s of `BLOCKS` blocks of `BLOCK` steps; their median.
-fn rate(env: &mut envhub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+fn rate(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
     let mut rates: Vec<f64> = (0..BLOCKS)
         .map(|_| {
             let t = Instant::now();
@@ -51,7 +51,7 @@ fn a_replay_flood_and_a_squatting_peer_leave_another_client_s_rate_within_20_per
     victim.reset(Some(0)).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     // The squatter: another client (its own network, so its own identity) holding sessions.
-    let squatter_net = envhub::NetConfig {
+    let squatter_net = envhub_hub::NetConfig {
         lease_ms: Some(1500),
         ..net_to(&[&a])
     };

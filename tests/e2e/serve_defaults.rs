@@ -1,9 +1,9 @@
 //! `envhub serve`'s safe defaults, with real hub processes: loopback only without
 //! credentials, limits on, silent sessions closed.
 
-use envhub::{EnvConfig, Hub, HubError, Placement, Registry, SessionOptions};
 use envhub_e2e::binary;
 use envhub_e2e::remote::{RemoteHub, net_to};
+use envhub_hub::{EnvConfig, Hub, HubError, Placement, Registry, SessionOptions};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -19,7 +19,7 @@ fn client(name: &str, hub: &RemoteHub, step_timeout: Duration) -> Hub {
         .with_network(net_to(&[hub]))
 }
 
-fn refusal(result: Result<envhub::VecEnv, HubError>) -> String {
+fn refusal(result: Result<envhub_hub::VecEnv, HubError>) -> String {
     match result {
         Err(e @ HubError::Refused { .. }) => e.to_string(),
         Err(e) => panic!("expected a refusal, got {e}"),
@@ -35,7 +35,7 @@ fn a_hub_without_credentials_refuses_to_listen_beyond_loopback() {
         .args(["serve", "--name", "exposed", "--socket"])
         .arg(dir.join("hub.sock"))
         .args(["--listen", "tcp/0.0.0.0:0"])
-        .env(envhub::ENVHUB_MULTICAST, "0")
+        .env(envhub_hub::ENVHUB_MULTICAST, "0")
         .stdin(Stdio::null())
         .output()
         .unwrap();
@@ -85,7 +85,7 @@ fn a_hub_started_without_listen_or_credentials_listens_on_loopback_only() {
     let mut hub = Command::new(binary("envhub"))
         .args(["serve", "--name", "quiet", "--socket"])
         .arg(dir.join("hub.sock"))
-        .env(envhub::ENVHUB_MULTICAST, "0")
+        .env(envhub_hub::ENVHUB_MULTICAST, "0")
         .env(
             "ENVHUB_NAMESPACE",
             format!("e2e_loopback_{}_", std::process::id()),

@@ -4,8 +4,8 @@
 //! 1.10 itself reports no deletion while another token of the key lives, in this topology;
 //! the hub's own check keeps it so where routers aggregate differently.)
 
-use envhub::EnvConfig;
 use envhub_e2e::remote::{RemoteHub, free_port, net_to};
+use envhub_hub::EnvConfig;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -21,15 +21,15 @@ fn a_forged_client_token_does_not_end_another_client_s_session() {
         .unwrap();
     let mut net = net_to(&[&hub_proc]);
     net.connect.push(spy_endpoint);
-    let hub = envhub::Hub::new(envhub::Registry::builtin())
-        .with_options(envhub::SessionOptions {
+    let hub = envhub_hub::Hub::new(envhub_hub::Registry::builtin())
+        .with_options(envhub_hub::SessionOptions {
             namespace: format!("e2e_owner_{}_", std::process::id()),
             step_timeout: Duration::from_secs(10),
             start_timeout: Duration::from_secs(30),
-            ..envhub::SessionOptions::default()
+            ..envhub_hub::SessionOptions::default()
         })
         .with_network(net);
-    let placement: envhub::Placement = "own".parse().unwrap();
+    let placement: envhub_hub::Placement = "own".parse().unwrap();
     let start = Instant::now();
     let mut env = loop {
         match hub.make_vec_on("gym-cartpole", 2, &EnvConfig::default(), &placement) {

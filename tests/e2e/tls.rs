@@ -3,8 +3,8 @@
 //! of another CA sees no hub; one of the lab's CA with a name the rules do not allow sees no
 //! hub either. Certificates are made by `openssl` for each run.
 
-use envhub::{EnvConfig, Hub, NetConfig, Placement, Registry, SessionOptions};
 use envhub_e2e::remote::{RemoteHub, free_port};
+use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry, SessionOptions};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;

@@ -4,8 +4,8 @@
 //!
 //! The clients are this test binary run again in a helper mode (`client_helper`).
 
-use envhub::{EnvConfig, Hub, Registry, SessionOptions};
 use envhub_e2e::{TestHub, sigkill};
+use envhub_hub::{EnvConfig, Hub, Registry, SessionOptions};
 use std::io::BufRead;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};

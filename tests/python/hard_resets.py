@@ -1,5 +1,5 @@
 """Run in robosuite's interpreter by test_py_suites.py, plainly or with the worker's caches of
-hard resets installed (`envhub.hosted.compiled_models`, `render_contexts`, `sensor_checks`),
+hard resets installed (`envhub.worker.hosted.compiled_models`, `render_contexts`, `sensor_checks`),
 with two cameras:
 - `stack`: robosuite's `Stack`, whose scene is the same at every reset, reset four times;
 - `lift`: robosuite's `Lift`, whose XML is drawn from the reset seed (the cube's size), reset
@@ -29,7 +29,7 @@ def main(task: str, mode: str) -> None:
     cached = mode in ("cached", "repeat")
     compile_xml = mujoco.MjModel.from_xml_string
     if cached:
-        from envhub.hosted import compiled_models, render_contexts, sensor_checks
+        from envhub.worker.hosted import compiled_models, render_contexts, sensor_checks
 
         compiled_models.install()
         render_contexts.install(scenes_repeat=mode == "repeat")
@@ -46,7 +46,7 @@ def main(task: str, mode: str) -> None:
 
     # Counted below the cache: the compiles that really happen.
     if cached:
-        from envhub.hosted import compiled_models
+        from envhub.worker.hosted import compiled_models
 
         compiled_models._installed._compile = counted_compile
     else:

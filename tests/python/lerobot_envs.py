@@ -71,7 +71,7 @@ def install_plugin(python: Path, folder: Path) -> Path:
     if not UV.exists():
         raise Unavailable(f"uv is missing ({UV}); run `make venv`")
     wheels = folder / "wheels"
-    for script in (REPO_ROOT / "py-client" / "build_wheel.py", REPO_ROOT / "integrations" / "lerobot" / "build_wheel.py"):
+    for script in (REPO_ROOT / "python" / "build_wheel.py", REPO_ROOT / "integrations" / "lerobot" / "build_wheel.py"):
         done = subprocess.run([sys.executable, str(script), "--out", str(wheels)], capture_output=True, text=True, timeout=300)
         if done.returncode != 0:
             raise RuntimeError(f"{script.name} failed:\n{done.stdout}{done.stderr}")

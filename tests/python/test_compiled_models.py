@@ -1,4 +1,4 @@
-"""The worker's cache of compiled MuJoCo models (`envhub.hosted.compiled_models`), which
+"""The worker's cache of compiled MuJoCo models (`envhub.worker.hosted.compiled_models`), which
 robosuite's and LIBERO's hard resets go through: a model handed out from it is the model a
 compile gives, byte for byte, and the cache keeps only what repeats, within its bound. (The
 suites' own runs through it are compared with the suites in-process in test_py_suites.py.)"""
@@ -10,7 +10,7 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco", reason="the dev venv's mujoco wheel (requirements-dev.txt) is missing")
 
-from envhub.hosted.compiled_models import CompiledModels  # noqa: E402
+from envhub.worker.hosted.compiled_models import CompiledModels  # noqa: E402
 
 
 def scene(size: float) -> str:

@@ -53,7 +53,7 @@ INIT_STATES = 2
 REFERENCE = """
 import sys
 import numpy as np
-from envhub.hosted.libero import ensure_config, use_assets
+from envhub.worker.hosted.libero import ensure_config, use_assets
 ensure_config(); use_assets()
 from libero.libero import benchmark
 from libero.libero.envs import OffScreenRenderEnv
@@ -131,7 +131,7 @@ def libero_python() -> str:
         skip(f"LIBERO's Python environment cannot be built here: {(done.stderr or done.stdout)[-1500:]}")
     python = os.path.join(found.group(1), "bin", "python")
     check = subprocess.run(
-        [python, "-c", "from envhub.hosted.libero import main; raise SystemExit(main())"],
+        [python, "-c", "from envhub.worker.hosted.libero import main; raise SystemExit(main())"],
         capture_output=True,
         text=True,
         timeout=300,

@@ -32,7 +32,7 @@ MOVE = np.array([0.5, 0.3, -0.4, 0.1, 0, 0, 1], np.float32)
 REFERENCE = """
 import sys
 import numpy as np
-from envhub.hosted.libero import ensure_config, use_assets
+from envhub.worker.hosted.libero import ensure_config, use_assets
 ensure_config(); use_assets()
 from libero.libero import benchmark
 from libero.libero.envs import OffScreenRenderEnv

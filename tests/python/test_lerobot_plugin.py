@@ -107,7 +107,7 @@ def test_ended_episode_frozen_as_lerobot_eval_freezes_it():
     from conftest import import_envhub
 
     import_envhub()
-    from envhub.hosted.lerobot_rollout import NEW_ROLLOUT_OPTION, FrozenAfterEnd
+    from envhub.worker.hosted.lerobot_rollout import NEW_ROLLOUT_OPTION, FrozenAfterEnd
 
     class Counting(gym.Env):
         observation_space = gym.spaces.Box(0, 100, (1,), np.float64)

@@ -4,7 +4,7 @@ fail; a worker crash is raised as its death (the hub watches the process), never
 
 No test here bounds how long something may take: a crash is told from a timeout by what the error
 says, with the step timeout far above any wait a loaded machine causes; how fast a crash is
-noticed is measured by py-client/bench/bench_failure_latency.py."""
+noticed is measured by python/bench/bench_failure_latency.py."""
 
 from __future__ import annotations
 

@@ -201,7 +201,7 @@ def test_fetch_matches_gymnasium_robotics_in_process(registry):
     seed and actions give the same Dict observations and rewards as the env made here."""
     pytest.importorskip("gymnasium_robotics")
     import gymnasium_robotics
-    from envhub.hosted import robotics_compat
+    from envhub.worker.hosted import robotics_compat
 
     gymnasium.register_envs(gymnasium_robotics)
     robotics_compat.apply()
@@ -225,7 +225,7 @@ def test_robotics_compat_is_scoped_and_idempotent():
     """The fix touches only gymnasium-robotics' `mujoco_utils`, and only where needed."""
     pytest.importorskip("gymnasium_robotics")
     import mujoco
-    from envhub.hosted import robotics_compat
+    from envhub.worker.hosted import robotics_compat
     from gymnasium_robotics.utils import mujoco_utils
 
     needed = robotics_compat.apply()

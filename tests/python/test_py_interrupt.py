@@ -5,7 +5,7 @@ here, so the signal reaches only it, as Ctrl-C in a terminal reaches the foregro
 
 The step would take ten minutes and the step timeout is longer still, so only the interrupt
 can end it within the test; how fast it does (tens of milliseconds here) is measured by
-py-client/bench/bench_failure_latency.py, not bounded here."""
+python/bench/bench_failure_latency.py, not bounded here."""
 
 from __future__ import annotations
 

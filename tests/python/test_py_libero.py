@@ -30,8 +30,8 @@ from conftest import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 
-from envhub.hosted import libero as adapter  # noqa: E402
-from envhub.hosted.libero_spec import action_space, observation_space, outside, split_env_id, task_index  # noqa: E402
+from envhub.worker.hosted import libero as adapter  # noqa: E402
+from envhub.worker.hosted.libero_spec import action_space, observation_space, outside, split_env_id, task_index  # noqa: E402
 
 # LIBERO's five suites (`libero_task_map`), 10 tasks each but libero_90's 90.
 SUITES = {"libero_spatial": 10, "libero_object": 10, "libero_goal": 10, "libero_10": 10, "libero_90": 90}
@@ -265,7 +265,7 @@ def test_first_import_asks_nothing(tmp_path):
     _libero_code()
     code = textwrap.dedent(
         """
-        from envhub.hosted.libero import ensure_config
+        from envhub.worker.hosted.libero import ensure_config
         path = ensure_config()
         from libero.libero import get_libero_path
         import os

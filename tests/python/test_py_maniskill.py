@@ -5,7 +5,7 @@ with the same seeds and actions, and a vector session over 2 Python workers runs
 Skipped unless ManiSkill is importable here and the worker's interpreter (ENVHUB_PYTHON,
 else this one) reports the adapter available: ManiSkill is not in requirements-dev.txt,
 and SAPIEN needs a Vulkan device even for state observations (a GPU driver, or Mesa's
-lavapipe; see `envhub/hosted/maniskill.py`). To run it:
+lavapipe; see `envhub/worker/hosted/maniskill.py`). To run it:
 `ENVHUB_PYTHON=<python with mani-skill> <that python> -m pytest tests/python/test_py_maniskill.py`.
 """
 

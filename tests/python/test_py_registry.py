@@ -135,4 +135,4 @@ def test_make_env_from_an_entry(null_registry):
 def test_worker_binary_is_found():
     path = envhub.worker_binary()
     assert path.endswith("envhub-worker")
-    assert REPO_ROOT.joinpath("py-client").exists()
+    assert REPO_ROOT.joinpath("python").exists()

@@ -154,7 +154,7 @@ CHECK_IDS = {
     "myosuite": "import gymnasium as gym, myosuite; "
     "print(json.dumps([e['id'] for e in entries if e['env_id'] not in gym.registry]))",
     # LIBERO asks on stdin at its first import without a config: the adapter writes one first.
-    "libero": "from envhub.hosted.libero import ensure_config; ensure_config(); "
+    "libero": "from envhub.worker.hosted.libero import ensure_config; ensure_config(); "
     "from libero.libero.benchmark.libero_suite_task_map import libero_task_map as m; "
     "print(json.dumps([e['id'] for e in entries if e['env_id'].partition('/')[0] not in m]))",
 }

@@ -243,7 +243,7 @@ def test_maniskill_env_id_exists(entry):
 def test_libero_suite_exists(entry, tmp_path, monkeypatch):
     if importlib.util.find_spec("libero") is None:
         pytest.skip("LIBERO is not installed here (`make libero` builds .venv-libero)")
-    from envhub.hosted import libero
+    from envhub.worker.hosted import libero
 
     if not os.path.isfile(libero._config_file()):
         monkeypatch.setenv("LIBERO_CONFIG_PATH", str(tmp_path))  # not the home folder's

@@ -42,7 +42,7 @@ def wheel(tmp_path_factory) -> Path:
     def build(out: Path) -> str:
         start = time.monotonic()
         done = subprocess.run(
-            [sys.executable, str(REPO_ROOT / "py-client" / "build_wheel.py"), "--out", str(out)],
+            [sys.executable, str(REPO_ROOT / "python" / "build_wheel.py"), "--out", str(out)],
             capture_output=True,
             text=True,
             timeout=300,

@@ -3,7 +3,7 @@
 pub mod intruder;
 pub mod remote;
 
-use envhub::{Hub, HubError, Registry, SessionOptions};
+use envhub_hub::{Hub, HubError, Registry, SessionOptions};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -113,7 +113,7 @@ pub fn shm_files(needle: &str) -> Vec<String> {
 /// unless `ENVHUB_PY_REQUIRED` is set (as `make rust-test` does), when it panics: a missing
 /// build must not pass by skipping.
 pub fn python_worker_available(test: &str) -> bool {
-    let python = envhub::python_interpreter();
+    let python = envhub_hub::python_interpreter();
     let out = std::process::Command::new(&python)
         .args(["-c", "import envhub._envhub"])
         .output();
@@ -131,7 +131,7 @@ pub fn python_worker_available(test: &str) -> bool {
         python.display()
     );
     assert!(
-        std::env::var_os(envhub::env_vars::ENVHUB_PY_REQUIRED).is_none_or(|v| v.is_empty()),
+        std::env::var_os(envhub_hub::env_vars::ENVHUB_PY_REQUIRED).is_none_or(|v| v.is_empty()),
         "{test}: the Python worker is required (ENVHUB_PY_REQUIRED) but {reason}"
     );
     eprintln!("skipped {test}: {reason}");
@@ -142,7 +142,7 @@ pub fn python_worker_available(test: &str) -> bool {
 /// finds libmujoco). If not, prints why and returns false so the test skips, unless
 /// `ENVHUB_MUJOCO_REQUIRED` is set (as `make rust-test` does, so in CI), when it panics: a
 /// worker built without MuJoCo must not pass the MuJoCo tests by skipping them.
-pub fn mujoco_available(hub: &envhub::Hub, test: &str) -> bool {
+pub fn mujoco_available(hub: &envhub_hub::Hub, test: &str) -> bool {
     let adapters = hub.adapters().expect("the adapter catalog");
     let availability = adapters
         .iter()
@@ -154,7 +154,7 @@ pub fn mujoco_available(hub: &envhub::Hub, test: &str) -> bool {
         _ => "the worker lists no `mujoco` adapter".into(),
     };
     assert!(
-        std::env::var_os(envhub::env_vars::ENVHUB_MUJOCO_REQUIRED).is_none_or(|v| v.is_empty()),
+        std::env::var_os(envhub_hub::env_vars::ENVHUB_MUJOCO_REQUIRED).is_none_or(|v| v.is_empty()),
         "{test}: MuJoCo is required (ENVHUB_MUJOCO_REQUIRED) but unavailable: {why}\nhint: `make build` builds the worker with the `mujoco` feature and libmujoco"
     );
     eprintln!("skipped {test}: MuJoCo is unavailable: {why}");
@@ -271,7 +271,7 @@ pub fn kill_worker_expect_died(
 /// step's observations, rewards and done flags): reset with `reset_seed`, actions sampled
 /// from `action_seed`. Two runs compare bit for bit.
 pub fn rollout_bytes(
-    env: &mut envhub::VecEnv,
+    env: &mut envhub_hub::VecEnv,
     reset_seed: u64,
     action_seed: u64,
     steps: usize,
@@ -287,7 +287,7 @@ pub fn rollout_bytes(
 
 /// One step with actions drawn from `rng`, as the bytes `rollout_bytes` keeps of it
 /// (observations, rewards, done flags).
-pub fn step_bytes(env: &mut envhub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<u8> {
+pub fn step_bytes(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<u8> {
     let actions = env.sample_actions(rng);
     let b = env.step(&actions).unwrap();
     let mut row = b.obs.to_vec();

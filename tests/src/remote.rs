@@ -6,7 +6,7 @@
 //! as `other_user` tests; the tests' raw Zenoh peers present none).
 
 use crate::binary;
-use envhub::{Hub, NetConfig, Registry, SessionOptions};
+use envhub_hub::{Hub, NetConfig, Registry, SessionOptions};
 use std::io::BufRead;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
@@ -60,9 +60,9 @@ impl RemoteHub {
             ])
             .args(args)
             .env("ENVHUB_NAMESPACE", &namespace)
-            .env(envhub::ENVHUB_MULTICAST, "0")
-            .env_remove(envhub::ENVHUB_CONNECT)
-            .env_remove(envhub::env_vars::ENVHUB_ADAPTERS)
+            .env(envhub_hub::ENVHUB_MULTICAST, "0")
+            .env_remove(envhub_hub::ENVHUB_CONNECT)
+            .env_remove(envhub_hub::env_vars::ENVHUB_ADAPTERS)
             .envs(vars.iter().copied())
             .stdout(Stdio::piped())
             .spawn()

@@ -5,7 +5,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-// `ENVHUB_PYTHON` is declared with the other variables in `hub/src/env_vars.rs`, which test
+// `ENVHUB_PYTHON` is declared with the other variables in `crates/hub/src/env_vars.rs`, which test
 // support cannot depend on; `ENVHUB_SKIP_PYTHON_TESTS` is not declared there yet.
 /// The interpreter (default: `<repo>/.venv/bin/python`, which `make test` creates).
 const ENVHUB_PYTHON: &str = "ENVHUB_PYTHON";

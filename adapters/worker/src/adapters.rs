@@ -4,7 +4,7 @@ use envhub_core::EnvAdapter;
 use std::sync::OnceLock;
 
 /// Set to `1` to list the test adapters (`null`) in `describe`, hence in the hub's catalog
-/// (`ENVHUB_TEST_ADAPTERS`, declared with the other variables in `envhub::env_vars`).
+/// (`ENVHUB_TEST_ADAPTERS`, declared with the other variables in `envhub_hub::env_vars`).
 const TEST_ADAPTERS_VAR: &str = "ENVHUB_TEST_ADAPTERS";
 
 /// The adapters users see, given the two MuJoCo ones (real or [`crate::Unlinked`], as the

@@ -64,7 +64,7 @@ impl Delegated {
                 ),
                 format!(
                     "run `make build-all` (or `cargo build --release -p {0}`), or install with \
-                     `cargo install --path hub --features worker`; `{0}` must sit beside `envhub-worker`",
+                     `cargo install --path crates/hub --features worker`; `{0}` must sit beside `envhub-worker`",
                     self.0.binary
                 ),
             )

@@ -19,7 +19,7 @@ use std::process::Command;
 pub const MUJOCO_WORKER: &str = "envhub-worker-mujoco";
 
 /// A folder holding `libmujoco.so.3.17.0`, instead of the interpreter's `mujoco` package
-/// (declared with the other variables in `envhub::env_vars`).
+/// (declared with the other variables in `envhub_hub::env_vars`).
 const ENVHUB_MUJOCO_LIB: &str = "ENVHUB_MUJOCO_LIB";
 
 const HINT: &str = "pip install 'envhub[mujoco]' (it pins mujoco==3.17.0) into the Python that \
@@ -134,7 +134,7 @@ pub fn hand_over() -> Missing {
             ),
             hint:
                 "run `make build` (it builds with `--features envhub-worker/mujoco`), or install \
-                   with `cargo install --path hub --features worker`; a worker named by \
+                   with `cargo install --path crates/hub --features worker`; a worker named by \
                    ENVHUB_WORKER needs `envhub-worker-mujoco` beside it"
                     .into(),
         };

@@ -154,7 +154,7 @@ class EnvhubEnv(EnvConfig):
             )
             if self.camera_name_mapping is not None:
                 options["camera_name_mapping"] = dict(self.camera_name_mapping)
-            from envhub.hosted.lerobot_libero import max_episode_steps
+            from envhub.worker.hosted.lerobot_libero import max_episode_steps
 
             steps = max_episode_steps(options["suite"], self.episode_length)
             return LeRobotVectorEnv(

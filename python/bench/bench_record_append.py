@@ -1,0 +1,155 @@
+"""What a recording holds in memory beyond `queue_bytes`, and what a commit costs as the last
+video file grows (issue 42's items 3 and 4: the figures docs/recording.md gives).
+
+    .venv/bin/python python/bench/bench_record_append.py memory [--envs 8] [--long 3000]
+    .venv/bin/python python/bench/bench_record_append.py append [--mb 200]
+
+`memory`: Gymnasium vector env of `--envs` envs with 4 KiB observations (512 float64), env 0's
+episodes `--long` steps, the others' 10, a 1 MiB queue; the process's resident set is sampled
+every 5 ms, and its rise over the baseline (after the first reset) reported, held at the end and
+at the peak. `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames, committed every 0.2 s (or 4x the last commit's time), until the camera's
+last video file reaches `--mb` MB; each commit's time, episodes and the bytes it wrote
+(`/proc/self/io` `wchar`) against the file's size before it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from envhub.recording import (
+    RecordEpisodes,
+    _dataset,
+)
+
+
+def _rss() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+class _Wide(gymnasium.Env):
+    metadata = {"render_fps": 30}
+
+    def __init__(self, length: int) -> None:
+        self.observation_space = spaces.Box(-1, 1, (512,), np.float64)
+        self.action_space = spaces.Box(-1, 1, (1,), np.float32)
+        self.length, self.t = length, 0
+
+    def reset(self, *, seed=None, options=None):
+        self.t = 0
+        return np.full(512, 0.5), {}
+
+    def step(self, action):
+        self.t += 1
+        return np.full(512, self.t % 7 / 7), 0.0, False, self.t >= self.length, {}
+
+
+class _Noise(gymnasium.Env):
+    metadata = {"render_fps": 30}
+
+    def __init__(self) -> None:
+        self.observation_space = spaces.Dict({"pixels": spaces.Box(0, 255, (256, 256, 3), np.uint8)})
+        self.action_space = spaces.Box(-1, 1, (1,), np.float32)
+        self.rng = np.random.default_rng(0)
+        self.t = 0
+
+    def _obs(self):
+        return {"pixels": self.rng.integers(0, 256, (256, 256, 3), dtype=np.uint8)}
+
+    def reset(self, *, seed=None, options=None):
+        self.t = 0
+        return self._obs(), {}
+
+    def step(self, action):
+        self.t += 1
+        return self._obs(), 0.0, False, self.t >= 10, {}
+
+
+def memory(envs: int, long: int) -> dict:
+    fns = [lambda: _Wide(long)] + [lambda: _Wide(10)] * (envs - 1)
+    env = gymnasium.vector.SyncVectorEnv(fns)
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = RecordEpisodes(env, str(Path(tmp) / "d"), video=False, queue_bytes=2**20)
+        rec.reset(seed=0)
+        base, peak, stop = _rss(), [0], threading.Event()
+
+        def sample() -> None:
+            while not stop.is_set():
+                peak[0] = max(peak[0], _rss())
+                time.sleep(0.005)
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
+        actions = np.zeros((envs, 1), np.float32)
+        for _ in range(long + 1):
+            rec.step(actions)
+        held = _rss()
+        rec.close()
+        stop.set()
+        sampler.join()
+    return {"envs": envs, "long": long, "queue_bytes": 2**20, "baseline_mib": base / 2**20,
+            "held_above_mib": (held - base) / 2**20, "peak_above_mib": (peak[0] - base) / 2**20,
+            "written": rec.stats["episodes_written"]}
+
+
+def _wchar() -> int:
+    with open("/proc/self/io") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("wchar:"))
+
+
+def append(mb: float) -> list[dict]:
+    rows: list[dict] = []
+    real = _dataset.Dataset.commit
+
+    def timed(self, episodes):
+        key = self.video_keys[0]
+        last = self._videos.get(key)
+        size = 0 if last is None else os.path.getsize(self.root / _dataset._fmt(_dataset.VIDEO_PATH, last.at,
+                                                                              video_key=key))
+        w0, t0 = _wchar(), time.perf_counter()
+        out = real(self, episodes)
+        rows.append({"last_file_mb": size / 1e6, "seconds": time.perf_counter() - t0,
+                     "written_mb": (_wchar() - w0) / 1e6, "episodes": len(episodes)})
+        return out
+
+    _dataset.Dataset.commit = timed
+    env = gymnasium.vector.SyncVectorEnv([_Noise])
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = RecordEpisodes(env, str(Path(tmp) / "d"), commit_every=0.2, video_files_size_in_mb=10 * mb)
+        rec.reset(seed=0)
+        try:
+            while not rows or rows[-1]["last_file_mb"] < mb:
+                rec.step(np.zeros((1, 1), np.float32))
+        finally:
+            rec.close()
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("what", choices=["memory", "append"])
+    p.add_argument("--envs", type=int, default=8)
+    p.add_argument("--long", type=int, default=3000)
+    p.add_argument("--mb", type=float, default=200)
+    a = p.parse_args()
+    if a.what == "memory":
+        print(json.dumps(memory(a.envs, a.long)))
+    else:
+        for row in append(a.mb):
+            print(json.dumps(row))
+
+
+if __name__ == "__main__":
+    main()
