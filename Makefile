@@ -315,7 +315,7 @@ wheel: build-all
 	$(VPY) integrations/lerobot/build_wheel.py --out dist
 
 # Python environments for suites (`python_envs:`) are built with uv from requirements-dev.txt
-# into the user's cache folder (docs/python-envs.md); uv's own cache stays at its default, so
+# into the user's cache folder (docs/guide/python-envs.md); uv's own cache stays at its default, so
 # a second run installs nothing new. ENVHUB_PYENV_REQUIRED / ENVHUB_SUITES_REQUIRED turn the
 # skips of those tests (no uv, no second CPython, no PyPI) into failures.
 # The tests mostly wait (hubs, workers, installs): PY_TEST_JOBS of them run side by side
@@ -359,7 +359,7 @@ check: lint py-install
 	fi
 	ENVHUB_PY_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup -m "not suite and not slow" --durations=10
 
-# Coverage-guided fuzzing of every parser of another process's bytes (docs/fuzzing.md):
+# Coverage-guided fuzzing of every parser of another process's bytes (docs/design/fuzzing.md):
 # cargo-fuzz (installed if missing), each target FUZZ_SECONDS from its corpus. CI runs it after
 # `make test` (.ci/run, 5 s each); not in `make test`, as its AddressSanitizer build of the
 # targets takes minutes: `make test` runs the quick tier (crates/hub/src/fuzz.rs) and checks the seed

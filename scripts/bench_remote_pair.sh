@@ -3,7 +3,7 @@
 # for two builds back to back on one machine (before and after a change):
 #   scripts/bench_remote_pair.sh /path/to/checkout-before /path/to/checkout-after
 # Each root needs its installed binaries (python/envhub/bin/envhub). The client reads
-# the hub's loopback credential from the same ENVHUB_LOCAL_HUBS folder (docs/security.md).
+# the hub's loopback credential from the same ENVHUB_LOCAL_HUBS folder (docs/design/security.md).
 set -u
 i=0
 for root in "$@"; do

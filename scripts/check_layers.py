@@ -264,7 +264,7 @@ def main() -> int:
     for p in problems:
         print(f"error: {p}", file=sys.stderr)
     if problems:
-        print(f"{len(problems)} layering problem(s); see docs/architecture.md for the layers", file=sys.stderr)
+        print(f"{len(problems)} layering problem(s); see docs/design/architecture.md for the layers", file=sys.stderr)
         return 1
     print(f"layers ok: {len(members)} crates and the Python package, arrows point down, no module cycles")
     return 0

@@ -4,7 +4,7 @@
 # run finds go to fuzz/target/corpus/<target>/). libFuzzer with AddressSanitizer, on the
 # stable toolchain (RUSTC_BOOTSTRAP=1 lets it take the -Z flags cargo-fuzz passes).
 # Installs the pinned cargo-fuzz first if it is missing. Exits non-zero on any finding; the
-# input that found it is in fuzz/artifacts/<target>/ (docs/fuzzing.md says how to replay it).
+# input that found it is in fuzz/artifacts/<target>/ (docs/design/fuzzing.md says how to replay it).
 #
 #   scripts/fuzz.sh          # 10 s per target (CI runs 5 s: .ci/run, `make fuzz FUZZ_SECONDS=5`)
 #   scripts/fuzz.sh 120      # a longer run

@@ -16,7 +16,7 @@ episode per env, through `evaluate` against `make_vec` stepped by hand with the 
 actions; fixed costs (imports, session start, results files) cancel out in the difference
 of a long and a short run. Reported per env step, in microseconds.
 
-Prints one JSON line per comparison; the figures in docs/eval.md come from here. On a shared
+Prints one JSON line per comparison; the figures in docs/guide/eval.md come from here. On a shared
 machine the wall-clock ratio moves with the other jobs' load, so `metaworld` also gives each
 side's CPU seconds (its processes' user + system time, children included) and the load
 average before and after.

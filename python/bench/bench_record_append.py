@@ -1,5 +1,5 @@
 """What a recording holds in memory beyond `queue_bytes`, and what a commit costs as the last
-video file grows (issue 42's items 3 and 4: the figures docs/recording.md gives).
+video file grows (issue 42's items 3 and 4: the figures docs/guide/recording.md gives).
 
     .venv/bin/python python/bench/bench_record_append.py memory [--envs 8] [--long 3000]
     .venv/bin/python python/bench/bench_record_append.py append [--mb 200]

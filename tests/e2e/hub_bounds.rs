@@ -1,7 +1,7 @@
 //! A live hub under a hostile peer on its network, measured: 100,000 client-token flaps,
 //! oversized requests on a session's key and a subscriber that never reads its samples. The
 //! hub's thread count and resident memory stay bounded (figures printed, for
-//! `docs/security.md`) and another client's session keeps stepping, bit for bit as it would.
+//! `docs/design/security.md`) and another client's session keeps stepping, bit for bit as it would.
 
 use envhub_e2e::remote::{RemoteHub, net_to};
 use envhub_hub::{EnvConfig, Hub, Placement};

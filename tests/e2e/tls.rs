@@ -1,4 +1,4 @@
-//! A hub on TLS with client certificates and Zenoh's access control, as docs/security.md
+//! A hub on TLS with client certificates and Zenoh's access control, as docs/design/security.md
 //! sets it up: a client with a certificate of the lab's CA and an allowed name runs envs; one
 //! of another CA sees no hub; one of the lab's CA with a name the rules do not allow sees no
 //! hub either. Certificates are made by `openssl` for each run.
@@ -206,7 +206,7 @@ fn only_clients_with_the_lab_s_certificate_and_an_allowed_name_reach_a_tls_hub()
             .insert_json5("connect/endpoints", &format!("[\"{endpoint}\"]"))
             .unwrap();
         // Listening on nothing, as envhub's clients do: a peer that listens would be found
-        // through the hub's gossip and connected to by the trainer directly (docs/security.md).
+        // through the hub's gossip and connected to by the trainer directly (docs/design/security.md).
         config.insert_json5("listen/endpoints", "[]").unwrap();
         let session = zenoh::open(config).wait().unwrap();
         let heard = Arc::new(AtomicUsize::new(0));

@@ -7,7 +7,7 @@
 //! crate (no Python, no asset files) and are bit-for-bit deterministic (rapier's
 //! `enhanced-determinism`, a fresh world per episode); the price is that they are modelled on
 //! Gymnasium's tasks, not equal to them: same layouts and rewards in spirit, rapier's own
-//! dynamics and actuator scales (see `docs/rapier.md`).
+//! dynamics and actuator scales (see `docs/design/rapier.md`).
 //!
 //! Each task is one file in `tasks/` implementing `Task` plus one line in the adapter's list;
 //! `TaskEnv` turns any task into an `envhub_core::Env`, and rendering is a ray caster over

@@ -1,5 +1,5 @@
 //! Per task: a scripted controller that reads only the observation succeeds in at least 90 %
-//! of seeded episodes, uniform random actions in at most 10 % (success as `docs/rapier.md`
+//! of seeded episodes, uniform random actions in at most 10 % (success as `docs/design/rapier.md`
 //! defines it, reported by `info["is_success"]` at the episode's last step).
 
 use crate::common::{Controller, random_policy, success_rate};

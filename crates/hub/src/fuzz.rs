@@ -12,7 +12,7 @@
 //!
 //! This is the quick tier, run by every `cargo test`. The coverage-guided tier is the
 //! cargo-fuzz crate `fuzz/` (libFuzzer with AddressSanitizer, `scripts/fuzz.sh`), with a target
-//! for each of these parsers and more (docs/fuzzing.md).
+//! for each of these parsers and more (docs/design/fuzzing.md).
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestCaseError, TestRng, TestRunner};

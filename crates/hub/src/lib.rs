@@ -3,7 +3,7 @@
 //! serve`: the daemon's control socket, a hub on the network) and the `envhub` CLI.
 //!
 //! The layers below, each a crate of one concept (arrows point down only; see
-//! `docs/architecture.md`, checked by `scripts/check_layers.py`):
+//! `docs/design/architecture.md`, checked by `scripts/check_layers.py`):
 //! - `envhub-catalog`: registry files, entries, search, matching (pure logic);
 //! - `envhub-protocol`: the messages between processes and their validation (no I/O);
 //! - `envhub-session`: the session engine (slots, worker links, batches, async steps);

@@ -6,7 +6,7 @@
 //!
 //! Each hub also holds an identity token naming its Zenoh id (`envhub/hub/<name>/zid/<zid>`):
 //! the client takes answers to its queries of a hub only from that id, so a peer that declares
-//! a queryable under a live hub's name is not answered in its place (docs/security.md says
+//! a queryable under a live hub's name is not answered in its place (docs/design/security.md says
 //! what this does and does not stop).
 
 use crate::config::{self, NetConfig};

@@ -271,7 +271,7 @@ fn check_local_credential(config: &mut zenoh::Config) -> Result<(), HubError> {
         reason: format!("cannot make this user's local credential: {e}"),
         hint: "the folder of local hubs (`ENVHUB_LOCAL_HUBS`, else `hubs/` in \
                `$XDG_RUNTIME_DIR/envhub` or `~/.cache/envhub/run`) must be this user's alone; \
-               or give credentials (docs/security.md)"
+               or give credentials (docs/design/security.md)"
             .into(),
     })?;
     config

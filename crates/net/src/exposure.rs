@@ -121,7 +121,7 @@ pub(crate) fn guard(
         exposure.notice = Some(
             "note: no credentials, so this hub listens on loopback only (this machine's clients) \
              and neither sends nor answers multicast scouts; to serve other machines give \
-             credentials with `--zenoh-config` and `--listen` (docs/security.md), or \
+             credentials with `--zenoh-config` and `--listen` (docs/design/security.md), or \
              `--insecure-listen` on a network you trust"
                 .to_string(),
         );
@@ -152,7 +152,7 @@ pub(crate) fn guard(
                  connects out beyond loopback only on `tls/` with client certificates)\n\
                  hint: give credentials with `--zenoh-config` (user/password: \
                  `transport/auth/usrpwd`, or TLS with client certificates: `tls/` endpoints and \
-                 `transport/link/tls/enable_mtls`; see docs/security.md), or pass \
+                 `transport/link/tls/enable_mtls`; see docs/design/security.md), or pass \
                  `--insecure-listen` to do it anyway on a network you trust",
                 quoted(&exposed)
             ),
@@ -170,7 +170,7 @@ pub(crate) fn guard(
                      only: its scouts and answers would reach the whole LAN and name an \
                      address no one there can reach\n\
                      hint: leave multicast off (this machine's clients find the hub without \
-                     it), or give credentials and `--listen` (docs/security.md)"
+                     it), or give credentials and `--listen` (docs/design/security.md)"
                 .to_string(),
         });
     }
@@ -208,14 +208,14 @@ pub(crate) fn guard(
         if exposed.is_empty() && exposure.loopback_only && !assigned {
             exposure.notice = Some(format!(
                 "warning: this hub listens on {} without credentials (`--insecure-listen`): \
-                 every user of this machine can run envs here{reach}; see docs/security.md",
+                 every user of this machine can run envs here{reach}; see docs/design/security.md",
                 quoted(&listen.iter().collect::<Vec<_>>())
             ));
         } else if !exposed.is_empty() {
             exposure.notice = Some(format!(
                 "warning: this hub is open without credentials on {} (`--insecure-listen`){reach}: \
                  any peer that reaches it can run envs here and read or steer every session; see \
-                 docs/security.md",
+                 docs/design/security.md",
                 quoted(&exposed)
             ));
         }

@@ -7,7 +7,7 @@
 //! bytes, which both messages start with) and is covered by the tag. A peer that sees the
 //! traffic can neither write a request or an answer the other end accepts, nor replay one
 //! (the hub takes each sequence number once, the client only the one it waits for).
-//! Everything after the sequence number is encrypted as well (`docs/security.md`: the
+//! Everything after the sequence number is encrypted as well (`docs/design/security.md`: the
 //! measured cost and why).
 //!
 //! A key seals at most one message per direction and sequence number with a given content:
@@ -196,7 +196,7 @@ mod tests {
     }
 
     /// The cost of sealing and opening (`cargo test --release -- --ignored seal_cost
-    /// --nocapture`): per MiB, encrypted and authenticated only, for docs/security.md.
+    /// --nocapture`): per MiB, encrypted and authenticated only, for docs/design/security.md.
     #[test]
     #[ignore = "a measurement"]
     fn seal_cost() {

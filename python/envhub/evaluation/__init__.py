@@ -1,6 +1,6 @@
 """`envhub.evaluation`: a policy over a benchmark's own protocol (LIBERO, Meta-World,
 robosuite, ManiSkill, dm_control, MuJoCo), episodes in parallel over a session's envs,
-results durable episode by episode. `python -m envhub.evaluation --help`; docs/eval.md.
+results durable episode by episode. `python -m envhub.evaluation --help`; docs/guide/eval.md.
 
     from envhub.evaluation import evaluate
     results = evaluate("metaworld-mt10", "envhub.evaluation.experts:metaworld",

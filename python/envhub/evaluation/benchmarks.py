@@ -37,7 +37,7 @@ FIELDS = {
     "action": "{sign: [i, ..]}: action dims sent as -1/+1 by their sign (a gripper)",
     "kwargs": "options the envs are made with",
     "python_env": "the catalog Python environment the policy runs in (optional)",
-    "servers": "per server protocol (vla-eval, openpi), what its own harness sends (docs/eval-report.md)",
+    "servers": "per server protocol (vla-eval, openpi), what its own harness sends (docs/guide/eval-report.md)",
     "source": "the registry file that declared it (set by the catalog)",
 }
 INIT_KINDS = ("init_states", "train_goals", "seeds", "seed_start")

@@ -188,9 +188,9 @@ def evaluate(
     progress: bool = True,
 ) -> dict[str, Any]:
     """Runs `policy` over `benchmark` (a catalog name, or a declaration dict) and returns the
-    results dict (docs/eval.md); `out` gets `episodes.jsonl` as episodes finish, then
+    results dict (docs/guide/eval.md); `out` gets `episodes.jsonl` as episodes finish, then
     `results.json`, `results.csv` (and `videos/`, `report.html` when asked); `record`: a
-    folder that gets every episode as a LeRobot dataset (docs/eval.md). `policy`:
+    folder that gets every episode as a LeRobot dataset (docs/guide/eval.md). `policy`:
     `function(observations, tasks) -> actions` (`per_task`: a factory `function(task) ->
     agent`), a `Policy`, or `module:function`; `server`: a policy server's URL instead.
     `resume`: episodes already in `out` are not run again (errored ones are).

@@ -1,6 +1,6 @@
 """Episode results, durable as they come: one JSON line per episode appended to
 `episodes.jsonl` and fsynced, so a killed evaluation resumes (`--resume`) with no episode
-lost or counted twice; then `results.json` (schema in docs/eval.md), `results.csv` and a
+lost or counted twice; then `results.json` (schema in docs/guide/eval.md), `results.csv` and a
 markdown table."""
 
 from __future__ import annotations

@@ -119,7 +119,7 @@ class Calls:
         for ids, conn in self._connect():
             answers = self._ask(conn, ("call", name, args, kwargs))
             # Checked by hand: `zip(strict=True)` is 3.10's, and this module runs in workers
-            # down to 3.9 (docs/architecture.md).
+            # down to 3.9 (docs/design/architecture.md).
             if len(answers) != len(ids):
                 raise RuntimeError(f"a worker answered `{name}` for {len(answers)} envs, not its {len(ids)}")
             out.update(zip(ids, answers))

@@ -1,7 +1,7 @@
 """`zip_strict`: `zip(..., strict=True)` for the interpreters the worker side runs on.
 
 `strict=` is Python 3.10's and the worker side runs down to CPython 3.9
-(docs/architecture.md), where it is a `TypeError` the first time the line runs."""
+(docs/design/architecture.md), where it is a `TypeError` the first time the line runs."""
 
 from __future__ import annotations
 

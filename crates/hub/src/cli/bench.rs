@@ -217,7 +217,7 @@ fn run_remote(
         REMOTE_ROUND_TRIP_BYTES,
         n,
     )?);
-    // The model of docs/remote.md: a batch on one hub takes what it takes here plus one
+    // The model of docs/guide/remote.md: a batch on one hub takes what it takes here plus one
     // round trip of its request and response bytes (a raw echo of that many bytes, half each
     // way).
     let on_first = places
@@ -284,7 +284,7 @@ fn run_remote(
         );
         if let Some(p) = predicted {
             println!(
-                "  model             {p:>12.0} steps/s  (here + that echo per batch; docs/remote.md)"
+                "  model             {p:>12.0} steps/s  (here + that echo per batch; docs/guide/remote.md)"
             );
         }
     }
