@@ -23,10 +23,10 @@ import gymnasium
 import numpy as np
 from envhub import AsyncVectorEnv
 from envhub.client.column_reader import ColumnReader
-from envhub.worker.hosted.env_fns import DropInEnv
 from envhub.wire.info_schema import INFO_ROW_BYTES
 from envhub.wire.spaces import from_gymnasium
 from envhub.worker import HostedBatch, HostedEnv
+from envhub.worker.hosted.env_fns import DropInEnv
 
 
 class _Batch:

@@ -8,7 +8,7 @@
 //! be chosen without filters, the alternatives, or the no-match error, name it and say why.
 
 use crate::entry::EnvEntry;
-use crate::registry::{Registry, RegistryError, SearchQuery, matching_tags};
+use crate::registry::{Registry, RegistryError, SearchHit, SearchQuery, matching_tags};
 use crate::tags::words;
 use serde::{Deserialize, Serialize};
 
@@ -118,38 +118,106 @@ pub fn match_task<'a>(
         .as_deref()
         .filter(|id| !id.trim().is_empty())
     {
-        let entry = registry.get(id.trim())?;
-        return Ok(TaskMatch {
-            entry,
-            score: 1.0,
-            reason: format!("environment `{}` was requested explicitly", entry.id),
-            alternatives: Vec::new(),
-        });
+        return explicit(id.trim(), registry);
     }
-
-    let said = words(&spec.task_description);
-    let tags = known_words(&said, registry);
-    if tags.is_empty() {
-        return Err(MatchError::NoMatch {
-            why: if said.is_empty() {
-                "the description has no task words".to_string()
-            } else {
+    let words = TaskWords::of(spec, registry)?;
+    let mut rejected: Option<String> = None;
+    let mut previous: Option<SearchQuery> = None;
+    for attempt in attempts(spec, &words.tags) {
+        // A relaxation that drops nothing would repeat the search before it.
+        if previous.as_ref() == Some(&attempt.query) {
+            continue;
+        }
+        let hits = registry.search(&attempt.query);
+        previous = Some(attempt.query.clone());
+        let Some(best) = hits.first() else { continue };
+        if attempt.relaxed && words.score(best.matched_tags.len()) < MIN_RELAXED_SCORE {
+            rejected.get_or_insert_with(|| {
                 format!(
-                    "none of its words ({}) match a tag or robot model in the registry",
-                    said.join(", ")
+                    "the closest entry, `{}`, matches only {}/{} task words ({}){}",
+                    best.entry.id,
+                    best.matched_tags.len(),
+                    words.total(),
+                    best.matched_tags.join(", "),
+                    attempt.how
                 )
-            },
-            hint: "describe the task with words such as walk, run, reach, push, pick, place, balance, or pass `--id`".to_string(),
-        });
+            });
+            continue;
+        }
+        return Ok(chosen(&words, registry, &attempt, &hits));
+    }
+    Err(no_match(spec, registry, &words, rejected, previous))
+}
+
+/// Phase 1: the entry asked for by id, whatever the description says.
+fn explicit<'a>(id: &str, registry: &'a Registry) -> Result<TaskMatch<'a>, MatchError> {
+    let entry = registry.get(id)?;
+    Ok(TaskMatch {
+        entry,
+        score: 1.0,
+        reason: format!("environment `{}` was requested explicitly", entry.id),
+        alternatives: Vec::new(),
+    })
+}
+
+/// Phase 2: the description's words, and those of them the registry knows (the tags
+/// searched for).
+struct TaskWords {
+    said: Vec<String>,
+    tags: Vec<String>,
+}
+
+impl TaskWords {
+    /// The words of `spec`'s description; an error when none means anything to `registry`.
+    fn of(spec: &TaskSpec, registry: &Registry) -> Result<TaskWords, MatchError> {
+        let said = words(&spec.task_description);
+        let tags = known_words(&said, registry);
+        if tags.is_empty() {
+            return Err(MatchError::NoMatch {
+                why: if said.is_empty() {
+                    "the description has no task words".to_string()
+                } else {
+                    format!(
+                        "none of its words ({}) match a tag or robot model in the registry",
+                        said.join(", ")
+                    )
+                },
+                hint: "describe the task with words such as walk, run, reach, push, pick, place, balance, or pass `--id`".to_string(),
+            });
+        }
+        Ok(TaskWords { said, tags })
     }
 
+    /// Every word of the description counts, known to the registry or not: a task that is
+    /// mostly about things no entry offers ("a submarine in a reef") must not score high.
+    fn total(&self) -> usize {
+        self.said.len()
+    }
+
+    /// The score of an entry matching `n` task words (a share, rounded to hundredths).
+    fn score(&self, n: usize) -> f64 {
+        (n as f64 / self.total() as f64 * 100.0).round() / 100.0
+    }
+}
+
+/// One search of phase 3: its query, how to describe its filters, and whether it relaxed
+/// one the user gave.
+struct Attempt {
+    how: String,
+    query: SearchQuery,
+    relaxed: bool,
+}
+
+/// Phase 3: the searches, strictest first: every field; without the environment type;
+/// robot type and task words only (the robot type is never relaxed).
+fn attempts(spec: &TaskSpec, tags: &[String]) -> [Attempt; 3] {
     let full = SearchQuery {
         robot_type: spec.robot_type.clone(),
         env_type: spec.environment_type.clone(),
         framework: spec.framework.clone(),
         robot_model: spec.robot_model.clone(),
         action_type: None,
-        tags: tags.clone(),
+        tags: tags.to_vec(),
     };
     let without_env_type = SearchQuery {
         env_type: None,
@@ -157,129 +225,135 @@ pub fn match_task<'a>(
     };
     let robot_and_tags = SearchQuery {
         robot_type: spec.robot_type.clone(),
-        tags: tags.clone(),
+        tags: tags.to_vec(),
         ..SearchQuery::default()
     };
-    let given = |q: &SearchQuery| {
-        let fields: Vec<String> = [
-            ("robot type", &q.robot_type),
-            ("environment type", &q.env_type),
-            ("framework", &q.framework),
-            ("model", &q.robot_model),
-        ]
-        .iter()
-        .filter_map(|(name, v)| v.as_ref().map(|v| format!("{name} `{v}`")))
-        .collect();
-        if fields.is_empty() {
-            String::new()
-        } else {
-            format!(" with {}", fields.join(", "))
-        }
-    };
-    let attempts = [
-        (given(&full), full, false),
-        (
-            format!("{} (environment type relaxed)", given(&without_env_type)),
-            without_env_type,
-            true,
-        ),
-        (
-            format!("{} (other filters relaxed)", given(&robot_and_tags)),
-            robot_and_tags,
-            true,
-        ),
-    ];
+    [
+        Attempt {
+            how: given(&full),
+            query: full,
+            relaxed: false,
+        },
+        Attempt {
+            how: format!("{} (environment type relaxed)", given(&without_env_type)),
+            query: without_env_type,
+            relaxed: true,
+        },
+        Attempt {
+            how: format!("{} (other filters relaxed)", given(&robot_and_tags)),
+            query: robot_and_tags,
+            relaxed: true,
+        },
+    ]
+}
 
-    // Every word of the description counts, known to the registry or not: a task that is
-    // mostly about things no entry offers ("a submarine in a reef") must not score high.
-    let total = said.len();
-    let score = |n: usize| (n as f64 / total as f64 * 100.0).round() / 100.0;
-    // The entries that would be chosen without any filter, when the filters of `query`
-    // exclude them and they match more task words than `matched` (and at least half of
-    // them): the user should hear about them.
-    let excluded_better = |query: &SearchQuery, matched: usize| -> Vec<Candidate> {
-        let any = SearchQuery {
-            tags: tags.clone(),
-            ..SearchQuery::default()
-        };
-        let hits = registry.search(&any);
-        let top = hits.first().map_or(0, |h| h.matched_tags.len());
-        if top <= matched || score(top) < MIN_RELAXED_SCORE {
-            return Vec::new();
-        }
-        hits.into_iter()
-            .take_while(|h| h.matched_tags.len() == top)
-            .filter_map(|h| {
-                let unmet = query.unmet_filters(h.entry);
-                (!unmet.is_empty()).then(|| Candidate {
-                    id: h.entry.id.clone(),
-                    score: score(h.matched_tags.len()),
-                    matched_tags: h.matched_tags,
-                    excluded: Some(unmet.join(" and ")),
-                })
-            })
-            .take(MAX_EXCLUDED)
-            .collect()
-    };
-    let mut rejected: Option<String> = None;
-    let mut previous: Option<SearchQuery> = None;
-    for (how, query, relaxed) in attempts {
-        // A relaxation that drops nothing would repeat the search before it.
-        if previous.as_ref() == Some(&query) {
-            continue;
-        }
-        let hits = registry.search(&query);
-        previous = Some(query.clone());
-        let Some(best) = hits.first() else { continue };
-        let best_score = score(best.matched_tags.len());
-        if relaxed && best_score < MIN_RELAXED_SCORE {
-            rejected.get_or_insert_with(|| {
-                format!(
-                    "the closest entry, `{}`, matches only {}/{} task words ({}){}",
-                    best.entry.id,
-                    best.matched_tags.len(),
-                    total,
-                    best.matched_tags.join(", "),
-                    how
-                )
-            });
-            continue;
-        }
-        let mut alternatives = excluded_better(&query, best.matched_tags.len());
-        alternatives.extend(
-            hits.iter()
-                .skip(1)
-                .take(MAX_ALTERNATIVES - alternatives.len())
-                .map(|h| Candidate {
-                    id: h.entry.id.clone(),
-                    score: score(h.matched_tags.len()),
-                    matched_tags: h.matched_tags.clone(),
-                    excluded: None,
-                }),
-        );
-        let unmatched: Vec<&str> = said
-            .iter()
-            .filter(|w| !best.matched_tags.contains(w))
-            .map(String::as_str)
-            .collect();
-        let mut reason = format!(
-            "matched {}/{} task words ({}){}",
-            best.matched_tags.len(),
-            total,
-            best.matched_tags.join(", "),
-            how
-        );
-        if !unmatched.is_empty() {
-            reason.push_str(&format!("; not matched: {}", unmatched.join(", ")));
-        }
-        return Ok(TaskMatch {
-            entry: best.entry,
-            score: best_score,
-            reason,
-            alternatives,
-        });
+/// The structured filters of `query` in words (" with robot type \`arm\`, ..."), or nothing.
+fn given(query: &SearchQuery) -> String {
+    let fields: Vec<String> = [
+        ("robot type", &query.robot_type),
+        ("environment type", &query.env_type),
+        ("framework", &query.framework),
+        ("model", &query.robot_model),
+    ]
+    .iter()
+    .filter_map(|(name, v)| v.as_ref().map(|v| format!("{name} `{v}`")))
+    .collect();
+    if fields.is_empty() {
+        String::new()
+    } else {
+        format!(" with {}", fields.join(", "))
     }
+}
 
+/// Phase 4: the match for the best of `hits` (found by `attempt`), with the runners-up and
+/// why it was chosen.
+fn chosen<'a>(
+    words: &TaskWords,
+    registry: &'a Registry,
+    attempt: &Attempt,
+    hits: &[SearchHit<'a>],
+) -> TaskMatch<'a> {
+    let best = &hits[0];
+    let mut alternatives =
+        excluded_better(words, registry, &attempt.query, best.matched_tags.len());
+    alternatives.extend(
+        hits.iter()
+            .skip(1)
+            .take(MAX_ALTERNATIVES - alternatives.len())
+            .map(|h| Candidate {
+                id: h.entry.id.clone(),
+                score: words.score(h.matched_tags.len()),
+                matched_tags: h.matched_tags.clone(),
+                excluded: None,
+            }),
+    );
+    let unmatched: Vec<&str> = words
+        .said
+        .iter()
+        .filter(|w| !best.matched_tags.contains(w))
+        .map(String::as_str)
+        .collect();
+    let mut reason = format!(
+        "matched {}/{} task words ({}){}",
+        best.matched_tags.len(),
+        words.total(),
+        best.matched_tags.join(", "),
+        attempt.how
+    );
+    if !unmatched.is_empty() {
+        reason.push_str(&format!("; not matched: {}", unmatched.join(", ")));
+    }
+    TaskMatch {
+        entry: best.entry,
+        score: words.score(best.matched_tags.len()),
+        reason,
+        alternatives,
+    }
+}
+
+/// The entries that would be chosen without any filter, when the filters of `query`
+/// exclude them and they match more task words than `matched` (and at least half of
+/// them): the user should hear about them.
+fn excluded_better(
+    words: &TaskWords,
+    registry: &Registry,
+    query: &SearchQuery,
+    matched: usize,
+) -> Vec<Candidate> {
+    let any = SearchQuery {
+        tags: words.tags.clone(),
+        ..SearchQuery::default()
+    };
+    let hits = registry.search(&any);
+    let top = hits.first().map_or(0, |h| h.matched_tags.len());
+    if top <= matched || words.score(top) < MIN_RELAXED_SCORE {
+        return Vec::new();
+    }
+    hits.into_iter()
+        .take_while(|h| h.matched_tags.len() == top)
+        .filter_map(|h| {
+            let unmet = query.unmet_filters(h.entry);
+            (!unmet.is_empty()).then(|| Candidate {
+                id: h.entry.id.clone(),
+                score: words.score(h.matched_tags.len()),
+                matched_tags: h.matched_tags,
+                excluded: Some(unmet.join(" and ")),
+            })
+        })
+        .take(MAX_EXCLUDED)
+        .collect()
+}
+
+/// Phase 5: no search found a good enough entry: say what was tried (`rejected`: the
+/// closest entry a relaxed search refused; `loosest`: the last search made), which entries
+/// the filters excluded, and what the registry offers.
+fn no_match(
+    spec: &TaskSpec,
+    registry: &Registry,
+    words: &TaskWords,
+    rejected: Option<String>,
+    loosest: Option<SearchQuery>,
+) -> MatchError {
     let filters: Vec<String> = [
         ("robot type", &spec.robot_type),
         ("environment type", &spec.environment_type),
@@ -297,15 +371,15 @@ pub fn match_task<'a>(
             } else {
                 format!(" with {}", filters.join(", "))
             },
-            tags.join(", ")
+            words.tags.join(", ")
         )
     });
     // The loosest search tried keeps the robot type: entries that only it excluded.
-    let excluded = previous.map_or_else(Vec::new, |q| excluded_better(&q, 0));
+    let excluded = loosest.map_or_else(Vec::new, |q| excluded_better(words, registry, &q, 0));
     let mut hint = String::new();
     if !excluded.is_empty() {
         for c in &excluded {
-            why.push_str(&format!("; {}", c.describe(total)));
+            why.push_str(&format!("; {}", c.describe(words.total())));
         }
         hint = format!(
             "change or leave out the filter that excludes `{}`; ",
@@ -317,7 +391,7 @@ pub fn match_task<'a>(
         registry.robot_types().join(", "),
         registry.distinct("env_type").join(", ")
     ));
-    Err(MatchError::NoMatch { why, hint })
+    MatchError::NoMatch { why, hint }
 }
 
 /// The words of a description that some entry of the registry can match.

@@ -47,8 +47,8 @@ pub const ENVHUB_PY_REQUIRED: &str = "ENVHUB_PY_REQUIRED";
 /// `make py-test` set it.
 pub const ENVHUB_MUJOCO_REQUIRED: &str = "ENVHUB_MUJOCO_REQUIRED";
 
-/// Set (non-empty) to make the LIBERO tests (`tests/python/test_py_libero.py`) fail instead
-/// of skipping when LIBERO or the `libero` adapter is unavailable; `make py-test` sets it
+/// Set (non-empty) to make the LIBERO tests (`tests/python/worker/hosted/test_libero.py`) fail
+/// instead of skipping when LIBERO or the `libero` adapter is unavailable; `make py-test` sets it
 /// once `make libero` succeeded (LIBERO and its assets in `.venv-libero/`).
 pub const ENVHUB_LIBERO_REQUIRED: &str = "ENVHUB_LIBERO_REQUIRED";
 
@@ -113,12 +113,12 @@ pub const ENVHUB_PYENV_WAIT: &str = "ENVHUB_PYENV_WAIT";
 /// rust-test` and `make py-test` set it.
 pub const ENVHUB_PYENV_REQUIRED: &str = "ENVHUB_PYENV_REQUIRED";
 
-/// Set (non-empty) to make the suite tests (`tests/python/test_py_suites.py`: Meta-World,
+/// Set (non-empty) to make the suite tests (`tests/python/pyenv/test_suites.py`: Meta-World,
 /// robosuite, dm_control, MyoSuite, each in its own Python environment) fail instead of
 /// skipping when an environment cannot be built here; `make py-test` sets it.
 pub const ENVHUB_SUITES_REQUIRED: &str = "ENVHUB_SUITES_REQUIRED";
 
-/// Set (non-empty) to make the recorder's tests (`tests/python/test_py_record.py`) fail
+/// Set (non-empty) to make the recorder's tests (`tests/python/recording/`) fail
 /// instead of skipping when pyarrow, PyAV or LeRobot's loader is missing; `make py-test` sets
 /// it.
 pub const ENVHUB_RECORD_REQUIRED: &str = "ENVHUB_RECORD_REQUIRED";

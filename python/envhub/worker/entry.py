@@ -29,10 +29,10 @@ import traceback
 from typing import Any
 
 from .. import _envhub
-from .hosted import all_adapters
 from ..wire.config import EnvConfig
 from ..wire.spaces import from_gymnasium
 from .batch import HostedBatch, HostedEnv, HostedVectorEnv
+from .hosted import all_adapters
 
 
 def _has_time_limit(env: Any) -> bool:

@@ -23,8 +23,8 @@ import sys
 import time
 from typing import Any
 
-from .hosted import all_adapters
 from .entry import refusal, serve
+from .hosted import all_adapters
 
 
 def _say(fd: int, message: dict[str, Any]) -> None:
