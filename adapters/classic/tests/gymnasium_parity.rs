@@ -1,6 +1,6 @@
 //! Parity with Gymnasium itself (envpool's `*_align_test.py` idea, driven from Rust).
 //!
-//! `tests/python/classic_reference.py` records trajectories of Gymnasium's own envs: for each
+//! `tests/python/support/classic_reference.py` records trajectories of Gymnasium's own envs: for each
 //! run the seeded initial state, then per step the state before it, the action, and the
 //! observation, reward and `terminated` after it, with a fresh initial state whenever an
 //! episode ends. This test replays them: the same seed must give the same initial states (NumPy's
@@ -51,7 +51,7 @@ struct Tally {
 
 #[test]
 fn matches_gymnasium() {
-    let script = "tests/python/classic_reference.py";
+    let script = "tests/python/support/classic_reference.py";
     let Some(reference) = python_reference(script, &["gymnasium"], "gymnasium 1.4") else {
         return;
     };

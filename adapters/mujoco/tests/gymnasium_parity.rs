@@ -1,6 +1,6 @@
 //! Parity with Gymnasium itself (envpool's `*_align_test.py` idea, driven from Rust).
 //!
-//! `tests/python/mujoco_reference.py` records trajectories of Gymnasium's own v5 envs: the
+//! `tests/python/support/mujoco_reference.py` records trajectories of Gymnasium's own v5 envs: the
 //! seeded initial state, then per step the random action, the observation, reward, `terminated`
 //! and `truncated` (Gymnasium's `TimeLimit`), and a fresh initial state whenever an episode ends
 //! (reset without a seed). This test replays them: the same seed must give the same initial
@@ -115,7 +115,7 @@ fn check_obs(obs: &[u8], want: &Value, what: &str) -> f64 {
 
 #[test]
 fn matches_gymnasium() {
-    let script = "tests/python/mujoco_reference.py";
+    let script = "tests/python/support/mujoco_reference.py";
     let needs = "gymnasium 1.4 and mujoco 3.17";
     let Some(reference) = python_reference(script, &["gymnasium", "mujoco"], needs) else {
         return;

@@ -155,7 +155,7 @@ fn hex_bytes(hex: &str) -> Vec<u8> {
         .collect()
 }
 
-/// `tests/python/mujoco_render_reference.py` renders Gymnasium's own envs (default cameras,
+/// `tests/python/support/mujoco_render_reference.py` renders Gymnasium's own envs (default cameras,
 /// a `default_camera_config` override, a named fixed camera, `camera_id=-1`, several sizes)
 /// after a seeded reset and after random actions; the same seed and actions here must give
 /// the same frames, byte for byte.
@@ -164,7 +164,7 @@ fn frames_match_gymnasium() {
     if skip() {
         return;
     }
-    let script = "tests/python/mujoco_render_reference.py";
+    let script = "tests/python/support/mujoco_render_reference.py";
     let needs = "gymnasium 1.4 and mujoco 3.17";
     let Some(reference) = python_reference(script, &["gymnasium", "mujoco"], needs) else {
         return;
