@@ -63,7 +63,7 @@ endif
 # Opt-in LIBERO (`make libero`): an interpreter of its own, since LIBERO needs robosuite 1.4 and
 # mujoco<3.9 while .venv/ pins mujoco 3.17 (requirements-libero.txt says what goes in). Its scene
 # assets come from the Hugging Face Hub (LIBERO's PyPI packages leave them out). Once `make
-# libero` succeeded, `make py-test` runs tests/python/test_py_libero.py in it as well.
+# libero` succeeded, `make py-test` runs tests/python/worker/hosted/test_libero.py in it as well.
 LIBERO_VENV := .venv-libero
 LIBERO_VPY := $(LIBERO_VENV)/bin/python
 LIBERO_STAMP := $(LIBERO_VENV)/.installed
@@ -75,7 +75,7 @@ LIBERO_PACKAGE := hf-libero==0.1.4
 # downloads in parallel.
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
-# LeRobot 0.6.1 itself (CPython 3.12, torch), where tests/python/test_lerobot_plugin.py runs
+# LeRobot 0.6.1 itself (CPython 3.12, torch), where tests/python/integrations/test_lerobot_plugin.py runs
 # LeRobot's own commands with the plugin (requirements-lerobot-next.txt); meant to replace
 # .venv-lerobot once the recorder's loader moves to it. The 3.12 interpreter: pyenv's or PATH's.
 LEROBOT_NEXT_VENV := .venv-lerobot-next
@@ -326,7 +326,7 @@ py-test: py-install $(LEROBOT_STAMP) $(LEROBOT_NEXT_STAMP) $(BROWSER_STAMP)
 	ENVHUB_PY_REQUIRED=1 ENVHUB_LEROBOT_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup --durations=25
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
-			$(LIBERO_VPY) -m pytest tests/python/test_py_libero.py -q -p no:cacheprovider --durations=10; \
+			$(LIBERO_VPY) -m pytest tests/python/worker/hosted/test_libero.py -q -p no:cacheprovider --durations=10; \
 	fi
 
 # The suites' Python environments (the catalog's `python_envs:`, LIBERO's 7 GB among them),

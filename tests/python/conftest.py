@@ -8,21 +8,27 @@ Every test process gets its own iceoryx2 namespace, so parallel runs never share
 `pytest{pid}_`, and under pytest-xdist (`-n N`) the controller's prefix plus the worker's
 name (`pytest{pid}_gw0_`), so the controller's clean-up at the end also covers its workers'.
 The rules that let tests run side by side under `-n N` are in README.md beside this file.
+
+The tests mirror the package (`client/test_env.py` tests `envhub.client.env`); what they
+share lives in `support/`, which this file puts on `sys.path` (`from harness import ...`).
 """
 
 from __future__ import annotations
 
 import fcntl
 import glob
-import json
 import os
 import re
+import sys
 import textwrap
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
+
+SUPPORT = Path(__file__).resolve().parent / "support"
+sys.path.insert(0, str(SUPPORT))
+
+from harness import REPO_ROOT, run_folder  # noqa: E402
 
 # An xdist worker inherits its controller's environment, and with it the controller's
 # namespace: each worker takes its own inside it, never the shared one.
@@ -44,7 +50,6 @@ os.environ.pop("ENVHUB_HUB", None)
 # it (where the folder cannot be written, Python goes on without).
 os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 # A registry entry for the `null` adapter: an env that does no work and misbehaves on
 # request (`sleep_ms`, `exit_after`, `error_after`), for failure tests. A test adapter: the
@@ -63,28 +68,6 @@ NULL_REGISTRY = textwrap.dedent(
         description: Does no work.
     """
 )
-
-
-def import_envhub():
-    """The `envhub` package, or a skip (an error under `ENVHUB_PY_REQUIRED`)."""
-    try:
-        import envhub
-    except ImportError as exc:
-        if os.environ.get("ENVHUB_PY_REQUIRED"):
-            raise
-        pytest.skip(f"the envhub package is not built ({exc}); run `make py-install`")
-    return envhub
-
-
-def mujoco_or_skip(envhub) -> None:
-    """A skip when envhub's MuJoCo adapter cannot run here (a worker built without it), or a
-    failure under `ENVHUB_MUJOCO_REQUIRED` (as `make py-test` sets, so in CI)."""
-    if "mujoco" in envhub.AdapterRegistry().list_available():
-        return
-    message = "envhub's MuJoCo adapter is not available here"
-    if os.environ.get("ENVHUB_MUJOCO_REQUIRED"):
-        pytest.fail(f"{message}, and ENVHUB_MUJOCO_REQUIRED is set")
-    pytest.skip(message)
 
 
 def pytest_configure(config) -> None:
@@ -134,16 +117,34 @@ def _suite_entries() -> set[str]:
         return set()
 
 
+_IMPORTS = re.compile(r"^\s*(?:from|import)\s+(\w+)", re.MULTILINE)
+
+
+def _uses_a_suite(path: Path, seen: set[Path] | None = None) -> bool:
+    """Whether the module at `path`, or a module of `support/` it imports (at any depth),
+    uses a suite's environment (`_USES_A_SUITE`)."""
+    seen = set() if seen is None else seen
+    seen.add(path)
+    text = path.read_text()
+    if _USES_A_SUITE.search(text):
+        return True
+    for name in _IMPORTS.findall(text):
+        helper = SUPPORT / f"{name}.py"
+        if helper.exists() and helper not in seen and _uses_a_suite(helper, seen):
+            return True
+    return False
+
+
 def pytest_collection_modifyitems(config, items) -> None:
     """Marks `suite` the tests that need a suite's environment, so that `make check` leaves
-    them to `make test`: those of a module that uses one (`_USES_A_SUITE`), and those
+    them to `make test`: those of a module that uses one (`_uses_a_suite`), and those
     parametrized with a catalog entry (`entry_id`) that runs in a Python environment of its
     own. Then orders the tests for pytest-xdist (`_order_for_xdist`)."""
     modules: dict[Path, bool] = {}
     entries: set[str] | None = None
     for item in items:
         if item.path not in modules:
-            modules[item.path] = bool(_USES_A_SUITE.search(item.path.read_text()))
+            modules[item.path] = _uses_a_suite(item.path)
         entry_id = getattr(getattr(item, "callspec", None), "params", {}).get("entry_id")
         if isinstance(entry_id, str) and entries is None:
             entries = _suite_entries()
@@ -199,34 +200,6 @@ def _serial_tests_run_alone(request, tmp_path_factory):
             fcntl.flock(turnstile, fcntl.LOCK_UN)
         try:
             yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
-
-
-def run_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The temporary folder of this test run, shared by its processes: under pytest-xdist
-    each worker's base temporary folder lies in the controller's, which is the run's."""
-    base = tmp_path_factory.getbasetemp()
-    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-
-
-def once_per_run(tmp_path_factory: pytest.TempPathFactory, name: str, make: Callable[[Path], Any]) -> Any:
-    """What `make(folder)` returns (JSON), made once per test run: under pytest-xdist the
-    workers share it (a lock file in the controller's temporary folder; the first to come
-    makes it into `folder`, the others wait and read it), alone the process makes it. For
-    set-ups whose result does not depend on the process: a reference run, a built wheel."""
-    shared = run_folder(tmp_path_factory)
-    folder, result = shared / f"once-{name}", shared / f"once-{name}.json"
-    with open(shared / f"once-{name}.lock", "a") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        try:
-            if not result.exists():
-                folder.mkdir(exist_ok=True)
-                value = make(folder)
-                tmp = result.with_suffix(".partial")
-                tmp.write_text(json.dumps(value))
-                tmp.rename(result)  # a failed `make` leaves nothing: the next test tries again
-            return json.loads(result.read_text())
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
 

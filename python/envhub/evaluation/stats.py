@@ -12,7 +12,7 @@
 - `spread`: the success rates of one protocol under several seeds: mean, sample standard
   deviation, min and max.
 
-`tests/python/test_eval_stats.py` checks every figure against statsmodels and scipy.
+`tests/python/evaluation/test_stats.py` checks every figure against statsmodels and scipy.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ the reason. One test per entry (`pytest -k mujoco-ant` runs one), so a wrong id 
                are scanned for the `gym.register(id=...)` call instead
 - custom_mjcf: the asset file exists and loads and steps in `mujoco`
 
-Run: `python -m pytest tests/python/test_registry_env_ids.py -q`
+Run: `python -m pytest tests/python/catalog/test_env_ids.py -q`
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import pytest
 
 yaml = pytest.importorskip("yaml", reason="PyYAML is needed to read the registry: pip install pyyaml")
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 REGISTRY_PATH = REPO_ROOT / "configs" / "env_registry.yaml"
 
 REQUIRED_FIELDS = {"id", "name", "framework", "env_id", "robot_type", "env_type"}

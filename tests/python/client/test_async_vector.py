@@ -19,15 +19,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_py_daemon import daemon  # noqa: F401 - the `envhub serve` fixture
+from harness import import_envhub
+from hub_daemons import daemon  # noqa: F401 - the `envhub serve` fixture
+from vector_checks import STEP_TIMEOUT, assert_same
 
 envhub = import_envhub()
 
 # Every session of these tests fails instead of hanging on a stuck worker.
-STEP_TIMEOUT = 60.0
-
-
 class CounterEnv(gym.Env):
     """A custom env defined in the test module: random episode ends (from its seeded
     `np_random`), a time limit, and infos of many kinds (numpy scalars of several dtypes,
@@ -75,28 +73,6 @@ class CounterEnv(gym.Env):
 
 def _counter_fns(n: int) -> list[Any]:
     return [lambda i=i: CounterEnv(limit=5 + i, gain=0.5 + 0.1 * i) for i in range(n)]
-
-
-def assert_same(a: Any, b: Any, where: str) -> None:
-    """Exact equality of two results (arrays, dtypes, dicts, object arrays of them)."""
-    if isinstance(b, dict):
-        assert isinstance(a, dict) and a.keys() == b.keys(), f"{where}: keys {sorted(a)} != {sorted(b)}"
-        for k in b:
-            assert_same(a[k], b[k], f"{where}[{k!r}]")
-    elif isinstance(b, tuple):
-        assert isinstance(a, tuple) and len(a) == len(b), where
-        for i, (x, y) in enumerate(zip(a, b, strict=True)):
-            assert_same(x, y, f"{where}[{i}]")
-    elif isinstance(b, np.ndarray):
-        assert isinstance(a, np.ndarray), f"{where}: {type(a)} is not an array"
-        assert a.dtype == b.dtype and a.shape == b.shape, f"{where}: {a.dtype}{a.shape} != {b.dtype}{b.shape}"
-        if b.dtype == object:
-            for i, (x, y) in enumerate(zip(a.reshape(-1), b.reshape(-1), strict=True)):
-                assert_same(x, y, f"{where}.flat[{i}]")
-        else:
-            assert np.array_equal(a, b, equal_nan=b.dtype.kind in "fc"), f"{where}: {a} != {b}"
-    else:
-        assert type(a) is type(b) and (a == b or (a != a and b != b)), f"{where}: {a!r} != {b!r}"
 
 
 def run_both(env_fns: list[Any], steps: int, seed: int, actions: Any, **kwargs: Any) -> int:

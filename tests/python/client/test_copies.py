@@ -11,9 +11,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_py_dropin import STEP_TIMEOUT
-from test_py_zero_copy import slot_of
+from harness import import_envhub
+from vector_checks import STEP_TIMEOUT, slot_of
 
 envhub = import_envhub()
 
@@ -100,7 +99,7 @@ def test_a_masked_reset_copies_only_the_envs_it_does_not_reset():
 
 
 def test_results_past_the_cap_are_copied_once():
-    slot_bytes = 16 * (4 * 4 + 8 + 3) + 8  # as test_py_zero_copy: 4 slots' worth
+    slot_bytes = 16 * (4 * 4 + 8 + 3) + 8  # as test_zero_copy: 4 slots' worth
     envs = envhub.make_vec("gym-cartpole", 16, num_workers=2, pool_bytes=4 * slot_bytes)
     try:
         kept = [envs.reset(seed=0)[0]]

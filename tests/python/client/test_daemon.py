@@ -4,73 +4,18 @@ it starts, although the daemon's own environment never had it."""
 
 from __future__ import annotations
 
-import os
-import select
-import subprocess
-import textwrap
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import import_envhub
+from hub_daemons import daemon  # noqa: F401 - the `envhub serve` fixture
 
 envhub = import_envhub()
-
-ENVHUB_BIN = REPO_ROOT / "target" / "release" / "envhub"
-
-REGISTRY = textwrap.dedent(
-    """\
-    environments:
-      - id: mysim-echo
-        name: My simulator echo
-        framework: mysim
-        env_id: Echo-v0
-        robot_type: custom
-        env_type: floor
-        kwargs: {gain: 2}
-    """
-)
-
 
 def _parent_of(pid: int) -> int:
     stat = Path(f"/proc/{pid}/stat").read_text()
     return int(stat[stat.rindex(")") + 2 :].split()[1])
-
-
-@pytest.fixture
-def daemon(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[subprocess.Popen[str]]:
-    """`envhub serve` over a registry with `mysim-echo`, started without any user adapter;
-    this process's clients use it (ENVHUB_HUB)."""
-    if not ENVHUB_BIN.is_file():
-        message = f"{ENVHUB_BIN} is not built; run `make py-install`"
-        if os.environ.get("ENVHUB_PY_REQUIRED"):
-            pytest.fail(message)
-        pytest.skip(message)
-    registry = tmp_path / "registry.yaml"
-    registry.write_text(REGISTRY)
-    socket = tmp_path / "hub.sock"
-    env = {k: v for k, v in os.environ.items() if k not in ("ENVHUB_ADAPTERS", "PYTHONPATH")}
-    env["ENVHUB_REGISTRY"] = f"@default:{registry}"
-    proc = subprocess.Popen(
-        [str(ENVHUB_BIN), "serve", "--local-only", "--socket", str(socket)],
-        env=env,
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 60)
-        line = proc.stdout.readline() if ready else ""
-        assert "listening on" in line, f"the daemon said {line!r} (exit status {proc.poll()})"
-        monkeypatch.setenv("ENVHUB_HUB", str(socket))
-        # `register` edits this process's environment: undo it after the test.
-        monkeypatch.delenv("ENVHUB_ADAPTERS", raising=False)
-        monkeypatch.setenv("PYTHONPATH", os.environ.get("PYTHONPATH", ""))
-        yield proc
-    finally:
-        proc.kill()
-        proc.wait(timeout=10)
 
 
 def test_adapter_registered_in_the_client_runs_in_the_daemons_workers(daemon):

@@ -7,8 +7,8 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub, mujoco_or_skip
 from gymnasium.utils.env_checker import check_env
+from harness import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 

@@ -11,7 +11,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from conftest import import_envhub, mujoco_or_skip
+from harness import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 gymnasium = pytest.importorskip("gymnasium")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub, mujoco_or_skip
+from harness import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 

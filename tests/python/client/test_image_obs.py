@@ -10,9 +10,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_py_dropin import STEP_TIMEOUT, assert_same
-from test_py_zero_copy import in_shared_memory, slot_of
+from harness import import_envhub
+from vector_checks import STEP_TIMEOUT, assert_same, in_shared_memory, slot_of
 
 envhub = import_envhub()
 

@@ -11,8 +11,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_py_dropin import STEP_TIMEOUT, assert_same
+from harness import import_envhub
+from vector_checks import STEP_TIMEOUT, assert_same
 
 envhub = import_envhub()
 from envhub import _envhub  # noqa: E402

@@ -10,7 +10,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 

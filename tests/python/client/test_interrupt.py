@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 

@@ -11,8 +11,8 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from conftest import import_envhub
-from test_py_daemon import daemon  # noqa: F401 - the `envhub serve` fixture
+from harness import import_envhub
+from hub_daemons import daemon  # noqa: F401 - the `envhub serve` fixture
 
 envhub = import_envhub()
 

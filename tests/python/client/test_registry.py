@@ -4,7 +4,7 @@ adapters (real registry files, the real worker binary for the adapter catalog)."
 from __future__ import annotations
 
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 

@@ -8,71 +8,13 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
-import subprocess
-from collections.abc import Iterator
-from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import import_envhub
+from hub_daemons import two_hubs  # noqa: F401 - the fixture
 
 envhub = import_envhub()
-
-ENVHUB_BIN = REPO_ROOT / "target" / "release" / "envhub"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Hub:
-    def __init__(self, name: str, tmp: Path) -> None:
-        self.name = name
-        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
-        self.namespace = f"pyhub_{name}_{os.getpid()}_"
-        env = {k: v for k, v in os.environ.items() if k not in ("ENVHUB_ADAPTERS", "ENVHUB_CONNECT")}
-        env.update(ENVHUB_NAMESPACE=self.namespace, ENVHUB_MULTICAST="0")
-        self.proc = subprocess.Popen(
-            [str(ENVHUB_BIN), "serve", "--socket", str(tmp / f"{name}.sock"), "--name", name]
-            + ["--listen", self.endpoint],
-            env=env,
-            cwd=REPO_ROOT,
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        # The hub prints three lines once it is up (or exits: end of file).
-        said = ""
-        for _ in range(3):
-            said += self.proc.stdout.readline()
-        assert "on the network" in said, f"hub {name} said {said!r} (exit status {self.proc.poll()})"
-
-    def stop(self) -> None:
-        self.proc.kill()
-        self.proc.wait(timeout=10)
-        for path in Path("/dev/shm").glob(f"*{self.namespace}*"):
-            path.unlink(missing_ok=True)
-
-
-@pytest.fixture
-def two_hubs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Hub, Hub]]:
-    if not ENVHUB_BIN.is_file():
-        message = f"{ENVHUB_BIN} is not built; run `make py-install`"
-        if os.environ.get("ENVHUB_PY_REQUIRED"):
-            pytest.fail(message)
-        pytest.skip(message)
-    a = Hub("pya", tmp_path)
-    b = Hub("pyb", tmp_path)
-    monkeypatch.setenv("ENVHUB_CONNECT", f"{a.endpoint},{b.endpoint}")
-    monkeypatch.setenv("ENVHUB_MULTICAST", "0")
-    try:
-        yield a, b
-    finally:
-        a.stop()
-        b.stop()
-
 
 def test_hubs_lists_the_live_hubs(two_hubs):
     infos = envhub.hubs()

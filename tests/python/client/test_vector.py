@@ -7,8 +7,8 @@ from __future__ import annotations
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub
 from gymnasium.vector import AutoresetMode
+from harness import import_envhub
 
 envhub = import_envhub()
 

@@ -14,38 +14,10 @@ import threading
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
+from vector_checks import address, in_shared_memory, slot_of
 
 envhub = import_envhub()
-
-
-def address(a: np.ndarray) -> int:
-    return a.__array_interface__["data"][0]
-
-
-def shm_mappings() -> list[tuple[int, int, str]]:
-    """(start, end, path) of this process's mappings of files in /dev/shm."""
-    out = []
-    with open("/proc/self/maps") as f:
-        for line in f:
-            parts = line.split()
-            if len(parts) >= 6 and parts[5].startswith("/dev/shm/"):
-                lo, hi = (int(x, 16) for x in parts[0].split("-"))
-                out.append((lo, hi, parts[5]))
-    return out
-
-
-def in_shared_memory(a: np.ndarray) -> str | None:
-    at = address(a)
-    return next((path for lo, hi, path in shm_mappings() if lo <= at and at + a.nbytes <= hi), None)
-
-
-def slot_of(a: np.ndarray):
-    """The owner object at the root of an array's bases, if it is envhub's."""
-    base = a
-    while isinstance(base, np.ndarray) and base.base is not None:
-        base = base.base
-    return base if type(base).__name__ == "SharedSlot" else None
 
 
 @pytest.fixture(params=[1, 2, 3])

@@ -10,7 +10,7 @@ reference agent returns the scripted actions in the action space's dtype (float3
 envhub policy does.
 
 Skipped where the `metaworld` environment cannot be built (`envhub env sync metaworld`);
-failed instead under ENVHUB_SUITES_REQUIRED=1, as test_py_suites.py does.
+failed instead under ENVHUB_SUITES_REQUIRED=1, as pyenv/test_suites.py does.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from conftest import import_envhub, once_per_run
+from harness import import_envhub, once_per_run
 
 envhub = import_envhub()
 

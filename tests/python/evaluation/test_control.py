@@ -9,7 +9,7 @@
   refused with the first one's pid; the lock goes when the run ends, however it ends.
 - SIGTERM (or SIGINT) to `envhub eval` stops the evaluation: the exit status is 143 (130)
   and no process it started (its workers) is left. With a policy in a catalog Python
-  environment: test_eval_control_policy_env.py.
+  environment: evaluation/test_policy_env.py.
 
 Outcomes are asserted, never how long anything took.
 """
@@ -25,11 +25,11 @@ import sys
 import textwrap
 import threading
 import time
-import uuid
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from eval_processes import alive, kill_all, marked, start_eval
+from harness import import_envhub
 
 envhub = import_envhub()
 
@@ -126,7 +126,7 @@ def test_a_hung_policy_process_is_killed_and_a_new_one_takes_the_next_episodes(t
     assert "gave no answer to `act` within 3 s (--policy-timeout)" in errors[1] and "hang_once.py:act" in errors[1]
     assert "was killed" in errors[1] and policy.killed == 1
     hung = int((tmp_path / "calls.pid").read_text())
-    assert not _alive(hung)
+    assert not alive(hung)
 
 
 # One evaluation per folder -----------------------------------------------------------------
@@ -158,88 +158,11 @@ def test_a_folder_in_use_is_refused_naming_its_owner(tmp_path):
 
 # Signals to `envhub eval` --------------------------------------------------------------------
 
-SLOW_POLICY = textwrap.dedent(
-    """\
-    import os, time
-    import numpy as np
-
-    def act(observations, tasks):
-        open(os.environ["EVAL_MARK_FILE"], "a").write(f"{os.getpid()}\\n")
-        time.sleep(0.05)
-        return np.zeros((len(observations), 1), np.float32)
-    """
-)
-
-
-def _alive(pid: int) -> bool:
-    """Running (a zombie, or no process, is down)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (FileNotFoundError, ProcessLookupError):
-        return False
-
-
-def _marked(mark: str) -> list[int]:
-    """The processes whose environment holds `mark` (every descendant inherits it, whatever
-    its process group or session)."""
-    found = []
-    needle = f"EVAL_RUN_MARK={mark}".encode()
-    for name in os.listdir("/proc"):
-        if not name.isdigit() or int(name) == os.getpid():
-            continue
-        try:
-            with open(f"/proc/{name}/environ", "rb") as f:
-                if needle in f.read().split(b"\0") and _alive(int(name)):
-                    found.append(int(name))
-        except OSError:
-            continue
-    return found
-
-
-def _wait_for(check, seconds: float, what: str):
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        value = check()
-        if value:
-            return value
-        time.sleep(0.1)
-    pytest.fail(f"gave up waiting for {what} after {seconds:g} s")
-
-
-def _start_eval(tmp_path, *extra):
-    """`envhub eval` of long Pendulum episodes over 2 envs (2 workers), the slow policy
-    (`extra` may run it in a Python environment), in its own session; returns it once its
-    policy has answered."""
-    from envhub._cli import BINARY
-
-    registry = tmp_path / "bench.yaml"
-    registry.write_text(json.dumps({"environments": [], "benchmarks": {"long-pendulum": {
-        "entries": ["gym-pendulum"], "episodes_per_task": 4, "init": {"seed_start": 0},
-        "horizon": 100000, "success": "none"}}}))
-    (tmp_path / "slow.py").write_text(SLOW_POLICY)
-    mark, calls = uuid.uuid4().hex, tmp_path / "calls"
-    env = {**os.environ, "EVAL_RUN_MARK": mark, "EVAL_MARK_FILE": str(calls)}
-    args = [str(BINARY), "--registry", "@default", "--registry", str(registry), "eval", "long-pendulum",
-            "--policy", f"{tmp_path / 'slow.py'}:act", "--num-envs", "2", "--workers", "2",
-            "--out", str(tmp_path / "out"), "--quiet", *extra]
-    proc = subprocess.Popen(args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
-
-    def answered():
-        if proc.poll() is not None:
-            pytest.fail(f"envhub eval ended early ({proc.returncode}): {proc.stderr.read().decode()[-3000:]}")
-        return calls.exists() and calls.read_text().count("\n") >= 2
-
-    _wait_for(answered, 300, "the policy's first answers")
-    return proc, mark, args, env
-
-
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_a_signal_stops_the_evaluation_and_everything_it_started(tmp_path, sig):
-    proc, mark, args, env = _start_eval(tmp_path)
+    proc, mark, args, env = start_eval(tmp_path)
     try:
-        started = _marked(mark)
+        started = marked(mark)
         assert proc.pid in started and len(started) >= 3, started  # the evaluation and its 2 workers
         # The folder is in use: a second run and a resume are refused, naming this one.
         for more in ([], ["--resume"]):
@@ -252,25 +175,12 @@ def test_a_signal_stops_the_evaluation_and_everything_it_started(tmp_path, sig):
         assert proc.returncode == 128 + sig, stderr.decode()[-3000:]
         assert f"stopped by {sig.name}" in stderr.decode()
         # Exited only when everything was down.
-        assert [p for p in started if _alive(p)] == []
-        assert _marked(mark) == []
+        assert [p for p in started if alive(p)] == []
+        assert marked(mark) == []
     finally:
-        _kill_all(proc, mark)
+        kill_all(proc, mark)
     done = [json.loads(x) for x in (tmp_path / "out" / "episodes.jsonl").read_text().splitlines()]
     assert done == []  # no episode of 100000 steps ended: none recorded, none lost on --resume
-
-
-def _kill_all(proc, mark) -> None:
-    """Whatever a failed test left running."""
-    for pid in [proc.pid] * (proc.poll() is None) + _marked(mark):
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    try:
-        proc.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        pass
 
 
 def test_an_unknown_policy_is_a_usage_error(tmp_path):

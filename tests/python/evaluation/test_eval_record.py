@@ -1,5 +1,5 @@
 """`envhub eval --record DIR`: every evaluated episode into a LeRobot dataset, judged by
-LeRobot's own loader (`lerobot_load.py` in `.venv-lerobot/`, as test_py_record.py does).
+LeRobot's own loader (`lerobot_load.py` in `.venv-lerobot/`, as recording/test_record.py does).
 
 - Pendulum (state observations, 2 envs, settling steps): the dataset holds each episode's
   frames from the first observation after settling; replaying the recorded actions in
@@ -19,22 +19,31 @@ and LIBERO's control frequency, as `render_fps`), which the dataset's timestamps
 from __future__ import annotations
 
 import json
+import os
 
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_eval import policies  # noqa: F401 (a fixture: the test policies' file)
-from test_py_record import _recording_deps, load  # noqa: F401 (an autouse fixture: pyarrow and PyAV, or a skip)
-from test_py_suites import suite_python
+from eval_policies import (
+    policies,  # noqa: F401 (a fixture: the test policies' file)
+    run_cli,
+)
+from harness import import_envhub
+from lerobot_datasets import (
+    load,
+    recording_deps,  # noqa: F401 (autouse: pyarrow and PyAV, or a skip)
+)
+from suite_envs import suite_python
 
 envhub = import_envhub()
+# As the suites' tests set it: robosuite renders offscreen through EGL (a GPU's or Mesa's).
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 from envhub.evaluation import evaluate  # noqa: E402
 from envhub.recording import RecordingError  # noqa: E402
 
 CAMERAS = ["agentview_image", "robot0_eye_in_hand_image"]
-MEAN_ABS_TOLERANCE = 5.0  # levels of 255, as test_py_record.py allows x264 at CRF 18
+MEAN_ABS_TOLERANCE = 5.0  # levels of 255, as recording/test_record.py allows x264 at CRF 18
 
 PENDULUM = {
     "name": "pendulum-rec",
@@ -158,8 +167,7 @@ def test_robosuite_cameras_become_videos(tmp_path):
 
 
 def test_the_command_line_records_and_says_where(tmp_path, policies):
-    from conftest import mujoco_or_skip
-    from test_eval import run_cli
+    from harness import mujoco_or_skip
 
     mujoco_or_skip(envhub)
     done = run_cli(

@@ -15,14 +15,17 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import textwrap
 import time
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from eval_policies import (
+    policies,  # noqa: F401 - a fixture
+    run_cli,
+)
+from harness import import_envhub
 
 envhub = import_envhub()
 
@@ -41,39 +44,8 @@ PENDULUM = {
     "success": "none",
 }
 
-POLICY_FILE = textwrap.dedent(
-    """\
-    import numpy as np
-
-    def act(observations, tasks):
-        # A deterministic function of the observation alone.
-        return np.stack([np.array([np.tanh(2 * o[0] - o[2])], dtype=np.float32) for o in observations])
-
-    def chunks(observations, tasks):
-        # Four actions per answer, from the observation alone.
-        return [np.array([[np.tanh(o[0] * k)] for k in range(1, 5)], dtype=np.float32) for o in observations]
-
-    def zeros3(observations, tasks):
-        return np.zeros((len(observations), 3), np.float32)
-    """
-)
-
-
 def table(results):
     return [(e["task"], e["index"], e["init"], e["success"], e["return"], e["length"], e["error"]) for e in results["episodes"]]
-
-
-@pytest.fixture
-def policies(tmp_path):
-    path = tmp_path / "policies.py"
-    path.write_text(POLICY_FILE)
-    return str(path)
-
-
-def run_cli(*args, cwd=None):
-    return subprocess.run(
-        [sys.executable, "-m", "envhub.evaluation", *args], capture_output=True, text=True, timeout=300, cwd=cwd
-    )
 
 
 # The catalog -----------------------------------------------------------------------------------
@@ -345,7 +317,7 @@ def test_observations_reach_a_policy_in_another_interpreter_through_shared_memor
 
 
 def test_cli_writes_the_table_and_results(tmp_path, policies):
-    from conftest import mujoco_or_skip
+    from harness import mujoco_or_skip
 
     mujoco_or_skip(envhub)
     done = run_cli(

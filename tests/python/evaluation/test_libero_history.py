@@ -10,15 +10,15 @@ For LIBERO-90 it is also vla-eval's first episode of a new env, LIBERO in-proces
 `seed(7)`, `reset()`, `set_init_state(init_states[1])`.
 
 Skipped with the reason where LIBERO's environment cannot be built, failed instead under
-ENVHUB_LIBERO_REQUIRED=1 or ENVHUB_SUITES_REQUIRED=1 (`libero_python` of test_eval_libero.py).
+ENVHUB_LIBERO_REQUIRED=1 or ENVHUB_SUITES_REQUIRED=1 (`libero_python` of support/libero_env.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_eval_libero import WITH_ENVHUB, libero_python
+from harness import import_envhub
+from libero_env import WITH_ENVHUB, libero_python
 
 envhub = import_envhub()
 

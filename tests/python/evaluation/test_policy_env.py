@@ -14,8 +14,8 @@ import signal
 import subprocess
 
 import pytest
-from conftest import import_envhub
-from test_eval_control import _alive, _kill_all, _marked, _start_eval, _wait_for
+from eval_processes import alive, kill_all, marked, start_eval, wait_for
+from harness import import_envhub
 
 envhub = import_envhub()
 
@@ -35,27 +35,27 @@ def _python_env(name: str) -> None:
 
 def test_kill_9_leaves_no_process_of_the_evaluation(tmp_path):
     _python_env("metaworld")
-    proc, mark, _, _ = _start_eval(tmp_path, "--policy-env", "metaworld")
+    proc, mark, _, _ = start_eval(tmp_path, "--policy-env", "metaworld")
     try:
-        started = _marked(mark)
+        started = marked(mark)
         policy = {int(x) for x in (tmp_path / "calls").read_text().split()}
         assert policy and policy <= set(started) and proc.pid not in policy  # the policy's own process
         assert len(started) >= 4, started  # the evaluation, its 2 workers, the policy's process
         proc.kill()
         proc.wait(timeout=60)
-        _wait_for(lambda: not _marked(mark), 60, "the evaluation's processes to end after SIGKILL")
+        wait_for(lambda: not marked(mark), 60, "the evaluation's processes to end after SIGKILL")
     finally:
-        _kill_all(proc, mark)
+        kill_all(proc, mark)
 
 
 def test_sigterm_stops_a_policy_process(tmp_path):
     _python_env("metaworld")
-    proc, mark, _, _ = _start_eval(tmp_path, "--policy-env", "metaworld")
+    proc, mark, _, _ = start_eval(tmp_path, "--policy-env", "metaworld")
     try:
-        started = _marked(mark)
+        started = marked(mark)
         proc.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=300)
         assert proc.returncode == 143, stderr.decode()[-3000:]
-        assert [p for p in started if _alive(p)] == []
+        assert [p for p in started if alive(p)] == []
     finally:
-        _kill_all(proc, mark)
+        kill_all(proc, mark)

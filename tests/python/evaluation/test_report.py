@@ -24,7 +24,7 @@ import av
 import eval_peers
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 import_envhub()
 

@@ -23,19 +23,16 @@ import pickle
 import socket
 import subprocess
 import time
-from pathlib import Path
 
 import eval_peers
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import REPO_ROOT, SUPPORT, import_envhub
 
 import_envhub()
 
 from envhub.evaluation.policy import Episode, PolicyError, Request, Task  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
-REPO = HERE.parent.parent
 REQUIRED = bool(os.environ.get("ENVHUB_LEROBOT_REQUIRED") or os.environ.get("ENVHUB_PYENV_REQUIRED"))
 
 
@@ -55,7 +52,7 @@ def grpc_here():
 
 @pytest.fixture(scope="module")
 def lerobot(grpc_here) -> str:
-    python = eval_peers.lerobot_peer_python(REPO)
+    python = eval_peers.lerobot_peer_python(REPO_ROOT)
     if python is None:
         _skip(f"no LeRobot 0.6.1 interpreter with its policy server here: {eval_peers.LAST_REASON}")
     return python
@@ -74,7 +71,7 @@ def served(lerobot, tmp_path_factory):
     folder = work / "policy"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     made = subprocess.run(
-        [lerobot, str(HERE / "eval_peers.py"), "lerobot-make-policy", str(folder)],
+        [lerobot, str(SUPPORT / "eval_peers.py"), "lerobot-make-policy", str(folder)],
         capture_output=True, text=True, timeout=600, env=env, cwd=work,
     )
     assert made.returncode == 0, made.stderr[-3000:]
@@ -133,7 +130,7 @@ def test_lerobots_server_gives_what_it_computes_in_process(lerobot, served) -> N
     inputs, outputs = served["work"] / "in.pkl", served["work"] / "out.pkl"
     inputs.write_bytes(pickle.dumps(sent))
     ref = subprocess.run(
-        [lerobot, str(HERE / "eval_peers.py"), "lerobot-reference", str(served["folder"]), str(inputs), str(outputs)],
+        [lerobot, str(SUPPORT / "eval_peers.py"), "lerobot-reference", str(served["folder"]), str(inputs), str(outputs)],
         capture_output=True, text=True, timeout=600, env=served["env"], cwd=served["work"],
     )
     assert ref.returncode == 0, ref.stderr[-3000:]

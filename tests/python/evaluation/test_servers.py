@@ -16,69 +16,29 @@ Without uv or PyPI these skip with the reason (a failure under ENVHUB_PYENV_REQU
 from __future__ import annotations
 
 import os
-import selectors
-import subprocess
 import time
-from pathlib import Path
 
 import eval_peers
 import numpy as np
 import pytest
-from conftest import import_envhub
 from eval_peers import HORIZON, reference_action, reference_chunk
+from harness import import_envhub
+from policy_servers import (
+    CHEETAH,
+    Server,
+    evaluate_or_skip,
+    peers,  # noqa: F401 - a fixture
+)
 
 import_envhub()
 
 from envhub.evaluation.policy import Episode, PolicyError, Request, Task  # noqa: E402
 from envhub.evaluation.servers import OpenPIPolicy, VlaEvalPolicy, connect  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
 VLA_FIELDS = {"images.agentview": "agentview_image", "states": "state"}
 OPENPI_FIELDS = {"observation/image": "agentview_image", "observation/state": "state"}
 STALL_TIMEOUT_S = 2.0
-
-
-@pytest.fixture(scope="module")
-def peers() -> str:
-    python = eval_peers.peer_python()
-    if python is None:
-        reason = f"the peers' environment (vla-eval, openpi-client) cannot be built: {eval_peers.LAST_REASON}"
-        if REQUIRED:
-            pytest.fail(f"{reason}, and ENVHUB_PYENV_REQUIRED is set")
-        pytest.skip(reason)
-    return python
-
-
-class Server:
-    """A policy server in a subprocess, on the port it printed."""
-
-    def __init__(self, python: str, *args: str, env: dict | None = None) -> None:
-        self.proc = subprocess.Popen(
-            [python, str(HERE / "eval_peers.py"), *args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.DEVNULL,
-            text=True,
-            env=env,
-        )
-        selector = selectors.DefaultSelector()
-        selector.register(self.proc.stdout, selectors.EVENT_READ)
-        deadline = time.monotonic() + 60
-        line = ""
-        while time.monotonic() < deadline and not line.startswith("PORT"):
-            if selector.select(timeout=max(0.0, deadline - time.monotonic())):
-                line = self.proc.stdout.readline()
-                if not line:
-                    break
-        selector.close()
-        if not line.startswith("PORT"):
-            self.stop()
-            raise RuntimeError(f"the {args[0]} server did not start (exit code {self.proc.returncode})")
-        self.url = f"ws://127.0.0.1:{int(line.split()[1])}"
-
-    def stop(self) -> None:
-        self.proc.kill()
-        self.proc.wait(timeout=10)
 
 
 @pytest.fixture(scope="module")
@@ -329,29 +289,6 @@ class _Bare:
 
 # -- through `envhub.evaluation.evaluate` --------------------------------------------------
 
-# HalfCheetah, short: the same per-episode results whoever computes the actions.
-CHEETAH = {
-    "name": "cheetah-short",
-    "entries": ["mujoco-half-cheetah"],
-    "episodes_per_task": 3,
-    "init": {"seed_start": 0},
-    "horizon": 40,
-    "success": {"rule": "none"},
-}
-
-
-def _evaluate():
-    try:
-        from envhub.evaluation import evaluate
-    except ImportError as exc:
-        pytest.skip(f"envhub.evaluation.evaluate is not here yet ({exc})")
-    import envhub
-    from conftest import mujoco_or_skip
-
-    mujoco_or_skip(envhub)
-    return evaluate
-
-
 def _episodes(results: dict) -> list[tuple]:
     return [
         (e["task"], e["index"], e["init"], e["return"], e["length"], e["error"]) for e in results["episodes"]
@@ -364,7 +301,7 @@ def test_eval_through_a_server_equals_the_callable(protocol, peers, tmp_path) ->
     action per observation) or an OpenPI server (4-action chunks) gives, episode for
     episode, the results of the same function passed as a Python callable, on a different
     number of envs."""
-    evaluate = _evaluate()
+    evaluate = evaluate_or_skip()
     if protocol == "vla-eval":
 
         def function(observations, tasks):

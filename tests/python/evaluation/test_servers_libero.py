@@ -27,16 +27,21 @@ from pathlib import Path
 
 import eval_peers
 import pytest
-from conftest import import_envhub
-from test_eval_server_wire import BOTH, assert_same, logging_server, peers, read_log  # noqa: F401
-from test_eval_servers import Server
+from harness import SUPPORT, import_envhub
+from policy_servers import (
+    BOTH,
+    Server,
+    assert_same,
+    logging_server,
+    peers,  # noqa: F401 - a fixture
+    read_log,
+)
 
 import_envhub()
 
 from envhub.evaluation.catalog import Catalog  # noqa: E402
 from envhub.evaluation.servers import connect  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
 LIBERO_REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVHUB_SUITES_REQUIRED"))
 
@@ -138,7 +143,7 @@ def test_openpi_example_and_envhub_send_the_same_bytes(libero_peer, tmp_path) ->
     server = Server(libero_peer, "openpi-logging", "--log", str(theirs), "--chunk", str(replan), env=env)
     try:
         done = subprocess.run(
-            [libero_peer, str(HERE / "eval_peers.py"), "openpi-libero-example", "--url", server.url,
+            [libero_peer, str(SUPPORT / "eval_peers.py"), "openpi-libero-example", "--url", server.url,
              "--max-steps", str(horizon), "--chunk", str(replan)],
             capture_output=True, text=True, timeout=1800, env=env,
         )

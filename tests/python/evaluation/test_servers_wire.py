@@ -10,7 +10,7 @@
 - A server that stops answering fails its batch's episodes after the policy timeout, with an
   error naming the server and the wait; the run goes on, or stops with fail_fast.
 
-LIBERO end to end, against vla-eval's and OpenPI's own clients: test_eval_server_libero.py.
+LIBERO end to end, against vla-eval's and OpenPI's own clients: evaluation/test_servers_libero.py.
 
 Skips with the reason where uv or PyPI are missing; failures instead under
 ENVHUB_PYENV_REQUIRED=1.
@@ -18,17 +18,24 @@ ENVHUB_PYENV_REQUIRED=1.
 
 from __future__ import annotations
 
-import json
 import os
 import pickle
 import subprocess
-from pathlib import Path
 
 import eval_peers
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_eval_servers import CHEETAH, Server
+from harness import REPO_ROOT, SUPPORT, import_envhub
+from policy_servers import (
+    BOTH,
+    CHEETAH,
+    Server,
+    assert_same,
+    evaluate_or_skip,
+    logging_server,
+    peers,  # noqa: F401 - a fixture
+    read_log,
+)
 
 envhub = import_envhub()
 
@@ -38,54 +45,14 @@ from envhub.evaluation.policy import Episode, Request, Task  # noqa: E402
 from envhub.evaluation.servers import OpenPIPolicy, VlaEvalPolicy, connect  # noqa: E402
 from envhub.evaluation.servers.layout import LayoutError, axis_angle, quat_of_matrix  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 REQUIRED = bool(os.environ.get("ENVHUB_PYENV_REQUIRED"))
-BOTH = {"send_wrist_image": True, "send_state": True}
-
-
-@pytest.fixture(scope="module")
-def peers() -> str:
-    python = eval_peers.peer_python()
-    if python is None:
-        reason = f"the peers' environment (vla-eval, openpi-client) cannot be built: {eval_peers.LAST_REASON}"
-        if REQUIRED:
-            pytest.fail(f"{reason}, and ENVHUB_PYENV_REQUIRED is set")
-        pytest.skip(reason)
-    return python
 
 
 def libero_spatial():
     """The checkout's libero-spatial (its registry file as written, not the catalog built into
     the extension at its last build)."""
-    registry = HERE.parent.parent / "configs" / "env_registry.yaml"
+    registry = REPO_ROOT / "configs" / "env_registry.yaml"
     return parse("libero-spatial", dict(Catalog([str(registry)]).declared["libero-spatial"]))
-
-
-def read_log(path: Path) -> list:
-    out = []
-    if not path.exists():
-        return out
-    with open(path, "rb") as f:
-        while True:
-            try:
-                out.append(pickle.load(f))
-            except EOFError:
-                return out
-
-
-def assert_same(got, want, where: str = "") -> None:
-    """Equal as the server sees them: the same keys in the same order, and arrays of the
-    same dtype, shape and bytes."""
-    if isinstance(want, dict):
-        assert isinstance(got, dict) and list(got) == list(want), (where, list(got), list(want))
-        for key in want:
-            assert_same(got[key], want[key], f"{where}.{key}")
-    elif isinstance(want, np.ndarray):
-        assert isinstance(got, np.ndarray), (where, type(got))
-        assert (got.dtype, got.shape) == (want.dtype, want.shape), (where, got.dtype, got.shape, want.dtype, want.shape)
-        assert got.tobytes() == want.tobytes(), (where, got, want)
-    else:
-        assert type(got) is type(want) and got == want, (where, got, want)
 
 
 # -- the conversions against vla-eval's own ------------------------------------------------
@@ -126,7 +93,7 @@ def test_state_conversions_give_the_references_bits(peers, tmp_path) -> None:
     path = tmp_path / "conversions.pkl"
     path.write_bytes(pickle.dumps((quats, mats)))
     done = subprocess.run(
-        [peers, "-c", REFERENCE_CONVERSIONS, str(path), str(HERE)], capture_output=True, text=True, timeout=300
+        [peers, "-c", REFERENCE_CONVERSIONS, str(path), str(SUPPORT)], capture_output=True, text=True, timeout=300
     )
     assert done.returncode == 0, done.stderr[-3000:]
     ref = pickle.loads(path.read_bytes())
@@ -153,10 +120,6 @@ def libero_observation(rng: np.random.Generator) -> dict[str, np.ndarray]:
         "robot0_controller_ee_pos": rng.standard_normal(3),
         "robot0_controller_ee_ori_mat": np.eye(3)[[1, 2, 0]],
     }
-
-
-def logging_server(python: str, log: Path, params: dict, env: dict | None = None) -> Server:
-    return Server(python, "vla-eval-logging", "--log", str(log), "--params", json.dumps(params), env=env)
 
 
 def test_the_hello_chooses_what_a_vla_eval_server_is_sent(peers, tmp_path) -> None:
@@ -274,9 +237,8 @@ def test_a_server_that_stops_answering_fails_its_episodes(protocol, fail_fast, p
     fail after the policy timeout with an error naming the server and the wait; the run
     goes on to the other episodes (each failing the same way), or stops at the first."""
     from envhub.evaluation import evaluate
-    from test_eval_servers import _evaluate
 
-    _evaluate()
+    evaluate_or_skip()
     server = Server(peers, protocol, "--action-dim", "6", "--hang-after", "1")
     try:
         policy = connect(protocol, server.url, timeout=1.5)

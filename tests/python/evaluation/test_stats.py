@@ -22,7 +22,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 

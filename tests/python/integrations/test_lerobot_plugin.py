@@ -22,7 +22,7 @@ from pathlib import Path
 import lerobot_envs
 import numpy as np
 import pytest
-from conftest import once_per_run
+from harness import SUPPORT, once_per_run
 from lerobot_envs import (
     LIBERO_FIRST,
     LIBERO_REFERENCE,
@@ -32,8 +32,6 @@ from lerobot_envs import (
     reference_venv,
     user_env,
 )
-
-HERE = Path(__file__).resolve().parent
 
 
 def unavailable(message: str) -> None:
@@ -85,7 +83,7 @@ def rollout(python: Path, site: Path | None, spec: dict, tmp: Path, name: str) -
     spec_file = tmp / f"{name}.json"
     spec_file.write_text(json.dumps(spec))
     out = tmp / f"{name}.npz"
-    run(python, [str(HERE / "lerobot_rollout.py"), str(spec_file), str(out)], site, tmp)
+    run(python, [str(SUPPORT / "lerobot_rollout.py"), str(spec_file), str(out)], site, tmp)
     with np.load(out) as data:
         return {k: data[k] for k in data.files}
 
@@ -93,7 +91,7 @@ def rollout(python: Path, site: Path | None, spec: dict, tmp: Path, name: str) -
 def save_policy(python: Path, site: Path, spec: dict, folder: Path) -> Path:
     spec_file = folder.parent / f"{folder.name}.json"
     spec_file.write_text(json.dumps(spec))
-    run(python, [str(HERE / "lerobot_policy.py"), str(spec_file), str(folder)], site, folder.parent)
+    run(python, [str(SUPPORT / "lerobot_policy.py"), str(spec_file), str(folder)], site, folder.parent)
     return folder
 
 
@@ -104,7 +102,7 @@ def test_ended_episode_frozen_as_lerobot_eval_freezes_it():
     (reward 0) instead of stepping or autoresetting the simulator, until a reset with
     `lerobot_new_rollout`; the LeRobot adapters do the same in the worker."""
     import gymnasium as gym
-    from conftest import import_envhub
+    from harness import import_envhub
 
     import_envhub()
     from envhub.worker.hosted.lerobot_rollout import NEW_ROLLOUT_OPTION, FrozenAfterEnd

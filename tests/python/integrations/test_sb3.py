@@ -11,7 +11,7 @@ import sys
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import import_envhub, mujoco_or_skip
+from harness import import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 import envhub.sb3  # noqa: E402 - after the skip check

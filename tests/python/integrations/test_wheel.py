@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import REPO_ROOT, once_per_run
+from harness import REPO_ROOT, once_per_run
 
 TARGET = REPO_ROOT / "target" / "release"
 BINARIES = ("envhub", "envhub-worker", "envhub-worker-mujoco", "envhub-worker-rapier")

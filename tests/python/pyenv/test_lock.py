@@ -29,7 +29,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 

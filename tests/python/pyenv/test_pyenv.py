@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 

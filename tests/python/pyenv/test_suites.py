@@ -18,7 +18,6 @@ import importlib.util
 import json
 import os
 import pickle
-import re
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -26,11 +25,12 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from conftest import REPO_ROOT, import_envhub, mujoco_or_skip
+from harness import REPO_ROOT, SUPPORT, import_envhub, mujoco_or_skip
 
 envhub = import_envhub()
 
 import suite_runs  # noqa: E402
+from suite_envs import suite_python  # noqa: E402
 
 REQUIRED = bool(os.environ.get("ENVHUB_SUITES_REQUIRED"))
 # robosuite and LIBERO render offscreen through EGL (a GPU's or Mesa's).
@@ -47,10 +47,6 @@ def libero_config(tmp_path_factory: pytest.TempPathFactory):
     os.environ["LIBERO_CONFIG_PATH"] = str(tmp_path_factory.mktemp("libero-config"))
     yield
     del os.environ["LIBERO_CONFIG_PATH"]
-HERE = Path(__file__).resolve().parent
-# A cold build of the largest suite (robosuite) took under a minute here; the bound is for
-# slow networks.
-SYNC_TIMEOUT_S = 1200
 RUN_TIMEOUT_S = 600
 
 #: The Python environment (`python_envs:`) of each framework, and the module that says the
@@ -71,43 +67,6 @@ if LIBERO_ENV:
 ENTRIES = {e["id"]: e for e in REGISTRY["environments"] if e["framework"] in SUITES}
 
 
-def skip_or_fail(reason: str) -> None:
-    if REQUIRED:
-        pytest.fail(f"{reason}, and ENVHUB_SUITES_REQUIRED is set")
-    pytest.skip(reason)
-
-
-_PYTHONS: dict[str, str | Exception] = {}
-
-
-def suite_python(name: str) -> str:
-    """The interpreter of the catalog's Python environment `name`, built by envhub if it is
-    not yet (`envhub env sync`), or a skip naming why it cannot be."""
-    if name not in _PYTHONS:
-        from envhub._cli import BINARY
-
-        try:
-            done = subprocess.run(
-                [str(BINARY), "env", "sync", name],
-                capture_output=True,
-                text=True,
-                timeout=SYNC_TIMEOUT_S,
-            )
-        except (OSError, subprocess.TimeoutExpired) as e:
-            _PYTHONS[name] = e
-        else:
-            found = re.search(rf"^{re.escape(name)}: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
-            python = Path(found.group(1)) / "bin" / "python" if found else None
-            if done.returncode == 0 and python is not None and python.exists():
-                _PYTHONS[name] = str(python)
-            else:
-                _PYTHONS[name] = RuntimeError(f"exit {done.returncode}: {(done.stderr or done.stdout).strip()[-2000:]}")
-    got = _PYTHONS[name]
-    if isinstance(got, Exception):
-        skip_or_fail(f"the Python environment `{name}` cannot be built here (`envhub env sync {name}`: {got})")
-    return str(got)
-
-
 def case(entry_id: str, seed: int, steps: int) -> dict[str, Any]:
     e = ENTRIES[entry_id]
     return {
@@ -125,7 +84,7 @@ def native_run(c: dict[str, Any], tmp_path: Path) -> dict[str, Any]:
     python = suite_python(SUITES[c["framework"]])
     out = tmp_path / f"{c['entry']}.pkl"
     done = subprocess.run(
-        [python, str(HERE / "suite_runs.py"), "native", json.dumps(c), str(out)],
+        [python, str(SUPPORT / "suite_runs.py"), "native", json.dumps(c), str(out)],
         capture_output=True,
         text=True,
         timeout=RUN_TIMEOUT_S,
@@ -259,14 +218,14 @@ def test_entry_runs_bit_for_bit_like_the_suite(c, tmp_path):
 
 
 def hard_resets(suite: str, task: str, caching: str = "cached") -> dict[str, Any]:
-    """tests/python/hard_resets.py's `task` in the interpreter of the catalog's Python
+    """tests/python/support/hard_resets.py's `task` in the interpreter of the catalog's Python
     environment `suite`, plain and with the caches (`caching`: `cached`, or `repeat` as LIBERO's
     adapter installs them): the same observations, camera images included."""
     python = suite_python(suite)
     runs = {}
     for name, mode in (("plain", "plain"), ("cached", caching)):
         done = subprocess.run(
-            [python, str(HERE / "hard_resets.py"), task, mode],
+            [python, str(SUPPORT / "hard_resets.py"), task, mode],
             capture_output=True,
             text=True,
             timeout=RUN_TIMEOUT_S,

@@ -18,52 +18,13 @@ from pathlib import Path
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub
-from gymnasium import spaces
-from test_py_record import check_video, lerobot_python, load
-from test_py_record_integrity import _snapshot
+from drawn_env import KEY, STEPS, Drawn, image
+from harness import import_envhub
+from lerobot_datasets import check_video, lerobot_python, load, snapshot
 
 envhub = import_envhub()
 from envhub.evaluation.dataset import EpisodeDataset  # noqa: E402
 from envhub.recording import _encoding  # noqa: E402
-
-KEY = "observation.images.pixels"
-STEPS = 6  # an episode's frames
-
-
-def image(ep: int, t: int) -> np.ndarray:
-    """The frame of step `t` of episode `ep`: smooth gradients that move with both."""
-    y, x = np.mgrid[0:48, 0:64]
-    return np.stack([x * 2 + t * 5, y * 3 + ep * 23 % 100, (x + y) * 2 + t], -1).astype(np.uint8)
-
-
-class Drawn(gymnasium.Env):
-    """An env whose state says (episode, step) and whose camera draws `image` of them; each
-    env of a vector env counts its own episodes from `first`."""
-
-    metadata = {"render_fps": 10}
-
-    def __init__(self, first: int = 0) -> None:
-        self.observation_space = spaces.Dict({
-            "state": spaces.Box(-1e6, 1e6, (2,), np.float32),
-            "pixels": spaces.Box(0, 255, (48, 64, 3), np.uint8),
-        })
-        self.action_space = spaces.Box(-1, 1, (1,), np.float32)
-        self.ep = first - 1
-        self.t = 0
-
-    def _obs(self) -> dict:
-        return {"state": np.array([self.ep, self.t], np.float32), "pixels": image(self.ep, self.t)}
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        self.ep += 1
-        self.t = 0
-        return self._obs(), {}
-
-    def step(self, action):
-        self.t += 1
-        return self._obs(), 1.0, False, self.t >= STEPS, {}
 
 
 def _vec(first: int) -> gymnasium.vector.SyncVectorEnv:
@@ -170,15 +131,15 @@ def test_other_parameters_are_refused_before_anything_is_touched(tmp_path, asked
     _record(root, 0)
     (root / ".envhub" / "staging").mkdir(parents=True)
     (root / ".envhub" / "staging" / "left.mp4").write_bytes(b"a crash's leftover")
-    before = _snapshot(root)
+    before = snapshot(root)
     with pytest.raises(envhub.recording.DatasetLayoutError, match="in its own encoding") as err:
         _record(root, 10, **asked)
     name = next(iter(asked))
     assert (f"{name}={asked[name]}" if name != "codec" else f"`{asked[name]}` asked") in str(err.value)
-    assert _snapshot(root) == before
+    assert snapshot(root) == before
     with pytest.raises(envhub.recording.DatasetLayoutError, match="in its own encoding"):
         _evaluate(root, 20, **asked)
-    assert _snapshot(root) == before
+    assert snapshot(root) == before
     _check_frames(root, 4)
 
 
@@ -187,11 +148,11 @@ def test_a_stream_that_cannot_be_reproduced_is_refused(tmp_path, monkeypatch):
     x264 options changed since the dataset was written), the append is refused untouched."""
     root = tmp_path / "x264"
     _record(root, 0)
-    before = _snapshot(root)
+    before = snapshot(root)
     monkeypatch.setitem(_encoding.CODECS, "libx264", {"preset": "veryslow"})
     with pytest.raises(envhub.recording.DatasetLayoutError, match="another stream configuration"):
         _record(root, 10)
-    assert _snapshot(root) == before
+    assert snapshot(root) == before
 
 
 LEROBOT_AV1_WRITER = textwrap.dedent(

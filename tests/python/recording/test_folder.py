@@ -13,9 +13,8 @@ import textwrap
 import gymnasium
 import numpy as np
 import pytest
-from conftest import import_envhub
-from test_py_record import lerobot_python
-from test_py_record_integrity import _snapshot
+from harness import import_envhub
+from lerobot_datasets import lerobot_python, snapshot
 
 envhub = import_envhub()
 from envhub.recording import _dataset  # noqa: E402
@@ -82,10 +81,10 @@ def test_refusals_touch_nothing(tmp_path):
     info = json.loads((root / "meta/info.json").read_text())
     info["total_episodes"] += 3
     (root / "meta/info.json").write_text(json.dumps(info))
-    before = _snapshot(root)
+    before = snapshot(root)
     with pytest.raises(envhub.recording.DatasetLayoutError, match="describes 4 of them"):
         _open(root)
-    assert _snapshot(root) == before
+    assert snapshot(root) == before
 
 
 def test_a_dangling_link_and_a_read_only_folder_are_clear_errors(tmp_path):
@@ -146,7 +145,7 @@ LEROBOT_CAMERA_STATS = textwrap.dedent(
 def test_camera_statistics_are_lerobots_for_one_frame_episodes(tmp_path):
     """Episodes of one frame and of several: a camera's per-episode statistics (quantiles over
     the pixels, also for one frame) equal LeRobot's `get_feature_stats` over the frames drawn."""
-    from test_py_record_encoding import KEY, Drawn, image
+    from drawn_env import KEY, Drawn, image
 
     class Short(Drawn):
         def step(self, action):

@@ -11,7 +11,7 @@ actions lie beyond the bounds (Gymnasium passes them to the env, which clips the
 must do the same). It prints one JSON document on stdout.
 
 Run by `adapters/classic/tests/gymnasium_parity.rs`; by hand:
-    python tests/python/classic_reference.py [--steps N] > reference.json
+    python tests/python/support/classic_reference.py [--steps N] > reference.json
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Run in robosuite's interpreter by test_py_suites.py, plainly or with the worker's caches of
+"""Run in robosuite's interpreter by pyenv/test_suites.py, plainly or with the worker's caches of
 hard resets installed (`envhub.worker.hosted.compiled_models`, `render_contexts`, `sensor_checks`),
 with two cameras:
 - `stack`: robosuite's `Stack`, whose scene is the same at every reset, reset four times;

@@ -13,7 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+REPO_ROOT = Path(__file__).resolve().parents[3]
 TARGET = REPO_ROOT / "target" / "release"
 BINARIES = ("lib_envhub.so", "envhub", "envhub-worker", "envhub-worker-mujoco", "envhub-worker-rapier")
 UV = REPO_ROOT / ".venv" / "bin" / "uv"

@@ -1,4 +1,4 @@
-"""Loads a dataset with LeRobot's own loader and dumps what it gives, for test_py_record.py.
+"""Loads a dataset with LeRobot's own loader and dumps what it gives, for the recording tests.
 
 Runs in the LeRobot interpreter (`.venv-lerobot/`, with `lerobot-dataset` or `lerobot`, and
 torch), not envhub's: `python lerobot_load.py ROOT OUT.npz`. Writes, per feature, the values of every

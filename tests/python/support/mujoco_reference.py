@@ -17,7 +17,7 @@ A run with `"set_state": true` instead starts from a state it sets itself after 
 the `qpos`/`qvel` reset options.
 
 Run by `adapters/mujoco/tests/gymnasium_parity.rs`; by hand:
-    python tests/python/mujoco_reference.py [--steps N] > reference.json
+    python tests/python/support/mujoco_reference.py [--steps N] > reference.json
 """
 
 from __future__ import annotations

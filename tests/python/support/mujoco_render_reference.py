@@ -10,7 +10,7 @@ side can replay the same actions and compare its frames with these. Rendering us
 software EGL.
 
 Run by `adapters/mujoco/tests/render.rs`; by hand:
-    python tests/python/mujoco_render_reference.py > frames.json
+    python tests/python/support/mujoco_render_reference.py > frames.json
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """Fixed-action runs of the suites' entries, in-process and through envhub, and their exact
-comparison (`test_py_suites.py`).
+comparison (`pyenv/test_suites.py`).
 
 `python suite_runs.py native CASE_JSON OUT` runs in a suite's own interpreter and uses only
 the suite's API (no envhub): it writes the run (observations, rewards, flags, infos) to OUT

@@ -7,7 +7,7 @@ import enum
 import json
 
 import numpy as np
-from conftest import import_envhub
+from harness import import_envhub
 
 import_envhub()
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from conftest import import_envhub
 from gymnasium import spaces
+from harness import import_envhub
 
 import_envhub()
 from envhub.wire.spaces import Codec, to_gymnasium  # noqa: E402

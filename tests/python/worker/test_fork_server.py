@@ -3,7 +3,7 @@ environment, started on the first session that needs it and reused by this proce
 sessions (the embedded hub), with the same trajectories as workers started cold
 (`ENVHUB_WARM_WORKERS=0`).
 
-The environment is test_py_pyenv.py's Gymnasium one on another CPython (same description, so
+The environment is pyenv/test_pyenv.py's Gymnasium one on another CPython (same description, so
 the same cached venv: built once by whichever test runs first). Without uv, that CPython or
 PyPI this skips with the reason; under ENVHUB_PYENV_REQUIRED=1 that is a failure.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 

@@ -16,7 +16,7 @@ LeRobot's rollout stops at the suite's horizon (`TASK_SUITE_MAX_STEPS`).
 It runs in the LeRobot plugin's Python environment `lerobot-libero`, pinned as
 `lerobot[libero]==0.6.1` installs LIBERO (hf-libero 0.1.4, robosuite 1.4.0, mujoco 3.8.1,
 numpy 2.2.6, CPython 3.12), with the `libero` adapter's asset set-up and its caches of what a
-hard reset rebuilds (the same observations, checked in tests/python/test_py_suites.py).
+hard reset rebuilds (the same observations, checked in tests/python/pyenv/test_suites.py).
 """
 
 from __future__ import annotations

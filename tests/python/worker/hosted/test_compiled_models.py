@@ -1,7 +1,7 @@
 """The worker's cache of compiled MuJoCo models (`envhub.worker.hosted.compiled_models`), which
 robosuite's and LIBERO's hard resets go through: a model handed out from it is the model a
 compile gives, byte for byte, and the cache keeps only what repeats, within its bound. (The
-suites' own runs through it are compared with the suites in-process in test_py_suites.py.)"""
+suites' own runs through it are compared with the suites in-process in pyenv/test_suites.py.)"""
 
 from __future__ import annotations
 

@@ -8,12 +8,11 @@ import signal
 import subprocess
 import sys
 import textwrap
-from pathlib import Path
 
 import gymnasium
 import numpy as np
 import pytest
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, SUPPORT, import_envhub
 
 envhub = import_envhub()
 
@@ -363,6 +362,6 @@ def test_adapters_from_the_hub_config(registry, tmp_path):
     env = dict(os.environ)
     env.pop("ENVHUB_ADAPTERS", None)
     env["ENVHUB_CONFIG"] = str(tmp_path / "envhub.yaml")
-    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parent), env.get("PYTHONPATH", "")])
+    env["PYTHONPATH"] = os.pathsep.join([str(SUPPORT), env.get("PYTHONPATH", "")])
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120, cwd=REPO_ROOT)
     assert out.returncode == 0 and "ok" in out.stdout, out.stderr

@@ -8,7 +8,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 gym = pytest.importorskip("gymnasium")

@@ -26,12 +26,18 @@ import textwrap
 import numpy as np
 import pytest
 import yaml
-from conftest import REPO_ROOT, import_envhub
+from harness import REPO_ROOT, import_envhub
 
 envhub = import_envhub()
 
 from envhub.worker.hosted import libero as adapter  # noqa: E402
-from envhub.worker.hosted.libero_spec import action_space, observation_space, outside, split_env_id, task_index  # noqa: E402
+from envhub.worker.hosted.libero_spec import (  # noqa: E402
+    action_space,
+    observation_space,
+    outside,
+    split_env_id,
+    task_index,
+)
 
 # LIBERO's five suites (`libero_task_map`), 10 tasks each but libero_90's 90.
 SUITES = {"libero_spatial": 10, "libero_object": 10, "libero_goal": 10, "libero_10": 10, "libero_90": 90}
@@ -228,7 +234,7 @@ def test_availability_names_what_is_missing_and_the_fix():
     with open(REPO_ROOT / "configs" / "env_registry.yaml", encoding="utf-8") as f:
         frameworks = yaml.safe_load(f).get("frameworks") or {}
     if "libero" in frameworks:
-        # The catalog runs LIBERO in a Python environment of its own (test_py_suites.py runs
+        # The catalog runs LIBERO in a Python environment of its own (pyenv/test_suites.py runs
         # it there): making an entry does not depend on this interpreter.
         return
     with pytest.raises(envhub.AdapterUnavailableError) as caught:

@@ -6,7 +6,7 @@ Skipped unless ManiSkill is importable here and the worker's interpreter (ENVHUB
 else this one) reports the adapter available: ManiSkill is not in requirements-dev.txt,
 and SAPIEN needs a Vulkan device even for state observations (a GPU driver, or Mesa's
 lavapipe; see `envhub/worker/hosted/maniskill.py`). To run it:
-`ENVHUB_PYTHON=<python with mani-skill> <that python> -m pytest tests/python/test_py_maniskill.py`.
+`ENVHUB_PYTHON=<python with mani-skill> <that python> -m pytest tests/python/worker/hosted/test_maniskill.py`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import importlib.util
 
 import numpy as np
 import pytest
-from conftest import import_envhub
+from harness import import_envhub
 
 envhub = import_envhub()
 
