@@ -64,7 +64,7 @@ def test_a_killed_hub_raises_hub_lost_naming_it(two_hubs):
     """The hub's death is noticed as its liveliness token going away (its TCP links close),
     not at the step timeout, which is set far above any wait a loaded machine causes: a loss
     noticed only when it runs out would say "step timeout". How fast it is noticed is a
-    figure of docs/remote.md, not a bound here."""
+    figure of docs/benchmarks.md, not a bound here."""
     a, b = two_hubs
     env = envhub.make_vec("gym-cartpole", 4, hubs=["pya", "pyb"], step_timeout=60.0)
     try:

@@ -118,7 +118,7 @@ def test_bad_frames_are_refused_naming_what_is_expected(tmp_path) -> None:
 
 
 def make_results(out: Path) -> dict:
-    """Results as envhub eval writes them (docs/eval.md's schema), with real videos: two
+    """Results as envhub eval writes them (docs/guide/eval.md's schema), with real videos: two
     tasks of three episodes, one failure and one error among them."""
     outcomes = {(0, 0): True, (0, 1): False, (0, 2): True, (1, 0): True, (1, 1): None, (1, 2): True}
     episodes = []

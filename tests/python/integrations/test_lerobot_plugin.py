@@ -273,7 +273,7 @@ ds.finalize()
 
 # slow: LeRobot's training start-up, then an evaluation episode of 500 steps
 @pytest.mark.slow
-@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/lerobot.md)")
+@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/guide/lerobot.md)")
 def test_lerobot_train_evaluates_through_envhub(lerobot_python, plugin_site, tmp_path):
     """`lerobot-train --env.type=envhub` runs its periodic evaluation on a Meta-World task
     (a tiny ACT trained two steps on a tiny local dataset, evaluated after the second)."""
@@ -300,7 +300,7 @@ def test_lerobot_train_evaluates_through_envhub(lerobot_python, plugin_site, tmp
 
 # slow: LIBERO's hard resets and 280 steps of 2 envs through lerobot-eval, videos included
 @pytest.mark.slow
-@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/lerobot.md)")
+@pytest.mark.skip(reason="not yet seen passing: the first run here failed under load before the plugin raised envhub's 60 s step bound (docs/guide/lerobot.md)")
 def test_lerobot_eval_libero_end_to_end(lerobot_python, plugin_site, tmp_path):
     """`lerobot-eval --env.type=envhub --env.task=libero_spatial` (task 0, 128x128 cameras, 2
     episodes in a batch of 2) in an interpreter with no LIBERO: LeRobot's LIBERO horizon, its

@@ -1,4 +1,4 @@
-"""The worker side's contract (docs/architecture.md): `envhub.worker` and `envhub.worker.hosted`
+"""The worker side's contract (docs/design/architecture.md): `envhub.worker` and `envhub.worker.hosted`
 run on the oldest versions envhub supports — CPython 3.9, numpy 1.21, Gymnasium 1.1 — and a
 worker process imports no client or integration code.
 
