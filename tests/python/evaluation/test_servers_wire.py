@@ -63,7 +63,7 @@ import numpy as np
 from vla_eval.rotation import matrix_to_quat, quat_to_axisangle
 from vla_eval.benchmarks.libero.benchmark import _quat_to_axisangle_robosuite
 sys.path.insert(0, sys.argv[2])
-from eval_peers import quat2axisangle
+from peer_servers import quat2axisangle
 quats, mats = pickle.load(open(sys.argv[1], "rb"))
 out = {
     "antipodal": [quat_to_axisangle(q) for q in quats],

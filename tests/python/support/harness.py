@@ -44,6 +44,20 @@ def mujoco_or_skip(envhub) -> None:
     pytest.skip(message)
 
 
+def runnable_or_skip(envhub, entry_id: str):
+    """An env of `entry_id`, or a skip naming why it cannot run here."""
+    try:
+        return envhub.make(entry_id)
+    except (envhub.AdapterUnavailableError, envhub.NoAdapterError) as exc:
+        pytest.skip(f"`{entry_id}` cannot run here: {str(exc).splitlines()[0]}")
+    except envhub.MakeError as exc:
+        # ManiSkill tasks whose assets are downloaded on first use (from GitHub or Hugging
+        # Face): the adapter names the download command; anything else is a real failure.
+        if "download_asset" not in str(exc):
+            raise
+        pytest.skip(f"`{entry_id}` needs assets that are not downloaded here")
+
+
 def run_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The temporary folder of this test run, shared by its processes: under pytest-xdist
     each worker's base temporary folder lies in the controller's, which is the run's."""

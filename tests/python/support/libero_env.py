@@ -9,8 +9,10 @@ import re
 import subprocess
 from pathlib import Path
 
-import envhub
 import pytest
+from harness import import_envhub
+
+envhub = import_envhub()
 
 REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVHUB_SUITES_REQUIRED"))
 
