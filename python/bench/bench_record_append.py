@@ -7,9 +7,11 @@ video file grows (issue 42's items 3 and 4: the figures docs/guide/recording.md 
 `memory`: Gymnasium vector env of `--envs` envs with 4 KiB observations (512 float64), env 0's
 episodes `--long` steps, the others' 10, a 1 MiB queue; the process's resident set is sampled
 every 5 ms, and its rise over the baseline (after the first reset) reported, held at the end and
-at the peak. `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames, committed every 0.2 s (or 4x the last commit's time), until the camera's
-last video file reaches `--mb` MB; each commit's time, episodes and the bytes it wrote
-(`/proc/self/io` `wchar`) against the file's size before it.
+at the peak. `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
+committed every 0.2 s (or 4x the last commit's time), until the camera's last video file (its
+run of files, joined at the end) reaches `--mb` MB; each commit's time, episodes and the bytes
+it wrote (`/proc/self/io` `wchar`, joins of small files included) against the file's size
+before it.
 """
 
 from __future__ import annotations
@@ -114,10 +116,8 @@ def append(mb: float) -> list[dict]:
     real = _dataset.Dataset.commit
 
     def timed(self, episodes):
-        key = self.video_keys[0]
-        last = self._videos.get(key)
-        size = 0 if last is None else os.path.getsize(self.root / _dataset._fmt(_dataset.VIDEO_PATH, last.at,
-                                                                              video_key=key))
+        # The camera's last file: the files of its run (`_files.py`), joined into one at the end.
+        size = sum(p.size for p in self._files[self.video_keys[0]].run)
         w0, t0 = _wchar(), time.perf_counter()
         out = real(self, episodes)
         rows.append({"last_file_mb": size / 1e6, "seconds": time.perf_counter() - t0,

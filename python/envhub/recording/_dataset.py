@@ -11,12 +11,12 @@ The layout, as LeRobot's writer makes it and its loader reads it:
     data/chunk-C/file-F.parquet             one row per frame, many episodes per file
     videos/KEY/chunk-C/file-F.mp4           a camera's frames, many episodes per file
 
-A commit appends its episodes to the last data, episodes and video files (or starts the next
-ones when a file would reach `data_files_size_in_mb` / `video_files_size_in_mb`): each such
-file is written anew in the private folder `.envhub/`, the committed rows or frames first,
-and renamed into place; then the new `meta/` is swapped in whole (`_durable.py`). A crash
-before the swap leaves `meta/` describing the last commit, over files that hold it first; the
-next open cuts what was appended past it and removes files no committed episode refers to.
+A commit writes its episodes' rows and frames into new data and video files, named after every
+file there, and swaps in the new `meta/` whole (`_durable.py`): no file a committed `meta/`
+refers to is ever changed, so LeRobot's loader (which globs `data/`) and `aggregate_datasets`
+(which reads the files `meta/` names, whole) see only committed episodes at any instant. Small
+files are then joined into LeRobot's sizes (`_files.py`). A crash leaves files no committed
+episode refers to; the next open removes them.
 """
 
 from __future__ import annotations
@@ -36,8 +36,9 @@ from typing import Any
 import numpy as np
 
 from . import _encoding as encoding
-from ._durable import Commit, fsync_dir, fsync_file
+from ._durable import Commit, fsync_dir, fsync_file, link_or_copy
 from ._encoding import Encoding
+from ._files import Files, Part, join_parquet, to_join
 from ._stats import NAMES, aggregate, aggregate_all, column_stats
 from ._video import concatenate, count_frames, pix_fmt
 from .errors import DatasetLayoutError, RecordingError
@@ -413,10 +414,14 @@ class Dataset:
                 self.info[key] = value
         rows = self._rows
         self._remove_uncommitted(rows)
-        self._data = self._last_file(rows, "data")
         self._meta = self._last_file(rows, "meta/episodes")
-        self._videos = {k: self._last_file(rows, f"videos/{k}") for k in self.video_keys}
-        self._trim(rows)
+        self._files = {"data": Files("data", DATA_PATH, self.info["data_files_size_in_mb"], video=False)}
+        for k in self.video_keys:
+            self._files[k] = Files(k, VIDEO_PATH.replace("{video_key}", k), self.info["video_files_size_in_mb"],
+                                   video=True)
+        for files in self._files.values():
+            self._find_run(rows, files)
+        self._trim()
         self.tasks = self._read_tasks()
         self.stats = self._committed_stats()
         self._schemas = self._existing_schemas()
@@ -492,30 +497,61 @@ class Dataset:
             count = round(float(last[f"{prefix}/to_timestamp"]) * self.info["fps"])
         return _Open(at, count)
 
-    def _trim(self, rows: list[dict[str, Any]]) -> None:
+    def _find_run(self, rows: list[dict[str, Any]], files: Files) -> None:
+        """The run of `files` the committed episodes leave: the newest files that together stay
+        under the kind's size (the last one always), with their rows or frames and episodes."""
+        prefix, fps = files.prefix(), self.info["fps"]
+        parts: list[Part] = []
+        for r in rows:
+            chunk = r.get(f"{prefix}/chunk_index")
+            if chunk is None:
+                return
+            at = (int(chunk), int(r[f"{prefix}/file_index"]))
+            if not parts or parts[-1].at != at:
+                parts.append(Part(at, 0, 0, int(r["episode_index"]), 0))
+            part = parts[-1]
+            part.episodes += 1
+            if files.video:
+                part.count = round(float(r[f"{prefix}/to_timestamp"]) * fps)
+            else:
+                part.count += int(r["length"])
+        if not parts:
+            return
+        files.last = parts[-1].at
+        total = 0
+        for part in reversed(parts):
+            part.size = os.path.getsize(self.root / files.rel(part.at))
+            total += part.size
+            if files.run and total / 2**20 >= files.limit_mb:
+                break
+            files.run.insert(0, part)
+
+    def _trim(self) -> None:
         """Cuts what a crash left appended to the last data and video files (rows and frames
-        past the last commit), so the files hold exactly what `meta/` describes."""
+        past the last commit: recorders before this one appended to them), so the files hold
+        exactly what `meta/` describes."""
         import pyarrow.parquet as pq
 
         cut = []
-        if self._data is not None:
-            path = self.root / _fmt(DATA_PATH, self._data.at)
-            if pq.read_metadata(path).num_rows > self._data.count:
-                tmp = self.staging / "trim.parquet"
-                self._write_table(pq.read_table(path).slice(0, self._data.count), tmp)
-                cut.append((tmp, path))
-        for key, last in self._videos.items():
-            if last is None:
+        for key, files in self._files.items():
+            if not files.run:
                 continue
-            path = self.root / _fmt(VIDEO_PATH, last.at, video_key=key)
-            if count_frames(path) > last.count:
+            last = files.run[-1]
+            path = self.root / files.rel(last.at)
+            if not files.video:
+                if pq.read_metadata(path).num_rows > last.count:
+                    tmp = self.staging / "trim.parquet"
+                    self._write_table(pq.read_table(path).slice(0, last.count), tmp)
+                    cut.append((tmp, path, files, last))
+            elif count_frames(path) > last.count:
                 tmp = self.staging / f"trim-{len(cut)}.mp4"
                 concatenate([(path, last.count)], tmp, self.info["fps"], self.encodings[key].tag())
-                cut.append((tmp, path))
-        for tmp, path in cut:
+                cut.append((tmp, path, files, last))
+        for tmp, path, _, last in cut:
             fsync_file(tmp)
             os.replace(tmp, path)
             fsync_dir(path.parent)
+            last.size = os.path.getsize(path)
         if cut:
             warnings.warn(
                 f"cut what a crash left past the last commit from {len(cut)} file(s) of `{self.root}`",
@@ -611,19 +647,116 @@ class Dataset:
     def commit(self, episodes: list[Episode]) -> list[int]:
         """Writes `episodes` into the dataset in one commit; returns their episode indices.
         On an error nothing is committed and the dataset's state here is as before."""
+        if not episodes:
+            return []
+        rows = sum(ep.length for ep in episodes)
+        for key, files in self._files.items():  # LeRobot's roll: the run joined, the next file new
+            if files.video:
+                adding = sum(os.path.getsize(ep.videos[key]) for ep in episodes)
+            else:
+                adding = sum(p.size for p in files.run) * rows // max(sum(p.count for p in files.run), 1)
+            if files.rolls(adding):
+                self._join(files, 0)
+                files.run = []
         tasks, stats = dict(self.tasks), dict(self.stats)
         try:
-            return self._commit(episodes)
+            indices = self._commit(episodes)
         except BaseException:
             self.tasks, self.stats = tasks, stats
             raise
+        for files in self._files.values():
+            self._join(files, to_join([p.size for p in files.run]))
+        return indices
+
+    # Joining small files (`_files.py`) -----------------------------------------------------
+
+    def _join(self, files: Files, first: int) -> None:
+        """Joins the run's files from `first` on into one, at the first one's name: a new file
+        after every file there, `meta/` swapped to it, the joined files removed, then the new
+        file linked to the first one's name and `meta/` swapped again. On an error (a full
+        disk) the run stays as it was, with a warning: the joins are an optimisation."""
+        parts = files.run[first:]
+        if len(parts) < 2:
+            return
+        commits: list[Commit] = []
+        try:
+            self._join_parts(commits, files, first, parts)
+        except OSError as e:  # a full disk (PyAV's I/O errors are `OSError`s too)
+            for commit in commits:
+                commit.discard()
+            warnings.warn(f"could not join {len(parts)} `{files.kind}` files of `{self.root}` ({e}); "
+                          "they stay as they are", stacklevel=4)
+
+    def _join_parts(self, commits: list[Commit], files: Files, first: int, parts: list[Part]) -> None:
+        target = files.after_last(CHUNKS_SIZE)
+        commit = Commit(self.root, self.staging)
+        commits.append(commit)
+        paths = [self.root / files.rel(p.at) for p in parts]
+        if files.video:
+            tmp = commit.staged("joined.mp4")
+            concatenate([(path, p.count) for path, p in zip(paths, parts, strict=True)], tmp, self.info["fps"],
+                        self.encodings[files.kind].tag())
+        else:
+            tmp = commit.staged("joined.parquet")
+            join_parquet(paths, tmp)
+        commit.place(tmp, files.rel(target))
+        shifts = np.concatenate([[0], np.cumsum([p.count for p in parts])[:-1]])
+        self._repoint(commit, files, parts, target, shifts)
+        commit.apply()
+        joined = Part(target, sum(p.count for p in parts), os.path.getsize(self.root / files.rel(target)),
+                      parts[0].first, sum(p.episodes for p in parts))
+        files.run[first:] = [joined]
+        files.last = target
+        for path in paths:
+            path.unlink()
+        for folder in {path.parent for path in paths}:
+            fsync_dir(folder)
+        # Back to the first joined file's name, so that names stay consecutive.
+        home = parts[0].at
+        commit = Commit(self.root, self.staging)
+        commits.append(commit)
+        tmp = commit.staged("link")
+        link_or_copy(str(self.root / files.rel(target)), str(tmp))
+        commit.place(tmp, files.rel(home))
+        self._repoint(commit, files, [joined], home, np.zeros(1, np.int64))
+        commit.apply()
+        (self.root / files.rel(target)).unlink()
+        fsync_dir((self.root / files.rel(target)).parent)
+        joined.at = files.last = home
+
+    def _repoint(self, commit: Commit, files: Files, parts: list[Part], at: tuple[int, int],
+                 shifts: np.ndarray) -> None:
+        """Writes into `commit`'s `meta/` the episodes files with the episodes of `parts`
+        pointing at the file `at`, where part `k` starts `shifts[k]` frames in."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        start, end = parts[0].first, parts[-1].first + parts[-1].episodes
+        shift = np.repeat(np.asarray(shifts, dtype=np.int64), [p.episodes for p in parts])
+        prefix, fps = files.prefix(), self.info["fps"]
+        for path in reversed(self._episode_files()):
+            index = pq.read_table(path, columns=["episode_index"]).column(0).to_numpy()
+            chosen = (index >= start) & (index < end)
+            if chosen.any():
+                table = pq.read_table(path)
+                moved = np.where(chosen, shift[np.clip(index - start, 0, len(shift) - 1)], 0)
+                new = {f"{prefix}/chunk_index": np.where(chosen, at[0], table.column(f"{prefix}/chunk_index")),
+                       f"{prefix}/file_index": np.where(chosen, at[1], table.column(f"{prefix}/file_index"))}
+                if files.video:
+                    for name in ("from_timestamp", "to_timestamp"):
+                        old = table.column(f"{prefix}/{name}").to_numpy()
+                        new[f"{prefix}/{name}"] = np.where(moved != 0, (np.round(old * fps) + moved) / fps, old)
+                for name, values in new.items():
+                    i = table.schema.get_field_index(name)
+                    table = table.set_column(i, table.schema.field(i), pa.array(values).cast(table.schema.field(i).type))
+                self._write_table(table, commit.meta_file(str(path.relative_to(self.root / "meta"))))
+            if len(index) and index.min() <= start:
+                break
 
     def _commit(self, episodes: list[Episode]) -> list[int]:
         """Writes `episodes` into the dataset (see the module's doc for the order); returns
         their episode indices. Statistics are computed over all of them at once (one
         `reduceat` per column and statistic), since commits of many episodes are common."""
-        if not episodes:
-            return []
         first_ep, first_frame = self.info["total_episodes"], self.info["total_frames"]
         new_tasks = [e.task for e in episodes if e.task not in self.tasks]
         for task in dict.fromkeys(new_tasks):
@@ -646,40 +779,35 @@ class Dataset:
         columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
         columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
 
-        # Data: appended to the last file, or a new one if that would reach the size.
-        data_table = self._data_table(columns)
-        data_last = self._grow(self._data, DATA_PATH, self.info["data_files_size_in_mb"], new=total)
-        if data_last.count:
-            data_table = self._prepend(data_table, _fmt(DATA_PATH, data_last.at), data_last.count)
+        # Data and videos: new files, after every file there, that only the new `meta/` refers
+        # to (`_files.py`); an episode is a range of rows and a time range of its files.
+        data_files = self._files["data"]
+        data_at = data_files.after_last(CHUNKS_SIZE)
         data = commit.staged("data.parquet")
-        self._write_table(data_table, data)
-        commit.place(data, _fmt(DATA_PATH, data_last.at))
+        self._write_table(self._data_table(columns), data)
+        commit.place(data, data_files.rel(data_at))
         meta: dict[str, Any] = {
             "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
             "tasks": [[ep.task] for ep in episodes],
             "length": lengths,
-            "data/chunk_index": np.full(count, data_last.at[0]),
-            "data/file_index": np.full(count, data_last.at[1]),
+            "data/chunk_index": np.full(count, data_at[0]),
+            "data/file_index": np.full(count, data_at[1]),
             "dataset_from_index": first_frame + starts,
             "dataset_to_index": first_frame + starts + lengths,
         }
-        # Videos: every episode's MP4 appended (packets copied, not encoded again) to the last
-        # file of its camera, or to a new one; an episode is a time range of its file.
-        videos: dict[str, _Open] = {}
+        placed = {"data": (data_at, total, data)}
         for key in self.video_keys:
-            size = sum(os.path.getsize(ep.videos[key]) for ep in episodes)
-            last = self._grow(self._videos[key], VIDEO_PATH, self.info["video_files_size_in_mb"], adding=size, key=key)
-            rel = _fmt(VIDEO_PATH, last.at, video_key=key)
-            parts = [(self.root / rel, last.count)] if last.count else []
-            parts += [(ep.videos[key], ep.length) for ep in episodes]
-            video = commit.staged("video.mp4")
-            concatenate(parts, video, fps, self.encodings[key].tag())
-            commit.place(video, rel)
-            meta[f"videos/{key}/chunk_index"] = np.full(count, last.at[0])
-            meta[f"videos/{key}/file_index"] = np.full(count, last.at[1])
-            meta[f"videos/{key}/from_timestamp"] = (last.count + starts) / fps
-            meta[f"videos/{key}/to_timestamp"] = (last.count + starts + lengths) / fps
-            videos[key] = _Open(last.at, last.count + total)
+            files = self._files[key]
+            at = files.after_last(CHUNKS_SIZE)
+            video = commit.staged("video.mp4")  # packets copied, not encoded again
+            concatenate([(ep.videos[key], ep.length) for ep in episodes], video, fps, self.encodings[key].tag())
+            commit.place(video, files.rel(at))
+            meta[f"videos/{key}/chunk_index"] = np.full(count, at[0])
+            meta[f"videos/{key}/file_index"] = np.full(count, at[1])
+            meta[f"videos/{key}/from_timestamp"] = starts / fps
+            meta[f"videos/{key}/to_timestamp"] = (starts + lengths) / fps
+            placed[key] = (at, total, video)
+        sizes = {key: os.path.getsize(path) for key, (_, _, path) in placed.items()}
         meta_last = self._grow(self._meta, EPISODES_PATH, self.info["data_files_size_in_mb"], new=count)
         meta["meta/episodes/chunk_index"] = np.full(count, meta_last.at[0])
         meta["meta/episodes/file_index"] = np.full(count, meta_last.at[1])
@@ -711,9 +839,11 @@ class Dataset:
         self._write_json(info, commit.meta_file("info.json"))
         commit.apply()  # the commit point: `meta/` swapped in whole
         self.info = info
-        self._data = _Open(data_last.at, data_last.count + total)
         self._meta = _Open(meta_last.at, meta_last.count + count)
-        self._videos.update(videos)
+        for key, (at, frames, _) in placed.items():
+            files = self._files[key]
+            files.run.append(Part(at, frames, sizes[key], first_ep, count))
+            files.last = at
         for ep in episodes:  # now copied into the dataset's files
             for path in ep.videos.values():
                 path.unlink(missing_ok=True)
@@ -809,6 +939,11 @@ class Dataset:
         """Releases the folder (removing the private folder's files not committed)."""
         if self._lock.closed:
             return
+        try:
+            for files in getattr(self, "_files", {}).values():  # each run into one file, as LeRobot's
+                self._join(files, 0)
+        except Exception as e:  # the committed episodes are whole either way
+            warnings.warn(f"could not join the last files of `{self.root}`: {e}", stacklevel=2)
         try:
             _remove_private(self.root / PRIVATE)
         finally:

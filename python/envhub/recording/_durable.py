@@ -1,8 +1,8 @@
 """One commit of a dataset, on disk: staged files fsynced, placed by rename, and the whole of
 `meta/` swapped in by one atomic exchange, the commit point.
 
-Data and video files a commit writes are new files or supersets of the committed ones (rows or
-frames appended), so placing them first changes nothing a loader reads through `meta/`. The
+Data and video files a commit places are new files, named after every file there (`_files.py`),
+so placing them first changes nothing a loader reads through `meta/`. The
 new `meta/` is built beside the old one (unchanged files hard-linked, changed ones written
 anew, never through a link) and exchanged with it by `renameat2(RENAME_EXCHANGE)`: `info.json`,
 `stats.json`, `tasks.parquet` and the episodes files change together. Where the file system
@@ -56,7 +56,7 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(errno, os.strerror(errno), str(b))
 
 
-def _link(src: str, dst: str) -> None:
+def link_or_copy(src: str, dst: str) -> None:
     """A hard link (nothing copied), or a copy where the file system has none."""
     try:
         os.link(src, dst)
@@ -78,17 +78,26 @@ class Commit:
         self.meta = staging / "meta"
         shutil.rmtree(self.meta, ignore_errors=True)
         if (root / "meta").is_dir():
-            shutil.copytree(root / "meta", self.meta, copy_function=_link)
+            shutil.copytree(root / "meta", self.meta, copy_function=link_or_copy)
         else:
             self.meta.mkdir(parents=True)
         self._renames: list[tuple[Path, str]] = []
         self._written: list[Path] = []
         self._serial = 0
+        self._staged: list[Path] = []
 
     def staged(self, name: str) -> Path:
         """A fresh path in the staging folder."""
         self._serial += 1
-        return self.staging / f"c{self._serial}-{name}"
+        path = self.staging / f"c{self._serial}-{name}"
+        self._staged.append(path)
+        return path
+
+    def discard(self) -> None:
+        """Removes what this commit staged (one that will not apply)."""
+        for path in self._staged:
+            path.unlink(missing_ok=True)
+        shutil.rmtree(self.meta, ignore_errors=True)
 
     def place(self, tmp: Path, rel: str) -> None:
         """Puts `tmp` at `rel` (under the dataset) when the commit applies, before `meta/`."""

@@ -67,10 +67,11 @@ class RecordEpisodes(VectorWrapper):
     `render()` frames become the video `observation.images.render`. The task text is `task`,
     else the catalog entry's description (envhub envs), else the env's id.
 
-    The files are LeRobot v3's: episodes appended into data, episodes-metadata and video
-    files, each rolled to the next file when it would reach `data_files_size_in_mb` (100,
-    LeRobot's default; the episodes files too) or `video_files_size_in_mb` (200); a value given
-    is written into the dataset's `info.json`.
+    The files are LeRobot v3's: data, episodes-metadata and video files holding many episodes,
+    each rolled to the next file when it would reach `data_files_size_in_mb` (100, LeRobot's
+    default; the episodes files too) or `video_files_size_in_mb` (200); a value given is written
+    into the dataset's `info.json`. A commit writes new files, joined into those sizes later,
+    and never changes a file a committed episode is in.
 
     Episodes are written when they end, `keep="success"` keeping only those whose last
     `success` / `is_success` info is true; an episode a `reset()` cuts short is not written.

@@ -291,8 +291,8 @@ class Writer:
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
         self._last_commit = time.monotonic()
-        # A commit writes the last files anew (up to their size): spacing commits by four
-        # times that keeps committing under a fifth of the writer's time as files grow.
+        # Spacing commits by four times their duration keeps committing (and the joins of small
+        # files it may do) under a fifth of the writer's time.
         self._interval = max(self.commit_every, 4 * (self._last_commit - start))
 
 

@@ -83,7 +83,7 @@ CRASH_BETWEEN_RENAMES = textwrap.dedent(
     import envhub
     from envhub.recording import _durable
 
-    root, crash_at = sys.argv[1], int(sys.argv[2])
+    root, crash_at, exchange = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
     renames = []
 
     def hook(rel):
@@ -93,8 +93,49 @@ CRASH_BETWEEN_RENAMES = textwrap.dedent(
             os._exit(9)  # a crash: nothing after this runs, nothing is cleaned up
 
     _durable.rename_hook = hook
+    if not exchange:  # as on a file system without RENAME_EXCHANGE
+        _durable._exchange = lambda a, b: False
     envhub.record("mujoco-inverted-pendulum", 3, root, num_envs=3, max_episode_steps=6, width=32, height=32,
                   seed=5, recorder={"commit_every": 3600})
+    """
+)
+
+# In LeRobot's interpreter, for each `ROOT\tCLEAN\tSCRATCH` line: what its loader gives of ROOT
+# (per frame: index, episode, state, each camera's mean level), and what `aggregate_datasets`
+# of ROOT and CLEAN holds (the same per frame, and the rows of its data files).
+READERS = textwrap.dedent(
+    """\
+    import json, sys, traceback
+    from pathlib import Path
+    import pyarrow.parquet as pq
+    try:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+        from lerobot.datasets.aggregate import aggregate_datasets
+    except ImportError:
+        from ledataset.datasets.lerobot_dataset import LeRobotDataset
+        from ledataset.datasets.aggregate import aggregate_datasets
+
+    def frames(ds):
+        out = []
+        for i in range(len(ds)):
+            item = ds[i]
+            out.append([int(item["index"]), int(item["episode_index"]), *item["observation.state"].tolist(),
+                        *[round(float(item[k].mean()) * 255, 1) for k in ds.meta.video_keys]])
+        return out
+
+    for line in sys.stdin:
+        try:
+            root, clean, scratch = (Path(p) for p in line.rstrip("\\n").split("\\t"))
+            ds = LeRobotDataset("envhub/crashed", root=root)
+            aggregate_datasets(["envhub/crashed", "envhub/clean"], "envhub/aggr", roots=[root, clean],
+                               aggr_root=scratch / "aggr")
+            agg = LeRobotDataset("envhub/aggr", root=scratch / "aggr")
+            out = {"ok": True, "episodes": ds.meta.total_episodes, "frames": frames(ds),
+                   "aggregate": {"episodes": agg.meta.total_episodes, "frames": frames(agg),
+                                 "rows": pq.read_table(scratch / "aggr" / "data").num_rows}}
+        except Exception:
+            out = {"ok": False, "error": traceback.format_exc()}
+        print(json.dumps(out), flush=True)
     """
 )
 
@@ -104,53 +145,81 @@ def _record_pendulums(root, episodes: int, seed: int) -> None:
                   height=32, seed=seed)
 
 
-def test_a_crash_between_any_two_renames_leaves_the_last_commit(tmp_path):
-    """A commit's renames, each one the last thing a process does (`os._exit` from the rename
-    hook): the dataset loads, and equals the last commit (meta files, stats included, change
-    together); the next recording appends after it."""
+# Slow: a crash at each of the 23 renames of an append (its commit, then the joins of its files
+# at close: 12 with RENAME_EXCHANGE, 11 without), each dataset read by LeRobot's loader and
+# aggregated with `aggregate_datasets` (about 2 min on two cores).
+@pytest.mark.slow
+def test_a_crash_at_any_rename_shows_every_reader_the_last_commit(tmp_path):
+    """An append (a commit, then the joins of its new files with the last ones), crashed at each
+    of its renames (`os._exit` from the rename hook), with and without RENAME_EXCHANGE: LeRobot's
+    loader gives exactly the episodes `meta/` counts, before or after the commit, frame for
+    frame as a clean recording of them; `aggregate_datasets` of it and another dataset holds
+    exactly those episodes' rows and frames and the other's (no row of a file no commit owns);
+    the next recording appends after it."""
+    import json
     import shutil
     import subprocess
     import sys
 
+    from lerobot_datasets import lerobot_python
+
+    python = lerobot_python()
     mujoco_or_skip(envhub)
-    base = tmp_path / "base"
+    base, full, other = tmp_path / "base", tmp_path / "full", tmp_path / "other"
     _record_pendulums(base, 3, seed=0)
-    ref_summary, ref = load(base)
-    ref_meta = snapshot(base / "meta")
-    script = tmp_path / "crash.py"
-    script.write_text(CRASH_BETWEEN_RENAMES)
+    shutil.copytree(base, full)
+    _record_pendulums(full, 3, seed=5)
+    _record_pendulums(other, 3, seed=4)
+    (tmp_path / "crash.py").write_text(CRASH_BETWEEN_RENAMES)
+    (tmp_path / "readers.py").write_text(READERS)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    crash_at, renames = 1, None
-    while True:
-        root = tmp_path / f"crash{crash_at}"
-        shutil.copytree(base, root)
-        proc = subprocess.run([sys.executable, str(script), str(root), str(crash_at)], capture_output=True,
-                              text=True, timeout=300, env=env)
-        if proc.returncode == 0:  # past the last rename: the whole commit is there
-            renames = crash_at - 1
-            break
-        assert proc.returncode == 9, proc.stderr[-3000:]
-        assert snapshot(root / "meta") == ref_meta, f"crash at rename {crash_at}: meta/ changed"
-        summary, arrays = load(root)
-        n = ref_summary["num_frames"]
-        assert {k: summary[k] for k in ("num_episodes", "num_frames", "episode_lengths", "stats_keys")} == {
-            k: ref_summary[k] for k in ("num_episodes", "num_frames", "episode_lengths", "stats_keys")}
-        for key, values in ref.items():
-            got = arrays[key][: len(values)] if key.startswith("raw/") else arrays[key]
-            assert got.shape[0] >= n and np.array_equal(got[: len(values)], values), (crash_at, key)
-        # Recording again removes what the crash left and appends after the last commit.
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            _record_pendulums(root, 3, seed=9)
-        summary, arrays = load(root)
-        assert summary["num_episodes"] == 6 and summary["episode_lengths"][:3] == ref_summary["episode_lengths"]
-        np.testing.assert_array_equal(arrays["raw/index"], np.arange(summary["num_frames"]))
-        for key in ("raw/observation.state", "raw/action"):
-            np.testing.assert_array_equal(arrays[key][:n], ref[key])
-        crash_at += 1
-    # The data file and the video file, each the last one with rows and frames appended, and
-    # `meta/` (exchanged whole).
-    assert renames == 3, renames
+    readers = subprocess.Popen([python, str(tmp_path / "readers.py")], stdin=subprocess.PIPE,
+                               stdout=subprocess.PIPE, text=True)
+
+    def read(root):
+        scratch = tmp_path / f"scratch-{root.name}"
+        scratch.mkdir()
+        readers.stdin.write(f"{root}\t{other}\t{scratch}\n")
+        readers.stdin.flush()
+        out = json.loads(readers.stdout.readline() or '{"ok": false, "error": "the readers died"}')
+        assert out["ok"], out["error"]
+        return out
+
+    try:
+        ref = {3: read(base), 6: read(full)}
+        theirs = [f[2:] for f in read(other)["frames"]]
+        for exchange in ("1", "0"):
+            crash_at = 1
+            while True:
+                root = tmp_path / f"crash{exchange}-{crash_at}"
+                shutil.copytree(base, root)
+                proc = subprocess.run([sys.executable, str(tmp_path / "crash.py"), str(root), str(crash_at), exchange],
+                                      capture_output=True, text=True, timeout=300, env=env)
+                assert proc.returncode in (0, 9), proc.stderr[-3000:]
+                where = (exchange, crash_at, proc.stdout.strip().splitlines()[-1:])
+                got = read(root)
+                assert got["episodes"] in ref, where
+                want = ref[got["episodes"]]
+                assert got["frames"] == want["frames"], where
+                aggregated = got["aggregate"]
+                if exchange == "1":  # without it, `meta/`'s files change one by one (see the report)
+                    assert aggregated["episodes"] == got["episodes"] + 3, where
+                    assert [f[2:] for f in aggregated["frames"]] == [f[2:] for f in want["frames"]] + theirs, where
+                    assert aggregated["rows"] == len(aggregated["frames"]), where
+                if proc.returncode == 0:
+                    break
+                # Recording again removes what the crash left and appends after the last commit.
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    _record_pendulums(root, 3, seed=9)
+                summary, arrays = load(root)
+                assert summary["num_episodes"] == got["episodes"] + 3, where
+                np.testing.assert_array_equal(arrays["raw/index"], np.arange(summary["num_frames"]))
+                crash_at += 1
+            assert crash_at >= 10, crash_at  # the commit's renames and the joins'
+    finally:
+        readers.stdin.close()
+        readers.wait(timeout=60)
 
 
 # Bounded in bytes and threads --------------------------------------------------------------------
