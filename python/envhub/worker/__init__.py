@@ -7,8 +7,8 @@ for Python-hosted adapters (`envhub.worker.hosted`), inside each suite's own int
 
 Its contract (docs/design/architecture.md, "The worker side's contract"): it imports `envhub.wire`,
 `envhub.worker.hosted`, the standard library, numpy, Gymnasium and the suite's own packages, never
-the client or the integrations; it runs on CPython 3.9 or later, numpy 1.24 or later and
-Gymnasium 1.1 or later (`tests/python/worker/test_contract.py` serves an env on the oldest).
+the client or the integrations; it runs on the oldest CPython, numpy and Gymnasium the contract
+names (`tests/python/worker/test_contract.py` serves an env on exactly those).
 """
 
 from .batch import HostedBatch, HostedEnv, HostedVectorEnv

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import struct
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -85,9 +86,9 @@ def _spec(value: Any) -> tuple[str, str, tuple[int, ...], str, Any] | None:
     if t in _PY_CODES:
         code, dtype = _PY_CODES[t]
         return code, dtype, (), "py", t
-    code = _NP_CODES.get(t)
-    if code is not None:
-        return code, value.dtype.str, (), "np", t
+    np_code = _NP_CODES.get(t)
+    if np_code is not None:
+        return np_code, value.dtype.str, (), "np", t
     if t is np.ndarray and value.dtype.str in _ARRAY_DTYPES and value.ndim <= 8:
         return "", value.dtype.str, value.shape, "array", t
     return None
@@ -124,7 +125,7 @@ class ColumnWriter:
         self._zero_id.pack_into(rows, i * self.row_bytes, 0)
 
     def _pack(self, s: _Schema, rows: memoryview, at: int, info: dict[str, Any]) -> bool:
-        values = info.values()
+        values: Iterable[Any] = info.values()
         try:
             if tuple(info) == s.keys and tuple(map(type, values)) == s.types:
                 if s.has_arrays:

@@ -157,7 +157,7 @@ def make_batch(
 def render_fps(env: Any) -> float | None:
     """The env's `metadata["render_fps"]` as a number, or None where it declares none (or
     something that is not a positive number)."""
-    fps = (getattr(env, "metadata", None) or {}).get("render_fps")
+    fps: Any = (getattr(env, "metadata", None) or {}).get("render_fps")
     try:
         fps = float(fps)
     except (TypeError, ValueError):

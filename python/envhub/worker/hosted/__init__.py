@@ -60,10 +60,10 @@ def load_adapter_class(path: str) -> type[EnvAdapter]:
         import pickle
 
         with open(path[len(PICKLED) :], "rb") as f:
-            obj = pickle.load(f)
-        if not (isinstance(obj, type) and issubclass(obj, EnvAdapter)):
+            loaded = pickle.load(f)
+        if not (isinstance(loaded, type) and issubclass(loaded, EnvAdapter)):
             raise TypeError(f"`{path}` does not hold an `envhub.EnvAdapter` subclass")
-        return obj
+        return loaded
     module_name, sep, attr = path.partition(":")
     if not sep or not module_name or not attr:
         raise ValueError(f"invalid adapter import path `{path}`; expected `package.module:ClassName`")

@@ -10,7 +10,7 @@ session asks (`freeze_after_episode_end: true`) and the episodes stay LeRobot's.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 
@@ -24,7 +24,7 @@ class FrozenAfterEnd(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        self._last: tuple[Any, float, bool, bool, dict[str, Any]] | None = None
+        self._last: tuple[Any, SupportsFloat, bool, bool, dict[str, Any]] | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         if self._last is not None and not (options or {}).get(NEW_ROLLOUT_OPTION):
@@ -33,7 +33,7 @@ class FrozenAfterEnd(gym.Wrapper):
         self._last = None
         return self.env.reset(seed=seed, options=options)
 
-    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         if self._last is not None:
             return self._last
         obs, reward, terminated, truncated, info = self.env.step(action)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib.util
 import os
 from importlib import metadata
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 
@@ -321,7 +321,7 @@ class LiberoEnv(gym.Env):
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
         obs = self._with_controller(obs)
-        return {k: obs[k] for k in self.observation_space.spaces}
+        return {k: obs[k] for k in cast(gym.spaces.Dict, self.observation_space).spaces}
 
     def _with_controller(self, obs: dict[str, Any]) -> dict[str, Any]:
         """With `controller_state`: the arm controller's end-effector pose as it last

@@ -216,7 +216,8 @@ class MetaWorldGoals(gym.Wrapper):
         n = len(select.tasks)
         if isinstance(goal, bool) or not isinstance(goal, int) or not 0 <= goal < n:
             raise ValueError(f"invalid Meta-World `goal` {goal!r}\nhint: an index 0..{n - 1} into the task's train goals")
-        self.env.unwrapped.set_task(select.tasks[goal])
+        unwrapped: Any = self.env.unwrapped  # Meta-World's env, with its `set_task`
+        unwrapped.set_task(select.tasks[goal])
         sampling = select.sample_tasks_on_reset
         select.toggle_sample_tasks_on_reset(False)
         try:

@@ -4,7 +4,7 @@ PickPlace, the two-arm tasks), state and camera images as one Dict observation."
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 
@@ -126,7 +126,7 @@ class RobosuiteEnv(gym.Env):
         return self._obs(obs), float(reward), False, self.env.timestep >= self.horizon, {"success": success}
 
     def _obs(self, obs: dict[str, Any]) -> dict[str, Any]:
-        return {k: obs[k] for k in self.observation_space.spaces}
+        return {k: obs[k] for k in cast(gym.spaces.Dict, self.observation_space).spaces}
 
     def close(self) -> None:
         self.env.close()
