@@ -7,8 +7,11 @@ Two rules, read from the sources (no build needed):
    only on crates of lower layers, and never on the external crates its layer forbids
    (``FORBIDDEN``: the catalog compiles without shared memory or a network, say). A crate's
    folder is its name without ``envhub-`` (``crates/session`` is ``envhub-session``).
-2. Modules: inside each crate, the modules that name one another through ``crate::`` and
-   ``super::`` paths form no cycle.
+2. Modules: inside each crate, the modules that name one another through ``crate::``,
+   ``super::`` and ``self::`` paths form no cycle. A name the crate root (or any module)
+   re-exports (``pub use messages::OpenRequest;``, then ``crate::OpenRequest``) counts as
+   the module it comes from, and a doc comment's link (``[`crate::local`]``) counts as a
+   use: rustdoc resolves it, and a module's docs leaning on another is the same arrow.
 3. The Python package: ``check_py_layers.py`` (its layers: wire, worker side, client,
    integrations; lazy imports included).
 
@@ -95,14 +98,24 @@ def check_crates(members: list[Path]) -> list[str]:
     return problems
 
 
+# An intra-doc link's target: [`crate::a::B`], [`super::a`], [text](crate::a::B).
+DOC_LINK = re.compile(r"(?:\[`?|\]\(`?)((?:crate|super|self)(?:::\w+)+)`?[\])]")
+
+
 def strip_tests_and_comments(text: str) -> str:
-    # Unit tests sit at the end of a file (`#[cfg(test)] mod tests`): their `super::` is the
-    # file itself, so they are cut off. Comments may name paths too.
+    """The text the module's references are read from: unit tests cut off (at the end of a
+    file, `#[cfg(test)] mod tests`: their `super::` is the file itself), comments dropped but
+    for the targets of doc comments' links, which rustdoc resolves like any path."""
     cut = re.search(r"#\[cfg\(test\)\]\s*mod\s+\w+\s*\{", text)
     if cut:
         text = text[: cut.start()]
-    text = re.sub(r"//[^\n]*", "", text)
-    return text
+
+    def links_only(comment: re.Match[str]) -> str:
+        if not comment.group(0).startswith(("///", "//!")):
+            return ""
+        return " ".join(f"{m.group(1)};" for m in DOC_LINK.finditer(comment.group(0)))
+
+    return re.sub(r"//[^\n]*", links_only, text)
 
 
 def module_files(src: Path) -> dict[str, Path]:
@@ -143,8 +156,8 @@ def expand_use(tree: str) -> list[str]:
     return out
 
 
-PATH = re.compile(r"\b(crate|super)((?:::\w+)+)")
-USE = re.compile(r"\buse\s+((?:crate|super)::[^;]+);")
+PATH = re.compile(r"\b(crate|super|self)((?:::\w+)+)")
+USE = re.compile(r"\buse\s+((?:crate|super|self)::[^;]+);")
 
 
 def referenced_paths(text: str) -> list[str]:
@@ -172,7 +185,10 @@ def resolve(path: str, here: str, modules: dict[str, Path], exports: dict[str, d
         base: list[str] = []
         parts = parts[1:]
     else:
+        # `super::`, `self::`, or a path relative to `here` (a `use` of a child module).
         base = here.split("::") if here else []
+        if parts[0] == "self":
+            parts = parts[1:]
         while parts and parts[0] == "super":
             base = base[:-1]
             parts = parts[1:]
@@ -184,9 +200,13 @@ def resolve(path: str, here: str, modules: dict[str, Path], exports: dict[str, d
             if n < len(segments) and depth < 8:
                 origin = exports.get(module, {}).get(segments[n])
                 if origin is not None:
-                    origin_path = origin if origin.startswith(("crate", "super")) else None
-                    if origin_path:
-                        return resolve(origin_path, module, modules, exports, depth + 1)
+                    # `pub use crate::a::B`, `pub use super::a::B`, `pub use self::a::B`, and
+                    # `pub use a::B` of a child module `a` (how a crate root re-exports): the
+                    # name is followed to its origin. Another crate's name stays here.
+                    first = origin.split("::")[0]
+                    child = f"{module}::{first}" if module else first
+                    if first in ("crate", "super", "self") or child in modules:
+                        return resolve(origin, module, modules, exports, depth + 1)
                     return module
             return module
     return None

@@ -6,8 +6,8 @@
 
 use envhub_fuzz::assert_json_round_trip;
 use envhub_protocol::HubError;
+use envhub_protocol::batch_codec::decode_error;
 use envhub_protocol::untrusted::from_hub;
-use envhub_protocol::wire::decode_error;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

@@ -1,11 +1,11 @@
-//! A remote session's request as a hub reads it (`wire::parse_request`): header, request
+//! A remote session's request as a hub reads it (`batch_codec::parse_request`): header, request
 //! blocks of the session's layout, reset options. Bytes are read against one of several
 //! layouts (the first byte picks it); a request the client encodes reads back as sent.
 #![no_main]
 
 use arbitrary::Unstructured;
 use envhub_fuzz::{MAX_ENVS, MAX_VALUE, below, bytes, layouts};
-use envhub_protocol::wire::{self, RequestBody};
+use envhub_protocol::batch_codec::{self, RequestBody};
 use envhub_shm::{Layout, command};
 use libfuzzer_sys::fuzz_target;
 
@@ -14,12 +14,12 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let (layout, _) = layouts(pick);
-    if let Ok(r) = wire::parse_request(msg, &layout) {
+    if let Ok(r) = batch_codec::parse_request(msg, &layout) {
         let n = layout.num_envs;
         assert_eq!(r.actions.len(), n * layout.act_bytes);
         assert_eq!((r.seeds.len(), r.selected.len()), (n, n));
         // What the hub read, encoded again, reads the same.
-        let again = wire::encode_request(
+        let again = batch_codec::encode_request(
             &layout,
             r.header.seq,
             r.header.command,
@@ -31,7 +31,8 @@ fuzz_target!(|data: &[u8]| {
                 options: r.options.as_bytes(),
             },
         );
-        let back = wire::parse_request(&again, &layout).expect("a re-encoded request parses");
+        let back =
+            batch_codec::parse_request(&again, &layout).expect("a re-encoded request parses");
         assert_eq!(
             (back.actions, &back.seeds, &back.selected, back.options),
             (r.actions, &r.seeds, &r.selected, r.options)
@@ -62,8 +63,8 @@ fn round_trip(u: &mut Unstructured<'_>) {
         seeds: &seeds,
         options: options.as_bytes(),
     };
-    let encoded = wire::encode_request(&layout, seq, cmd, slot, &body);
-    let r = wire::parse_request(&encoded, &layout).expect("an encoded request parses");
+    let encoded = batch_codec::encode_request(&layout, seq, cmd, slot, &body);
+    let r = batch_codec::parse_request(&encoded, &layout).expect("an encoded request parses");
     assert_eq!(
         (r.header.seq, r.header.command, r.header.slot),
         (seq, cmd, slot)

@@ -7,8 +7,8 @@
 
 use arbitrary::Unstructured;
 use envhub_fuzz::{below, bytes, layouts};
+use envhub_protocol::batch_codec::{self, RESPONSE_HEADER, RemoteAnswer};
 use envhub_protocol::untrusted::{from_hub, read_failure_report};
-use envhub_protocol::wire::{self, RESPONSE_HEADER, RemoteAnswer};
 use envhub_protocol::{Frame, HubError};
 use libfuzzer_sys::fuzz_target;
 
@@ -30,12 +30,12 @@ fuzz_target!(|data: &[u8]| {
             let base: &mut [u8] = bytemuck::cast_slice_mut(&mut slot);
             // SAFETY: `base` holds `size()` bytes, 8-byte aligned, used only here.
             let mut to = unsafe { layout.rows_mut(base.as_mut_ptr(), 0, n) };
-            wire::land_rows(&layout, answer.rows(), &sent, &mut to, 0);
+            batch_codec::land_rows(&layout, answer.rows(), &sent, &mut to, 0);
         }
         let info = answer.info_bytes();
         let _ = serde_json::from_slice::<serde_json::Value>(info);
         let _ = read_failure_report(info, "hub `fuzz`", &sent, 0);
-        match wire::decode_error("fuzz", info) {
+        match batch_codec::decode_error("fuzz", info) {
             HubError::WorkerDied { .. } => {}
             e => {
                 let e = from_hub("fuzz", e);
@@ -66,7 +66,7 @@ fn round_trip(u: &mut Unstructured<'_>) {
     );
     let (rows_len, info_len) = (below(u, 256), below(u, 256));
     let (rows, info) = (bytes(u, rows_len), bytes(u, info_len));
-    let encoded = wire::encode_response(seq, status, num_envs.into(), &rows, &info);
+    let encoded = batch_codec::encode_response(seq, status, num_envs.into(), &rows, &info);
     let answer = RemoteAnswer::parse(encoded).expect("an encoded response parses");
     let h = answer.header();
     assert_eq!(

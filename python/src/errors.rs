@@ -64,7 +64,12 @@ pub(crate) fn hub_error(py: Python<'_>, e: HubError) -> PyErr {
             raise(py, "MakeError", message, vec![])
         }
         HubError::InvalidAction { .. } => raise(py, "InvalidActionError", message, vec![]),
-        HubError::InvalidState(_) => raise(py, "InvalidStateError", message, vec![]),
+        HubError::InvalidState(_)
+        | HubError::Closed { .. }
+        | HubError::NotReset { .. }
+        | HubError::MustReset { .. }
+        | HubError::SpacesDiffer(_)
+        | HubError::Internal(_) => raise(py, "InvalidStateError", message, vec![]),
         HubError::WorkerDied {
             worker, pid, envs, ..
         } => {

@@ -47,7 +47,7 @@ fn kill_9_mid_rollout_is_worker_died_and_hub_lives_on() {
     assert!(why.contains("signal 9") || why.contains("SIGKILL"), "{why}");
     assert!(err.to_string().contains("hint:"));
     // The session is closed for good; the other one and new ones work.
-    assert!(matches!(env.step(&actions), Err(HubError::InvalidState(_))));
+    assert!(matches!(env.step(&actions), Err(HubError::Closed { .. })));
     let action = vec![0u8; 2 * 4];
     other.step(&action).unwrap();
     let mut fresh = t

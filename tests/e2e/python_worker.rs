@@ -256,7 +256,7 @@ fn a_killed_python_worker_is_worker_died() {
     assert!(why.contains("signal: 9"), "{why}");
     assert!(matches!(
         env.step_i64(&actions),
-        Err(HubError::InvalidState(_))
+        Err(HubError::Closed { .. })
     ));
     other.step_i64(&[0, 1]).unwrap();
 }

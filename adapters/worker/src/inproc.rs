@@ -12,17 +12,18 @@ const ACTION_POOL: usize = 64;
 
 pub(crate) fn run(job_json: &str, threads: usize, steps: usize) -> anyhow::Result<()> {
     let job: WorkerJob = serde_json::from_str(job_json).context("invalid job")?;
-    let threads = threads.clamp(1, job.num_envs.max(1));
+    let threads = threads.clamp(1, job.worker_envs.max(1));
     let barrier = std::sync::Barrier::new(threads + 1);
     let (total, seconds) = std::thread::scope(|scope| -> anyhow::Result<(usize, f64)> {
         let mut handles = Vec::new();
         for t in 0..threads {
             let mut part = job.clone();
-            part.num_envs = job.num_envs / threads + usize::from(t < job.num_envs % threads);
+            part.worker_envs =
+                job.worker_envs / threads + usize::from(t < job.worker_envs % threads);
             let barrier = &barrier;
             handles.push(scope.spawn(move || -> Result<usize, String> {
                 let (mut batch, spec) = make_envs(&part)?;
-                let n = part.num_envs;
+                let n = part.worker_envs;
                 let layout = BatchLayout::new(n, spec.observation_space.byte_len(), false);
                 let mut words = vec![0u64; layout.size() / 8 + 1];
                 let flags = vec![env_flag::SELECTED; n];

@@ -28,8 +28,8 @@ pub(crate) fn make_envs(job: &WorkerJob) -> Result<(EnvBatch, ReadySpec), String
         .spec(&job.env_id, &job.config)
         .map_err(|e| e.to_string())?;
     let limit = job.config.episode_limit(spec.max_episode_steps);
-    let mut envs = Vec::with_capacity(job.num_envs);
-    for _ in 0..job.num_envs {
+    let mut envs = Vec::with_capacity(job.worker_envs);
+    for _ in 0..job.worker_envs {
         let env = adapter
             .make(&job.env_id, &job.config)
             .map_err(|e| e.to_string())?;

@@ -38,7 +38,7 @@ pub struct LockFile {
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EnvLock {
-    /// [`PythonEnvSpec::declaration_hash`](crate::PythonEnvSpec::declaration_hash) of the
+    /// `PythonEnvSpec::declaration_hash` of the
     /// declaration it was resolved from: a registry edit without relocking shows as a
     /// mismatch.
     pub declaration: String,

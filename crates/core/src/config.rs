@@ -43,7 +43,9 @@ pub struct EnvConfig {
     pub seed: Option<u64>,
     /// Truncate after this many steps. `None` or 0 keep the env's own default limit.
     pub max_episode_steps: Option<u32>,
-    /// Number of env instances in the session.
+    /// Number of env instances in the session. The config each worker is started with is
+    /// the exception: there it is that worker's envs (`WorkerJob::worker_envs`), what its
+    /// adapter builds (`make_vec(num_envs=config.num_envs)`).
     pub num_envs: usize,
     /// A model file that overrides the env's default asset.
     pub asset_path: Option<PathBuf>,

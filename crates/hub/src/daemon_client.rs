@@ -5,7 +5,7 @@
 //! the adapters carry this process's user adapters (see `UserAdapters`), read at each call so
 //! an adapter registered since is included.
 
-use crate::catalog::AdapterInfo;
+use crate::adapters::AdapterInfo;
 use crate::python_host::user_adapters_of_this_process;
 use envhub_core::EnvConfig;
 use envhub_protocol::HubError;

@@ -276,7 +276,7 @@ fn read_ready(
     let deadline = Instant::now() + start_timeout;
     let died = |why: String| HubError::WorkerDied {
         worker: 0,
-        envs: format!("{}..{}", job.env_offset, job.env_offset + job.num_envs),
+        envs: format!("{}..{}", job.env_offset, job.env_offset + job.worker_envs),
         pid,
         why: format!("failed to start: {why}"),
     };

@@ -176,8 +176,8 @@ fn fuzz(target: &str, seeds: Vec<Vec<u8>>, check: impl Fn(&[u8]) -> Result<(), S
 
 mod targets {
     use super::fuzz;
+    use envhub_protocol::batch_codec::{self, RemoteAnswer, RequestBody, RowsOut};
     use envhub_protocol::untrusted::{check_open_reply, from_hub, read_failure_report};
-    use envhub_protocol::wire::{self, RemoteAnswer, RequestBody, RowsOut};
     use envhub_protocol::{Frame, HubError, OpenReply};
     use envhub_shm::{BatchLayout, Layout, command};
 
@@ -215,11 +215,11 @@ mod targets {
             };
             seeds.push(with_pick(
                 pick,
-                wire::encode_request(&layout, 1, command::RESET, 0, &body),
+                batch_codec::encode_request(&layout, 1, command::RESET, 0, &body),
             ));
             seeds.push(with_pick(
                 pick,
-                wire::encode_request(&layout, 2, command::STEP, 1, &RequestBody::NONE),
+                batch_codec::encode_request(&layout, 2, command::STEP, 1, &RequestBody::NONE),
             ));
         }
         fuzz("wire_request", seeds, |bytes| {
@@ -227,7 +227,7 @@ mod targets {
                 return Ok(());
             };
             let (layout, _) = layouts(pick);
-            if let Ok(r) = wire::parse_request(msg, &layout) {
+            if let Ok(r) = batch_codec::parse_request(msg, &layout) {
                 let n = layout.num_envs;
                 if r.actions.len() != n * layout.act_bytes
                     || r.seeds.len() != n
@@ -251,7 +251,7 @@ mod targets {
             let rewards = vec![0.5; n];
             let flags = vec![false; n];
             let envs: Vec<usize> = (0..n).collect();
-            wire::write_rows(
+            batch_codec::write_rows(
                 &rows,
                 &mut block,
                 &envs,
@@ -266,12 +266,12 @@ mod targets {
             );
             seeds.push(with_pick(
                 pick,
-                wire::encode_response(3, 0, n, &block, b"[{\"a\": 1}]"),
+                batch_codec::encode_response(3, 0, n, &block, b"[{\"a\": 1}]"),
             ));
             let frames = envhub_shm::frames_section((0..n).map(|_| Some((2, 1, vec![9u8; 6]))));
             seeds.push(with_pick(
                 pick,
-                wire::encode_response(4, 0, n, &[], &frames),
+                batch_codec::encode_response(4, 0, n, &[], &frames),
             ));
         }
         fuzz("wire_response", seeds, |bytes| {
@@ -294,7 +294,7 @@ mod targets {
                 // SAFETY: `base` holds `size()` bytes, 8-byte aligned, used only here.
                 let mut to = unsafe { layout.rows_mut(base.as_mut_ptr(), 0, n) };
                 let envs: Vec<usize> = (0..n).collect();
-                wire::land_rows(&layout, answer.rows(), &envs, &mut to, 0);
+                batch_codec::land_rows(&layout, answer.rows(), &envs, &mut to, 0);
             }
             let mut rest = answer.info_bytes();
             for _ in 0..n {

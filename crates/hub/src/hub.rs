@@ -3,7 +3,7 @@
 //! Embedded by default: the client process owns its workers. The `envhub serve` daemon
 //! runs the same hub for many clients.
 
-use crate::catalog::{self, AdapterInfo};
+use crate::adapters::{self, AdapterInfo};
 use crate::daemon_client::DaemonClient;
 use crate::launcher::Launcher;
 use crate::placement::Placement;
@@ -85,7 +85,7 @@ impl Hub {
     ) -> Result<Hub, HubError> {
         let registry = settings.registry(explicit)?;
         if crate::python_host::configure(settings.python.clone(), settings.adapters.clone()) {
-            crate::catalog::refresh_adapters();
+            crate::adapters::refresh_adapters();
         }
         let hub = match std::env::var_os(crate::env_vars::ENVHUB_HUB).filter(|s| !s.is_empty()) {
             Some(socket) => Hub::connect(std::path::Path::new(&socket), registry)?,
@@ -184,7 +184,7 @@ impl Hub {
     /// results (more of them fit the pool).
     fn options_for(&self, route: Option<&Route>) -> SessionOptions {
         let mut options = self.options.clone();
-        if options.info_row_bytes > 0 && !route.is_some_and(catalog::hosted_in_python) {
+        if options.info_row_bytes > 0 && !route.is_some_and(adapters::hosted_in_python) {
             options.info_row_bytes = 0;
         }
         options
@@ -210,13 +210,13 @@ impl Hub {
     pub fn adapters(&self) -> Result<Vec<AdapterInfo>, HubError> {
         match &self.launcher {
             Launcher::Daemon(d) => d.adapters(),
-            Launcher::Local => Ok(catalog::adapters()?.to_vec()),
+            Launcher::Local => Ok(adapters::adapters()?.to_vec()),
         }
     }
 
     /// Every adapter, with `user`'s beside this hub's own (a daemon answering a client).
     pub(crate) fn adapters_with(&self, user: &UserAdapters) -> Result<Vec<AdapterInfo>, HubError> {
-        Ok(catalog::adapters_with(user)?.to_vec())
+        Ok(adapters::adapters_with(user)?.to_vec())
     }
 
     /// The adapter and config that would run `id` with `config`.
@@ -255,14 +255,14 @@ impl Hub {
             crate::provision::worker_python(&self.registry, entry, may_build, &hint)?
         {
             // The environment's own packages decide which adapter runs the entry.
-            let mut found = route(entry, &catalog::adapters_in(&python, user), config)
+            let mut found = route(entry, &adapters::adapters_in(&python, user), config)
                 .map_err(|e| in_python_env(e, &python.name))?;
             found.python = Some(python);
             return Ok(found);
         }
         // Native adapters first: when one runs the entry (and draws the render mode asked
         // for), Python is never started to ask.
-        let native = catalog::native_adapters()?;
+        let native = adapters::native_adapters()?;
         if let Ok(found) = route(entry, &native, config)
             && native
                 .iter()
@@ -270,7 +270,7 @@ impl Hub {
         {
             return Ok(found);
         }
-        route(entry, &catalog::adapters_with(user)?, config)
+        route(entry, &adapters::adapters_with(user)?, config)
     }
 
     /// A batch of `num_envs` envs of registry entry `id`.

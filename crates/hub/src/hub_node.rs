@@ -73,6 +73,11 @@ pub fn host_name() -> String {
 
 /// Joins the network as hub `name`: declares the token and queryables and serves remote
 /// sessions with `hub`'s catalog until the returned node is dropped.
+///
+/// Its steps: open the hub's Zenoh session (its exposure decided first); make sure no hub
+/// of that name is live; declare the queryables (info, catalog, adapters, open), the
+/// session requests' subscriber, the watch on clients that leave and the echo; and last
+/// the tokens that tell clients the hub is there.
 pub fn join(
     hub: Arc<Hub>,
     name: &str,
@@ -85,26 +90,7 @@ pub fn join(
         notice: exposure_notice,
         local,
     } = envhub_net::open_hub(name, net, &policy)?;
-    let zerr = |what: &str| {
-        let what = what.to_string();
-        move |e: zenoh::Error| HubError::Network {
-            reason: format!("{what}: {e}"),
-            hint: "another hub with this name may be running; pick another `--name`".into(),
-        }
-    };
-    // A hub of the same name already live would make both unreachable by name.
-    let existing = session
-        .liveliness()
-        .get(keys::hub_token(name))
-        .timeout(Duration::from_millis(300))
-        .wait()
-        .map_err(zerr("liveliness query"))?;
-    if existing.recv().is_ok_and(|r| r.result().is_ok()) {
-        return Err(HubError::Network {
-            reason: format!("a hub named `{name}` is already live on this network"),
-            hint: "give this one another `--name`".into(),
-        });
-    }
+    refuse_a_namesake(&session, name)?;
     let sessions = Arc::new(Sessions::default());
     let state = Arc::new(State {
         hub,
@@ -115,8 +101,71 @@ pub fn join(
         identity: envhub_net::identity::hub_identity()?,
         hellos: std::sync::Mutex::new(SeenHellos::default()),
     });
-    // Queries being answered now: each takes a thread (opening starts workers, seconds), so
-    // their number is bounded; past it a query is answered "busy" on Zenoh's thread.
+    let queryables = declare_queryables(&session, name, &state)?;
+    let requests = declare_requests(&session, name, &sessions)?;
+    let (gone, clients) = watch_clients(&session, &sessions)?;
+    let echo = declare_echo(&session, name)?;
+    // The identity first: a client that sees the name can then tell this hub's answers.
+    let id_token = session
+        .liveliness()
+        .declare_token(keys::hub_id_token(name, &session.zid().to_string()))
+        .wait()
+        .map_err(zenoh_error("declare identity token"))?;
+    let token = session
+        .liveliness()
+        .declare_token(keys::hub_token(name))
+        .wait()
+        .map_err(zenoh_error("declare token"))?;
+    Ok(HubNode {
+        name: name.to_string(),
+        _session: session,
+        _token: token,
+        _id_token: id_token,
+        _queryables: queryables,
+        _requests: requests,
+        _clients: clients,
+        _gone: gone,
+        _echo: echo,
+        sessions,
+        exposure_notice,
+        _local: local,
+    })
+}
+
+/// A Zenoh failure while joining, as the error the operator sees.
+fn zenoh_error(what: &'static str) -> impl FnOnce(zenoh::Error) -> HubError {
+    move |e: zenoh::Error| HubError::Network {
+        reason: format!("{what}: {e}"),
+        hint: "another hub with this name may be running; pick another `--name`".into(),
+    }
+}
+
+/// Refuses to join when a hub of the same name is already live: both would be unreachable
+/// by name.
+fn refuse_a_namesake(session: &zenoh::Session, name: &str) -> Result<(), HubError> {
+    let existing = session
+        .liveliness()
+        .get(keys::hub_token(name))
+        .timeout(Duration::from_millis(300))
+        .wait()
+        .map_err(zenoh_error("liveliness query"))?;
+    if existing.recv().is_ok_and(|r| r.result().is_ok()) {
+        return Err(HubError::Network {
+            reason: format!("a hub named `{name}` is already live on this network"),
+            hint: "give this one another `--name`".into(),
+        });
+    }
+    Ok(())
+}
+
+/// The queryables of info, catalog, adapters and open. Queries being answered now: each
+/// takes a thread (opening starts workers, seconds), so their number is bounded; past it a
+/// query is answered "busy" on Zenoh's thread.
+fn declare_queryables(
+    session: &zenoh::Session,
+    name: &str,
+    state: &Arc<State>,
+) -> Result<Vec<zenoh::query::Queryable<()>>, HubError> {
     let in_flight = Arc::new(std::sync::atomic::AtomicUsize::new(0));
     let mut queryables = Vec::new();
     for (op, key) in [
@@ -157,30 +206,43 @@ pub fn join(
                 }
             })
             .wait()
-            .map_err(zerr("declare queryable"))?;
+            .map_err(zenoh_error("declare queryable"))?;
         queryables.push(q);
     }
-    let requests = {
-        let (sessions, zenoh, name) = (sessions.clone(), session.clone(), name.to_string());
-        session
-            .declare_subscriber(keys::all_requests(&name))
-            .callback(move |sample| {
-                envhub_net::dispatch(
-                    &sessions,
-                    &zenoh,
-                    &name,
-                    sample.key_expr().as_str(),
-                    &sample.payload().to_bytes(),
-                );
-            })
-            .wait()
-            .map_err(zerr("declare subscriber"))?
-    };
-    // A client that leaves (exits, crashes, or is cut off past its lease) takes its sessions.
-    // Any peer can declare and drop a token of the same key, so a deletion ends sessions only
-    // once no token of that key is left on the network: the real client's still answers.
-    // The check is a query: one watcher thread makes them, for the keys gone since it last
-    // looked (a set, so a flapping token costs one check, and bounded).
+    Ok(queryables)
+}
+
+/// The subscriber of remote sessions' requests, handed to the bridge.
+fn declare_requests(
+    session: &zenoh::Session,
+    name: &str,
+    sessions: &Arc<Sessions>,
+) -> Result<zenoh::pubsub::Subscriber<()>, HubError> {
+    let (sessions, zenoh, name) = (sessions.clone(), session.clone(), name.to_string());
+    session
+        .declare_subscriber(keys::all_requests(&name))
+        .callback(move |sample| {
+            envhub_net::dispatch(
+                &sessions,
+                &zenoh,
+                &name,
+                sample.key_expr().as_str(),
+                &sample.payload().to_bytes(),
+            );
+        })
+        .wait()
+        .map_err(zenoh_error("declare subscriber"))
+}
+
+/// A client that leaves (exits, crashes, or is cut off past its lease) takes its sessions.
+/// Any peer can declare and drop a token of the same key, so a deletion ends sessions only
+/// once no token of that key is left on the network: the real client's still answers.
+/// The check is a query: one watcher thread makes them, for the keys gone since it last
+/// looked (a set, so a flapping token costs one check, and bounded).
+fn watch_clients(
+    session: &zenoh::Session,
+    sessions: &Arc<Sessions>,
+) -> Result<(Arc<GoneClients>, zenoh::pubsub::Subscriber<()>), HubError> {
     let gone = Arc::new(GoneClients::default());
     {
         let (gone, sessions, zenoh) = (Arc::downgrade(&gone), sessions.clone(), session.clone());
@@ -197,7 +259,7 @@ pub fn join(
                     }
                 }
             })
-            .map_err(|e| HubError::InvalidState(format!("cannot start the client watcher: {e}")))?;
+            .map_err(|e| HubError::Internal(format!("cannot start the client watcher: {e}")))?;
     }
     let clients = {
         let gone = gone.clone();
@@ -210,52 +272,32 @@ pub fn join(
                 }
             })
             .wait()
-            .map_err(zerr("declare client watch"))?
+            .map_err(zenoh_error("declare client watch"))?
     };
-    // The echo answers on Zenoh's own thread, with the data path's QoS: the floor under a
-    // remote round trip.
-    let echo = {
-        let (req, rep) = keys::hub_echo(name);
-        let publisher = session
-            .declare_publisher(rep)
-            .express(true)
-            .congestion_control(zenoh::qos::CongestionControl::Drop)
-            .priority(zenoh::qos::Priority::DataHigh)
-            .wait()
-            .map_err(zerr("declare echo"))?;
-        session
-            .declare_subscriber(req)
-            .callback(move |sample| {
-                let _ = publisher.put(sample.payload().clone()).wait();
-            })
-            .wait()
-            .map_err(zerr("declare echo"))?
-    };
-    // The identity first: a client that sees the name can then tell this hub's answers.
-    let id_token = session
-        .liveliness()
-        .declare_token(keys::hub_id_token(name, &session.zid().to_string()))
+    Ok((gone, clients))
+}
+
+/// The echo: answers on Zenoh's own thread, with the data path's QoS — the floor under a
+/// remote round trip.
+fn declare_echo(
+    session: &zenoh::Session,
+    name: &str,
+) -> Result<zenoh::pubsub::Subscriber<()>, HubError> {
+    let (req, rep) = keys::hub_echo(name);
+    let publisher = session
+        .declare_publisher(rep)
+        .express(true)
+        .congestion_control(zenoh::qos::CongestionControl::Drop)
+        .priority(zenoh::qos::Priority::DataHigh)
         .wait()
-        .map_err(zerr("declare identity token"))?;
-    let token = session
-        .liveliness()
-        .declare_token(keys::hub_token(name))
+        .map_err(zenoh_error("declare echo"))?;
+    session
+        .declare_subscriber(req)
+        .callback(move |sample| {
+            let _ = publisher.put(sample.payload().clone()).wait();
+        })
         .wait()
-        .map_err(zerr("declare token"))?;
-    Ok(HubNode {
-        name: name.to_string(),
-        _session: session,
-        _token: token,
-        _id_token: id_token,
-        _queryables: queryables,
-        _requests: requests,
-        _clients: clients,
-        _gone: gone,
-        _echo: echo,
-        sessions,
-        exposure_notice,
-        _local: local,
-    })
+        .map_err(zenoh_error("declare echo"))
 }
 
 /// Client token keys deleted and not yet checked: a set (a key flapping a thousand times is
@@ -540,7 +582,7 @@ impl State {
             hello.request,
             hello.exchange,
         )
-        .map_err(|e| HubError::InvalidState(format!("the key exchange failed: {e}")))?;
+        .map_err(|e| HubError::Internal(format!("the key exchange failed: {e}")))?;
         envhub_net::start(
             &self.sessions,
             &self.zenoh,

@@ -1,6 +1,6 @@
 //! Starting worker processes: here (the embedded hub) or by the hub daemon on our behalf.
 
-use crate::catalog::Host;
+use crate::adapters::Host;
 use crate::daemon_client::DaemonClient;
 use crate::python_host::UserAdapters;
 use crate::worker_binary::worker_binary;
@@ -149,7 +149,7 @@ pub(crate) fn launch_local(
     }
     let host = match &job.python {
         Some(_) => Host::Python,
-        None => crate::catalog::host_of(&job.adapter, user),
+        None => crate::adapters::host_of(&job.adapter, user),
     };
     let (mut command, path) = match host {
         Host::Native => {
@@ -224,7 +224,7 @@ pub(crate) fn launch_local(
             let status = child.wait().map(|s| s.to_string()).unwrap_or_default();
             Err(HubError::WorkerDied {
                 worker: 0,
-                envs: format!("{}..{}", job.env_offset, job.env_offset + job.num_envs),
+                envs: format!("{}..{}", job.env_offset, job.env_offset + job.worker_envs),
                 pid,
                 why: format!("failed to start: {why} ({status})"),
             })

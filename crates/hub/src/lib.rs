@@ -12,8 +12,8 @@
 //! This crate re-exports what a Rust user needs, so `envhub_hub::{Hub, VecEnv, Registry, ...}`
 //! is the whole public API.
 
+mod adapters;
 mod bounded;
-mod catalog;
 mod daemon;
 mod daemon_client;
 mod daemon_guard;
@@ -31,7 +31,7 @@ mod settings;
 mod spawner;
 mod worker_binary;
 
-pub use catalog::{AdapterInfo, Host, refresh_adapters};
+pub use adapters::{AdapterInfo, Host, refresh_adapters};
 pub use daemon::{default_socket, serve};
 pub use daemon_client::DaemonClient;
 pub use envhub_catalog::{

@@ -1,6 +1,6 @@
 //! Routing: which adapter runs a registry entry, and with which config.
 
-use crate::catalog::AdapterInfo;
+use crate::adapters::AdapterInfo;
 use envhub_catalog::EnvEntry;
 use envhub_core::{Availability, EnvConfig, FRAMEWORKS, canonical_framework};
 use envhub_protocol::HubError;

@@ -14,8 +14,8 @@
 //! wrong, and the session goes on.
 
 use crate::policy::{SESSION_QUEUE, ServePolicy};
+use envhub_protocol::batch_codec::{self, RowsOut};
 use envhub_protocol::seal::{Direction, SessionKey};
-use envhub_protocol::wire::{self, RowsOut};
 use envhub_protocol::{HubError, keys};
 use envhub_session::{Batch, VecEnv};
 use envhub_shm::{BatchLayout, Layout, command, frames_section, status};
@@ -245,7 +245,7 @@ fn random<const N: usize>() -> Result<[u8; N], HubError> {
     // SAFETY: `bytes` is a valid buffer of its length; getrandom fills it or fails.
     let filled = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
     if filled != bytes.len() as isize {
-        return Err(HubError::InvalidState(format!(
+        return Err(HubError::Internal(format!(
             "the OS random source failed: {}",
             std::io::Error::last_os_error()
         )));
@@ -298,8 +298,10 @@ pub fn start(
             hint: "the hub's Zenoh session is failing; see its log".into(),
         })?;
     let (tx, rx) = std::sync::mpsc::sync_channel(SESSION_QUEUE);
-    let request_sizes =
-        wire::sealed_request_sizes(&Layout::new(vec.num_envs(), vec.action_space().byte_len()));
+    let request_sizes = batch_codec::sealed_request_sizes(&Layout::new(
+        vec.num_envs(),
+        vec.action_space().byte_len(),
+    ));
     let entry_sizes = request_sizes.clone();
     let answered = Arc::new(AtomicU64::new(0));
     let mut entries = sessions.lock();
@@ -350,7 +352,7 @@ pub fn start(
             sessions.lock().remove(&thread_id);
             tracing::info!(session = %thread_id, "remote session closed");
         })
-        .map_err(|e| HubError::InvalidState(format!("cannot start a session thread: {e}")))?;
+        .map_err(|e| HubError::Internal(format!("cannot start a session thread: {e}")))?;
     Ok(())
 }
 
@@ -461,7 +463,8 @@ fn answer_closed(sessions: &Sessions, zenoh: &zenoh::Session, hub: &str, id: &st
         _ if seq <= session.last_seq => return dropped("out of sequence (a replay)", id),
         _ => {
             let text = format!("hub `{hub}` has no open session `{id}` (closed)");
-            let mut answer = wire::encode_response(seq, status::ERROR, 0, &[], text.as_bytes());
+            let mut answer =
+                batch_codec::encode_response(seq, status::ERROR, 0, &[], text.as_bytes());
             session.key.seal(Direction::Response, &mut answer);
             let answer = zenoh::bytes::ZBytes::from(answer);
             session.answer = Some((seq, answer.clone()));
@@ -548,7 +551,7 @@ fn run(
             dropped("out of sequence (a replay)", "");
             continue;
         }
-        let (answer, closing) = match wire::parse_request(&bytes, &layout) {
+        let (answer, closing) = match batch_codec::parse_request(&bytes, &layout) {
             Ok(request) => {
                 let closing = request.header.command == command::CLOSE;
                 (serve(&mut vec, &request, &rows_layout), closing)
@@ -557,7 +560,7 @@ fn run(
                 tracing::warn!(seq, %message, "unreadable request");
                 let text = format!("unreadable request: {message}");
                 (
-                    wire::encode_response(
+                    batch_codec::encode_response(
                         seq,
                         status::ERROR,
                         layout.num_envs,
@@ -588,7 +591,7 @@ fn run(
 /// Runs one request on the local session; the encoded response.
 fn serve(
     vec: &mut VecEnv,
-    request: &wire::ParsedRequest<'_>,
+    request: &batch_codec::ParsedRequest<'_>,
     rows_layout: &BatchLayout,
 ) -> Vec<u8> {
     let seq = request.header.seq;
@@ -605,18 +608,18 @@ fn serve(
                         .into_iter()
                         .map(|f| f.map(|f| (f.height, f.width, f.rgb)))
                         .collect();
-                    wire::encode_response(seq, status::OK, n, &[], &frames_section(frames))
+                    batch_codec::encode_response(seq, status::OK, n, &[], &frames_section(frames))
                 }
-                Err(e) => wire::encode_error(seq, n, &e),
+                Err(e) => batch_codec::encode_error(seq, n, &e),
             };
         }
         _ => {
             vec.close();
-            return wire::encode_response(seq, status::CLOSED, n, &[], &[]);
+            return batch_codec::encode_response(seq, status::CLOSED, n, &[], &[]);
         }
     };
     match result {
-        Ok(()) => wire::encode_response(seq, status::OK, n, &out.rows, &out.info()),
+        Ok(()) => batch_codec::encode_response(seq, status::OK, n, &out.rows, &out.info()),
         Err(HubError::EnvFailed { envs, message, .. }) => {
             if let Some(batch) = vec.last_batch() {
                 out.absorb(rows_layout, &batch);
@@ -625,14 +628,14 @@ fn serve(
             let failed: Vec<(usize, String)> =
                 envs.iter().map(|&e| (e, message_of(&message, e))).collect();
             let report = serde_json::json!({ "failed": failed, "info": info }).to_string();
-            wire::encode_response(seq, status::ENV_FAILED, n, &out.rows, report.as_bytes())
+            batch_codec::encode_response(seq, status::ENV_FAILED, n, &out.rows, report.as_bytes())
         }
         // A call that failed while the session goes on (bad reset options, an env to reset
         // first): the slice failed this call only, as a local worker's refusal does.
         Err(e) if !vec.is_closed() => {
-            wire::encode_response(seq, status::ERROR, n, &[], e.to_string().as_bytes())
+            batch_codec::encode_response(seq, status::ERROR, n, &[], e.to_string().as_bytes())
         }
-        Err(e) => wire::encode_error(seq, n, &e),
+        Err(e) => batch_codec::encode_error(seq, n, &e),
     }
 }
 
@@ -647,7 +650,7 @@ fn message_of(message: &str, e: usize) -> String {
 
 fn reset(
     vec: &mut VecEnv,
-    request: &wire::ParsedRequest<'_>,
+    request: &batch_codec::ParsedRequest<'_>,
     all: bool,
     layout: &BatchLayout,
     out: &mut Out,
@@ -668,7 +671,7 @@ fn reset(
 
 fn step(
     vec: &mut VecEnv,
-    request: &wire::ParsedRequest<'_>,
+    request: &batch_codec::ParsedRequest<'_>,
     all: bool,
     layout: &BatchLayout,
     out: &mut Out,
@@ -716,7 +719,7 @@ impl Out {
 
     /// Writes `batch`'s rows (and infos) where its envs go.
     fn absorb(&mut self, layout: &BatchLayout, batch: &Batch<'_>) {
-        wire::write_rows(
+        batch_codec::write_rows(
             layout,
             &mut self.rows,
             batch.env_ids,

@@ -176,7 +176,7 @@ impl Network {
             .wait()
             .map_err(failed)?;
         let identity = envhub_protocol::handshake::Identity::generate()
-            .map_err(|e| HubError::InvalidState(format!("cannot make a client identity: {e}")))?;
+            .map_err(|e| HubError::Internal(format!("cannot make a client identity: {e}")))?;
         Ok(Network {
             session,
             client_id,
@@ -365,7 +365,7 @@ impl Network {
         start_timeout: Duration,
     ) -> Result<(OpenReply, SessionKey), HubError> {
         let (hello, pending) = handshake::client_hello(&self.identity, hub, unix_ms())
-            .map_err(|e| HubError::InvalidState(format!("cannot start a key exchange: {e}")))?;
+            .map_err(|e| HubError::Internal(format!("cannot start a key exchange: {e}")))?;
         let payload = serde_json::to_vec(&serde_json::json!({"request": request, "hello": hello}))
             .expect("requests serialize");
         // A hub reads no longer request: say so here, naming the hub and the limit.

@@ -17,8 +17,8 @@
 //! or when TLS with client certificates checks every link; it connects to the endpoints it is
 //! given and to the hubs of its own user on this machine ([`crate::local`]).
 
+use crate::endpoint::{is_loopback, protocol};
 use envhub_protocol::HubError;
-use std::net::IpAddr;
 
 /// The listener a hub without credentials gets: loopback, a free port (found by local
 /// clients through [`crate::local`], or named with `--listen`).
@@ -282,28 +282,6 @@ fn endpoints(json: &str, mode: &str) -> Vec<String> {
     }
 }
 
-fn protocol(endpoint: &str) -> &str {
-    endpoint.split('/').next().unwrap_or_default()
-}
-
-/// Whether an endpoint (`tcp/127.0.0.1:7447`, `tls/[::1]:0`, `tcp/localhost:7447`) names a
-/// loopback address. Anything unreadable counts as exposed.
-pub(crate) fn is_loopback(endpoint: &str) -> bool {
-    let address = endpoint
-        .split_once('/')
-        .map_or("", |(_, rest)| rest)
-        .split(['?', '#'])
-        .next()
-        .unwrap_or_default();
-    let host = match address.rsplit_once(':') {
-        Some((host, port)) if port.chars().all(|c| c.is_ascii_digit()) => host,
-        _ => return false,
-    };
-    let host = host.trim_start_matches('[').trim_end_matches(']');
-    host.eq_ignore_ascii_case("localhost")
-        || host.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -314,28 +292,6 @@ mod tests {
             c.insert_json5(key.trim(), value.trim()).unwrap();
         }
         c
-    }
-
-    #[test]
-    fn loopback_addresses_are_recognised() {
-        for e in [
-            "tcp/127.0.0.1:7447",
-            "tcp/[::1]:0",
-            "tls/localhost:7447",
-            "tcp/127.3.2.1:1#iface=lo",
-        ] {
-            assert!(is_loopback(e), "{e}");
-        }
-        for e in [
-            "tcp/0.0.0.0:7447",
-            "tcp/[::]:0",
-            "tcp/10.0.0.5:7447",
-            "tcp/lab-host:7447",
-            "garbage",
-            "tcp/127.0.0.1",
-        ] {
-            assert!(!is_loopback(e), "{e}");
-        }
     }
 
     #[test]

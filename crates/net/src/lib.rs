@@ -9,6 +9,7 @@
 mod bridge;
 mod client;
 mod config;
+mod endpoint;
 mod exposure;
 pub mod identity;
 mod link;

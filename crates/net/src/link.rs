@@ -14,8 +14,8 @@
 //! answer to another request than the one in flight (a replay).
 
 use crate::client::{Inbox, Network};
+use envhub_protocol::batch_codec::{self, RemoteAnswer, RequestBody};
 use envhub_protocol::seal::{Direction, SessionKey};
-use envhub_protocol::wire::{self, RemoteAnswer, RequestBody};
 use envhub_protocol::{HubError, keys};
 use envhub_shm::{BatchLayout, DataPlaneError, Layout, command};
 use std::sync::Arc;
@@ -135,7 +135,7 @@ impl RemoteConn {
         body: &RequestBody<'_>,
     ) -> Result<(), HubError> {
         self.seq += 1;
-        let mut request = wire::encode_request(&self.layout, self.seq, command, slot, body);
+        let mut request = batch_codec::encode_request(&self.layout, self.seq, command, slot, body);
         self.key.seal(Direction::Request, &mut request);
         self.awaited
             .store(self.seq, std::sync::atomic::Ordering::Release);

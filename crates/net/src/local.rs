@@ -165,7 +165,7 @@ pub fn endpoints() -> Vec<String> {
             let endpoints: Vec<String> = listed
                 .iter()
                 .filter_map(|e| e.as_str())
-                .filter(|e| crate::exposure::is_loopback(e))
+                .filter(|e| crate::endpoint::is_loopback(e))
                 .map(String::from)
                 .collect();
             Some(endpoints)

@@ -3,8 +3,8 @@
 
 use crate::client::{Inbox, Network};
 use crate::link::RemoteConn;
+use envhub_protocol::batch_codec::{RemoteAnswer, RequestBody};
 use envhub_protocol::untrusted::check_open_reply;
-use envhub_protocol::wire::{RemoteAnswer, RequestBody};
 use envhub_protocol::{HubError, OpenReply, OpenRequest};
 use envhub_session::{RemoteSlice, SliceOpener};
 use envhub_shm::BatchLayout;

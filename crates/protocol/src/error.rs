@@ -77,9 +77,42 @@ pub enum HubError {
         /// What is expected.
         hint: String,
     },
-    /// The call is not valid in the env's current state.
+    /// The call is not valid in the session's current state: calls out of order (`recv`
+    /// before `send`, a step while results are still to be received, the EnvPool mode's
+    /// rules). The caller fixes the order of its calls.
     #[error("{0}")]
     InvalidState(String),
+    /// The session is closed (by `close`, or for good after a worker died without
+    /// `restart_on_crash`): the caller makes a new one.
+    #[error("`{id}` is closed; make a new env")]
+    Closed {
+        /// The session's id.
+        id: String,
+    },
+    /// The session was never reset: the caller resets it before stepping.
+    #[error("`{id}` must be reset before it is stepped")]
+    NotReset {
+        /// The session's id.
+        id: String,
+    },
+    /// Envs whose last step or reset failed were asked to step: the caller resets them.
+    #[error(
+        "env {envs:?} of `{id}` failed in its last step or reset and must be reset first\nhint: reset them (a full reset, or `reset_with` a mask that selects them; in Python `reset(options={{\"reset_mask\": mask}})`)"
+    )]
+    MustReset {
+        /// The session's id.
+        id: String,
+        /// The envs to reset.
+        envs: Vec<usize>,
+    },
+    /// Workers or hubs report spaces the session cannot batch (they differ between hubs,
+    /// or are too large for the batch slots): the hubs run different versions of an env.
+    #[error("{0}")]
+    SpacesDiffer(String),
+    /// Something the caller cannot fix failed inside the hub or client: a thread could
+    /// not start, the OS random source or the key exchange failed.
+    #[error("{0}")]
+    Internal(String),
     /// A worker died or hung; its envs are lost (unless restarted).
     #[error(
         "worker {worker} (envs {envs}, pid {pid}) {why}\nhint: the hub and other sessions are unaffected; make a new env, or enable `restart_on_crash`"
@@ -256,6 +289,19 @@ mod tests {
                 why: "died (signal: 9 (SIGKILL))".into(),
             },
             HubError::MakeFailed("no".into()),
+            HubError::InvalidState("nothing was sent; call `send` first".into()),
+            HubError::Closed {
+                id: "CartPole-v1".into(),
+            },
+            HubError::NotReset {
+                id: "CartPole-v1".into(),
+            },
+            HubError::MustReset {
+                id: "CartPole-v1".into(),
+                envs: vec![1, 3],
+            },
+            HubError::SpacesDiffer("`x` has different spaces".into()),
+            HubError::Internal("cannot start a session thread: x".into()),
             HubError::DataPlane(DataPlaneError::Ipc {
                 what: "node",
                 detail: "x".into(),

@@ -63,16 +63,6 @@ pub struct HubHello {
     pub proof: String,
 }
 
-/// An open request as it travels: the request and the client's hello.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OpenMessage {
-    /// What to open.
-    pub request: crate::OpenRequest,
-    /// The client's half of the key exchange.
-    pub hello: ClientHello,
-}
-
 /// An Ed25519 identity: a hub's (static, stored as PKCS#8) or a client process's.
 pub struct Identity {
     pair: Ed25519KeyPair,

@@ -11,6 +11,7 @@
 //! exchange that agrees its key). Must not depend
 //! on: Zenoh, iceoryx2 services, processes.
 
+pub mod batch_codec;
 pub mod daemon;
 mod error;
 mod frame;
@@ -22,13 +23,12 @@ mod messages;
 mod route;
 pub mod seal;
 pub mod untrusted;
-pub mod wire;
 
 pub use error::HubError;
 pub use frame::Frame;
 pub use ids::session_id;
 pub use messages::{
-    HubInfo, MAX_OPEN_REQUEST_BYTES, MAX_OPEN_REQUEST_DEPTH, MAX_OPEN_REQUEST_VALUES, OpenReply,
-    OpenRequest,
+    HubInfo, MAX_OPEN_REQUEST_BYTES, MAX_OPEN_REQUEST_DEPTH, MAX_OPEN_REQUEST_VALUES, OpenMessage,
+    OpenReply, OpenRequest,
 };
 pub use route::Route;

@@ -61,6 +61,16 @@ pub struct OpenRequest {
     pub step_timeout_ms: u64,
 }
 
+/// An open request as it travels: the request and the client's hello.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpenMessage {
+    /// What to open.
+    pub request: OpenRequest,
+    /// The client's half of the key exchange.
+    pub hello: crate::handshake::ClientHello,
+}
+
 /// The hub's answer to an open request.
 #[derive(Debug, Serialize, Deserialize)]
 pub struct OpenReply {

@@ -1,6 +1,6 @@
 //! Sealed session messages: every request and response of a remote session carries an AEAD
 //! tag (ChaCha20-Poly1305, `ring`) made with the session's own key, which the client and the
-//! hub agree when it opens ([`crate::handshake`]): it never travels.
+//! hub agree when it opens (the key exchange in `handshake`): it never travels.
 //!
 //! The nonce is the message's direction and sequence number, so a request can never pass for
 //! a response, nor one step for another; the sequence number stays in clear (the first 8

@@ -47,7 +47,7 @@ pub fn check_worker_spaces(spec: &ReadySpec, num_envs: usize) -> Result<Layout, 
 /// [`MAX_OPEN_REQUEST_BYTES`]: crate::MAX_OPEN_REQUEST_BYTES
 /// [`MAX_OPEN_REQUEST_DEPTH`]: crate::MAX_OPEN_REQUEST_DEPTH
 /// [`MAX_OPEN_REQUEST_VALUES`]: crate::MAX_OPEN_REQUEST_VALUES
-pub fn read_open_request(bytes: &[u8]) -> Result<crate::handshake::OpenMessage, String> {
+pub fn read_open_request(bytes: &[u8]) -> Result<crate::OpenMessage, String> {
     use crate::{MAX_OPEN_REQUEST_DEPTH, MAX_OPEN_REQUEST_VALUES};
     check_open_request_size(bytes.len())?;
     let (mut depth, mut values) = (0usize, 0usize);
@@ -235,6 +235,11 @@ pub fn describes_the_request(e: &HubError) -> bool {
             | HubError::MakeFailed(_)
             | HubError::InvalidAction { .. }
             | HubError::InvalidState(_)
+            | HubError::Closed { .. }
+            | HubError::NotReset { .. }
+            | HubError::MustReset { .. }
+            | HubError::SpacesDiffer(_)
+            | HubError::Internal(_)
     )
 }
 

@@ -7,10 +7,10 @@
 //! `ENVHUB_WRITE_FUZZ_SEEDS=1 cargo test -p envhub-protocol --test fuzz_seeds`.
 
 use envhub_core::{EnvConfig, ResetOptions, Space};
+use envhub_protocol::batch_codec::{self, RemoteAnswer, RequestBody, RowsOut};
 use envhub_protocol::daemon::{self, Request, UserAdapters};
 use envhub_protocol::info_columns::InfoSchema;
 use envhub_protocol::untrusted::{check_open_reply, read_failure_report};
-use envhub_protocol::wire::{self, RemoteAnswer, RequestBody, RowsOut};
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, Route};
 use envhub_shm::{
     BatchLayout, ChannelName, Layout, ReadySpec, SlotsName, WorkerJob, WorkerReply, command,
@@ -92,7 +92,7 @@ fn job() -> WorkerJob {
         env_id: "CartPole-v1".into(),
         config: route().config,
         env_offset: 2,
-        num_envs: 2,
+        worker_envs: 2,
         session_envs: 4,
         channel: ChannelName {
             prefix: "envhub_1234_".into(),
@@ -152,7 +152,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "wire_request",
         "reset",
-        picked(wire::encode_request(
+        picked(batch_codec::encode_request(
             &requests,
             1,
             command::RESET,
@@ -167,12 +167,18 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "wire_request",
         "step",
-        picked(wire::encode_request(&requests, 2, command::STEP, 1, &step)),
+        picked(batch_codec::encode_request(
+            &requests,
+            2,
+            command::STEP,
+            1,
+            &step,
+        )),
     );
     add(
         "wire_request",
         "close",
-        picked(wire::encode_request(
+        picked(batch_codec::encode_request(
             &requests,
             3,
             command::CLOSE,
@@ -183,7 +189,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
 
     let mut block = vec![0u8; rows.size()];
     let obs: Vec<u8> = (0..48).collect();
-    wire::write_rows(
+    batch_codec::write_rows(
         &rows,
         &mut block,
         &[0, 1, 2],
@@ -200,7 +206,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "wire_response",
         "step",
-        picked(wire::encode_response(2, 0, 3, &block, infos)),
+        picked(batch_codec::encode_response(2, 0, 3, &block, infos)),
     );
     let frames = envhub_shm::frames_section([
         Some((2, 2, vec![200u8; 12])),
@@ -210,13 +216,13 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "wire_response",
         "render",
-        picked(wire::encode_response(4, 0, 3, &[], &frames)),
+        picked(batch_codec::encode_response(4, 0, 3, &[], &frames)),
     );
     let failed = json(json!({"failed": [[1, "boom"]], "info": [{}, null, {}]}));
     add(
         "wire_response",
         "env_failed",
-        picked(wire::encode_response(
+        picked(batch_codec::encode_response(
             5,
             envhub_shm::status::ENV_FAILED,
             3,
@@ -227,7 +233,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "wire_response",
         "hub_error",
-        picked(wire::encode_error(6, 3, &errors()[1])),
+        picked(batch_codec::encode_error(6, 3, &errors()[1])),
     );
     add("frames", "render", frames);
 
@@ -244,7 +250,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
     add(
         "open_request",
         "cartpole",
-        json(envhub_protocol::handshake::OpenMessage { request, hello }),
+        json(envhub_protocol::OpenMessage { request, hello }),
     );
     for (name, spec) in [("cartpole", cartpole_spec()), ("nested", nested_spec())] {
         let reply = OpenReply {
@@ -369,7 +375,7 @@ fn accepted(target: &str, bytes: &[u8]) -> Result<(), String> {
     let body = bytes.get(1..).unwrap_or_default();
     let ok = |r: Result<(), String>| r;
     match target {
-        "wire_request" => wire::parse_request(body, &requests).map(drop),
+        "wire_request" => batch_codec::parse_request(body, &requests).map(drop),
         "wire_response" => RemoteAnswer::parse(body.to_vec())
             .filter(|a| a.rows().is_empty() || a.rows().len() == rows.size())
             .map(drop)

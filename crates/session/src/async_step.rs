@@ -47,7 +47,7 @@ impl VecEnv {
             return self.env_pool_send(actions, env_ids);
         }
         for w in &self.workers {
-            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
             if (w.pending || w.response.is_some())
                 && let Some(e) = env_ids.iter().find(|e| range.contains(e))
             {
@@ -60,7 +60,7 @@ impl VecEnv {
         let ab = self.action_space.byte_len();
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
-            let (lo, n) = (w.job.env_offset, w.job.num_envs);
+            let (lo, n) = (w.job.env_offset, w.job.worker_envs);
             let mut selected = vec![false; n];
             let mut block = vec![0u8; n * ab];
             for (k, &env) in env_ids.iter().enumerate() {

@@ -2,7 +2,7 @@
 //! slot when they lie there contiguously, else gathered.
 
 /// The results of a reset or step, for every env of the batch (or, from
-/// [`VecEnv::recv`](crate::VecEnv::recv), for exactly the envs listed in `env_ids`).
+/// `VecEnv::recv`, for exactly the envs listed in `env_ids`).
 /// Observations, rewards and flags are viewed in place in the session's shared-memory batch
 /// slot, whatever the number of workers; only results that do not lie contiguously there
 /// (`recv` of envs picked out of a worker's) are gathered into a copy.

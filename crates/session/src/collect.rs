@@ -6,8 +6,8 @@ use crate::results::Place;
 use crate::vec_env::VecEnv;
 use crate::worker_link::{Answer, WorkerLink, env_range};
 use envhub_protocol::HubError;
+use envhub_protocol::batch_codec::{HUB_ERROR, RemoteAnswer, decode_error, land_rows};
 use envhub_protocol::untrusted::{from_hub, read_failure_report};
-use envhub_protocol::wire::{HUB_ERROR, RemoteAnswer, decode_error, land_rows};
 use envhub_shm::{DataPlaneError, SlotPool, status};
 
 /// Copies a remote hub's result rows of the envs it was sent into the batch slot, where a
@@ -42,7 +42,7 @@ fn land_remote_rows(
     let envs: Vec<usize> = w.sent.iter().map(|e| e - lo).collect();
     // SAFETY: these rows belong to this link's envs, which no worker writes (a remote slice
     // has none here), and results are being made: nothing reads them until they are placed.
-    let mut to = unsafe { slot.rows_mut(lo, w.job.num_envs) };
+    let mut to = unsafe { slot.rows_mut(lo, w.job.worker_envs) };
     land_rows(layout, rows, &envs, &mut to, 0);
     Ok(())
 }
@@ -107,7 +107,7 @@ impl VecEnv {
             let policy = self.options.wait_policy(self.workers.len());
             self.workers[i].restart(&self.session, policy, self.options.start_timeout)?;
         }
-        let n = self.workers[i].job.num_envs;
+        let n = self.workers[i].job.worker_envs;
         self.workers[i].send_reset(slot, &vec![None; n], None, "")?;
         self.workers[i].sent(slot, sent);
         let interrupt = self.interrupt.clone();

@@ -80,7 +80,7 @@ impl VecEnv {
         }
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
-            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
             w.send_reset(slot, &seeds[range.clone()], None, "")?;
             w.sent(slot, range);
         }
@@ -122,7 +122,7 @@ impl VecEnv {
         if w.pending || w.response.is_some() {
             return Ok(());
         }
-        let (lo, n) = (w.job.env_offset, w.job.num_envs);
+        let (lo, n) = (w.job.env_offset, w.job.worker_envs);
         let pool = self.env_pool.as_mut().expect("in the EnvPool mode");
         let selected: Vec<bool> = (lo..lo + n)
             .map(|e| pool.state[e] == EnvState::Queued)

@@ -2,13 +2,13 @@
 //! a request for its envs and answers with their result rows, the same statuses as a local
 //! worker. How they are reached (Zenoh, in `envhub-net`) is the layer above's business.
 
-use envhub_protocol::wire::{RemoteAnswer, RequestBody};
+use envhub_protocol::batch_codec::{RemoteAnswer, RequestBody};
 use envhub_protocol::{HubError, OpenReply, OpenRequest};
 use envhub_shm::BatchLayout;
 use std::time::Duration;
 
 /// The place name of this machine's own workers (in [`Slice::place`] and
-/// [`crate::VecEnv::placement`]).
+/// `VecEnv::placement`).
 pub const LOCAL: &str = "local";
 
 /// A run of a session's envs and where it runs: [`LOCAL`] or a hub's name.

@@ -13,7 +13,7 @@ use crate::session_options::SessionOptions;
 use crate::worker_link::{InterruptCheck, WorkerLink, split_envs};
 use envhub_core::{AutoresetMode, DType, Space};
 use envhub_protocol::{Frame, HubError, OpenRequest, Route};
-use envhub_shm::{BatchLayout, ChannelName, Doorbells, SlotPool, SlotsName, WorkerJob};
+use envhub_shm::{BatchLayout, ChannelName, Doorbells, SlotPool, SlotsName, WaitPolicy, WorkerJob};
 use std::sync::Arc;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,7 +59,8 @@ enum Planned {
     Remote {
         hub: String,
         env_offset: usize,
-        num_envs: usize,
+        /// The envs of the slice.
+        envs: usize,
     },
 }
 
@@ -104,6 +105,11 @@ impl VecEnv {
 
     /// Starts a session over local workers and remote hubs: envs `0..a` on the first slice's
     /// place, `a..b` on the second's, and so on.
+    ///
+    /// Its steps: count the envs and the local workers; plan one link per local worker and
+    /// per remote slice; start them all in parallel; check that they agree on the spaces and
+    /// lay out the batch slots by them; reserve the first slot. What started is closed again
+    /// when a later step fails.
     pub fn start_placed(
         plan: StartPlan<'_>,
         options: SessionOptions,
@@ -116,252 +122,44 @@ impl VecEnv {
             slices,
             opener,
         } = plan;
-        let num_envs: usize = slices.iter().map(|s| s.num_envs).sum();
-        if num_envs == 0 {
-            return Err(HubError::InvalidConfig {
-                what: "num_envs",
-                reason: "must be at least 1".into(),
-            });
-        }
-        let local_envs: usize = slices
-            .iter()
-            .filter(|s| s.place == LOCAL)
-            .map(|s| s.num_envs)
-            .sum();
-        let local_workers = if local_envs == 0 {
-            0
-        } else {
-            let workers = crate::session_options::workers_for(&config, local_envs);
-            if workers == 0 || workers > local_envs {
-                return Err(HubError::InvalidConfig {
-                    what: "workers",
-                    reason: format!(
-                        "{workers} workers for {local_envs} envs; use between 1 and {local_envs} (each worker hosts at least one env)"
-                    ),
-                });
-            }
-            workers
-        };
+        let num_envs = session_envs(&slices)?;
+        let local_workers = local_workers(&config, &slices)?;
         let session = envhub_protocol::session_id();
-        let slots = SlotsName::new(options.namespace.clone(), session.clone());
-        let policy = options.wait_policy(local_workers.max(1));
-        let mut planned = Vec::new();
-        let mut offset = 0;
-        let mut worker_index = 0;
-        for slice in &slices {
-            if slice.place != LOCAL {
-                planned.push(Planned::Remote {
-                    hub: slice.place.clone(),
-                    env_offset: offset,
-                    num_envs: slice.num_envs,
-                });
-                offset += slice.num_envs;
-                continue;
-            }
-            let route = route.as_ref().ok_or_else(|| {
-                HubError::InvalidState("envs placed here without a local route".into())
-            })?;
-            for (local_offset, count) in split_envs(slice.num_envs, local_workers) {
-                let mut config = route.config.clone();
-                config.num_envs = count;
-                planned.push(Planned::Local(Box::new(WorkerJob {
-                    adapter: route.adapter.clone(),
-                    env_id: route.env_id.clone(),
-                    config,
-                    env_offset: offset + local_offset,
-                    num_envs: count,
-                    session_envs: num_envs,
-                    channel: ChannelName {
-                        prefix: options.namespace.clone(),
-                        service: String::new(),
-                    },
-                    slots: slots.clone(),
-                    worker_index,
-                    session_workers: local_workers,
-                    owner_pid: std::process::id(),
-                    spin_us: policy.spin.as_micros() as u64,
-                    max_spin_us: options.max_spin.as_micros() as u64,
-                    info_row_bytes: options.info_row_bytes,
-                    python: route.python.clone(),
-                })));
-                worker_index += 1;
-            }
-            offset += slice.num_envs;
-        }
+        let starting = Starting {
+            id,
+            config: &config,
+            options: &options,
+            session: &session,
+            slots: SlotsName::new(options.namespace.clone(), session.clone()),
+            policy: options.wait_policy(local_workers.max(1)),
+            num_envs,
+            local_workers,
+            with_final: config.autoreset_mode == AutoresetMode::SameStep,
+        };
+        let planned = starting.plan_links(&slices, route.as_ref())?;
         let bells = if local_workers > 0 {
-            Some(Doorbells::create(&slots, local_workers)?)
+            Some(Doorbells::create(&starting.slots, local_workers)?)
         } else {
             None
         };
-        let with_final = config.autoreset_mode == AutoresetMode::SameStep;
-        // Workers and remote slices start in parallel: a simulator that takes a while to load
-        // (MuJoCo, Python) costs its load time once, not once per worker or hub.
-        let started: Vec<Result<(WorkerLink, Option<Route>), HubError>> =
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = planned
-                    .into_iter()
-                    .enumerate()
-                    .map(|(index, plan)| {
-                        let (session, options, config) = (&session, &options, &config);
-                        let (bells, opener, slots) = (&bells, &opener, &slots);
-                        scope.spawn(move || match plan {
-                            Planned::Local(job) => {
-                                let bell = bells
-                                    .as_ref()
-                                    .expect("made for local workers")
-                                    .bell(job.worker_index)?;
-                                let link = WorkerLink::start(
-                                    index,
-                                    *job,
-                                    session,
-                                    0,
-                                    policy,
-                                    options.start_timeout,
-                                    launcher,
-                                    bell,
-                                )?;
-                                Ok((link, None))
-                            }
-                            Planned::Remote {
-                                hub,
-                                env_offset,
-                                num_envs: n,
-                            } => {
-                                let opener = opener.as_ref().ok_or_else(|| {
-                                    HubError::InvalidState("remote envs without a network".into())
-                                })?;
-                                let mut config = config.clone();
-                                config.num_envs = n;
-                                let request = OpenRequest {
-                                    id: id.to_string(),
-                                    config,
-                                    client: opener.client_id(),
-                                    restart_on_crash: options.restart_on_crash,
-                                    step_timeout_ms: options.step_timeout.as_millis() as u64,
-                                };
-                                let (reply, conn) = opener.open(
-                                    &hub,
-                                    &request,
-                                    index,
-                                    with_final,
-                                    options.start_timeout,
-                                )?;
-                                let job = WorkerJob {
-                                    adapter: reply.route.adapter.clone(),
-                                    env_id: reply.route.env_id.clone(),
-                                    config: request.config,
-                                    env_offset,
-                                    num_envs: n,
-                                    session_envs: num_envs,
-                                    channel: ChannelName {
-                                        prefix: String::new(),
-                                        service: String::new(),
-                                    },
-                                    slots: slots.clone(),
-                                    worker_index: index,
-                                    session_workers: 0,
-                                    owner_pid: std::process::id(),
-                                    spin_us: 0,
-                                    max_spin_us: 0,
-                                    info_row_bytes: 0,
-                                    python: None,
-                                };
-                                Ok((
-                                    WorkerLink::remote(index, job, reply.spec, conn),
-                                    Some(reply.route),
-                                ))
-                            }
-                        })
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| {
-                        h.join().unwrap_or_else(|_| {
-                            Err(HubError::InvalidState(
-                                "a worker start thread panicked".into(),
-                            ))
-                        })
-                    })
-                    .collect()
-            });
-        let mut links = Vec::with_capacity(started.len());
-        let mut route = route;
-        let mut failure = None;
-        for result in started {
-            match result {
-                Ok((link, remote_route)) => {
-                    if route.is_none() {
-                        route = remote_route;
-                    }
-                    links.push(link);
-                }
-                Err(e) => failure = failure.or(Some(e)),
-            }
-        }
-        if let Some(e) = failure {
-            for mut link in links {
-                link.close();
-            }
-            slots.unlink_all();
-            return Err(e);
-        }
-        let observation_space = links[0].spec.observation_space.clone();
-        let action_space = links[0].spec.action_space.clone();
-        if let Some(odd) = links.iter().find(|l| {
-            l.spec.observation_space != observation_space || l.spec.action_space != action_space
-        }) {
-            let where_ = |l: &WorkerLink| {
-                l.remote_conn().map_or_else(
-                    || "this machine".to_string(),
-                    |r| format!("hub `{}`", r.hub()),
-                )
-            };
-            let message = format!(
-                "`{id}` has different spaces on {} ({} / {}) and {} ({} / {}); the hubs run different versions of it",
-                where_(&links[0]),
-                observation_space,
-                action_space,
-                where_(odd),
-                odd.spec.observation_space,
-                odd.spec.action_space
-            );
-            for mut link in links {
-                link.close();
-            }
-            slots.unlink_all();
-            return Err(HubError::InvalidState(message));
-        }
-        let route = route.expect("some link started");
-        // The spaces came from other processes (workers running user code, hubs): sizes are
-        // checked before a slot is laid out by them.
-        let layout = observation_space
-            .check()
-            .ok()
-            .and_then(|obs| BatchLayout::checked(num_envs, obs, with_final))
-            .and_then(|layout| layout.with_info_columns(options.info_row_bytes))
-            .ok_or_else(|| {
-                HubError::InvalidState(format!(
-                    "`{id}` has an observation space too large for a batch of {num_envs} envs: {observation_space}"
-                ))
-            });
-        let layout = match layout {
-            Ok(layout) => layout,
+        let started = starting.start_links(planned, bells.as_ref(), opener.as_ref(), launcher);
+        let (links, route) = starting.all_started(started, route)?;
+        let checked = same_spaces(id, &links).and_then(|(observation, action)| {
+            let layout = starting.batch_layout(&observation)?;
+            Ok((observation, action, layout))
+        });
+        let (observation_space, action_space, layout) = match checked {
+            Ok(checked) => checked,
             Err(e) => {
-                for mut link in links {
-                    link.close();
-                }
-                slots.unlink_all();
+                starting.abandon(links);
                 return Err(e);
             }
         };
-        let mut pool = SlotPool::new(slots, layout, options.pool_bytes);
+        let mut pool = SlotPool::new(starting.slots.clone(), layout, options.pool_bytes);
         // The first slot now, reserved in full: a `/dev/shm` too small fails the open with
         // the bytes needed and free, not a worker's SIGBUS at the first step.
         if let Err(e) = pool.writable() {
-            for mut link in links {
-                link.close();
-            }
+            close_all(links);
             return Err(e.into());
         }
         Ok(VecEnv {
@@ -402,7 +200,7 @@ impl VecEnv {
         let opener = self
             .opener
             .clone()
-            .ok_or_else(|| HubError::InvalidState("remote envs without a network".into()))?;
+            .ok_or_else(|| HubError::Internal("remote envs without a network".into()))?;
         let mut load: Vec<(String, usize)> = Vec::new();
         for other in &self.workers {
             if let Some(r) = other.remote_conn()
@@ -410,8 +208,8 @@ impl VecEnv {
                 && opener.is_alive(r.hub())
             {
                 match load.iter_mut().find(|(h, _)| h == r.hub()) {
-                    Some((_, n)) => *n += other.job.num_envs,
-                    None => load.push((r.hub().to_string(), other.job.num_envs)),
+                    Some((_, n)) => *n += other.job.worker_envs,
+                    None => load.push((r.hub().to_string(), other.job.worker_envs)),
                 }
             }
         }
@@ -422,7 +220,7 @@ impl VecEnv {
                 why: "no other hub of the session is live to take its envs".into(),
             });
         };
-        let n = w.job.num_envs;
+        let n = w.job.worker_envs;
         let request = OpenRequest {
             id: self.id.clone(),
             config: w.job.config.clone(),
@@ -441,7 +239,7 @@ impl VecEnv {
         if reply.spec.observation_space != self.observation_space
             || reply.spec.action_space != self.action_space
         {
-            return Err(HubError::InvalidState(format!(
+            return Err(HubError::SpacesDiffer(format!(
                 "hub `{target}` runs `{}` with other spaces than the session's",
                 self.id
             )));
@@ -458,7 +256,7 @@ impl VecEnv {
             let place = w
                 .remote_conn()
                 .map_or_else(|| LOCAL.to_string(), |r| r.hub().to_string());
-            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
             match out.last_mut() {
                 Some((p, r)) if *p == place && r.end == range.start => r.end = range.end,
                 _ => out.push((place, range)),
@@ -555,10 +353,9 @@ impl VecEnv {
 
     pub(crate) fn check_open(&self) -> Result<(), HubError> {
         if self.phase == Phase::Closed {
-            return Err(HubError::InvalidState(format!(
-                "`{}` is closed; make a new env",
-                self.id
-            )));
+            return Err(HubError::Closed {
+                id: self.id.clone(),
+            });
         }
         if self
             .env_pool
@@ -619,7 +416,7 @@ impl VecEnv {
         };
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
-            let range = w.job.env_offset..w.job.env_offset + w.job.num_envs;
+            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
             w.send_reset(
                 slot,
                 &seeds[range.clone()],
@@ -673,7 +470,7 @@ impl VecEnv {
         let ab = self.action_space.byte_len();
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
-            let (lo, n) = (w.job.env_offset, w.job.num_envs);
+            let (lo, n) = (w.job.env_offset, w.job.worker_envs);
             w.send_step(slot, &actions[lo * ab..(lo + n) * ab], None)?;
             w.sent(slot, lo..lo + n);
         }
@@ -685,10 +482,9 @@ impl VecEnv {
     pub(crate) fn check_steppable(&self) -> Result<(), HubError> {
         self.check_open()?;
         if self.phase == Phase::Created {
-            return Err(HubError::InvalidState(format!(
-                "`{}` must be reset before it is stepped",
-                self.id
-            )));
+            return Err(HubError::NotReset {
+                id: self.id.clone(),
+            });
         }
         Ok(())
     }
@@ -707,10 +503,10 @@ impl VecEnv {
         if failed.is_empty() {
             return Ok(());
         }
-        Err(HubError::InvalidState(format!(
-            "env {failed:?} of `{}` failed in its last step or reset and must be reset first\nhint: reset them (a full reset, or `reset_with` a mask that selects them; in Python `reset(options={{\"reset_mask\": mask}})`)",
-            self.id
-        )))
+        Err(HubError::MustReset {
+            id: self.id.clone(),
+            envs: failed,
+        })
     }
 
     /// Checks `env_ids.len()` actions back to back against the action space, holding float
@@ -791,7 +587,7 @@ impl VecEnv {
                 });
             }
             let mut bytes = response.info_bytes();
-            for _ in 0..self.workers[i].job.num_envs {
+            for _ in 0..self.workers[i].job.worker_envs {
                 let (frame, rest) = Frame::parse(bytes).ok_or_else(|| {
                     HubError::DataPlane(envhub_shm::DataPlaneError::Protocol(format!(
                         "worker {i} sent a truncated frame"
@@ -857,5 +653,327 @@ impl VecEnv {
 impl Drop for VecEnv {
     fn drop(&mut self) {
         self.close();
+    }
+}
+
+/// The envs of the whole session: those of every slice (at least one).
+fn session_envs(slices: &[Slice]) -> Result<usize, HubError> {
+    let num_envs: usize = slices.iter().map(|s| s.num_envs).sum();
+    if num_envs == 0 {
+        return Err(HubError::InvalidConfig {
+            what: "num_envs",
+            reason: "must be at least 1".into(),
+        });
+    }
+    Ok(num_envs)
+}
+
+/// The workers to start on this machine for the envs placed here (0 when none is).
+fn local_workers(config: &envhub_core::EnvConfig, slices: &[Slice]) -> Result<usize, HubError> {
+    let local_envs: usize = slices
+        .iter()
+        .filter(|s| s.place == LOCAL)
+        .map(|s| s.num_envs)
+        .sum();
+    if local_envs == 0 {
+        return Ok(0);
+    }
+    let workers = crate::session_options::workers_for(config, local_envs);
+    if workers == 0 || workers > local_envs {
+        return Err(HubError::InvalidConfig {
+            what: "workers",
+            reason: format!(
+                "{workers} workers for {local_envs} envs; use between 1 and {local_envs} (each worker hosts at least one env)"
+            ),
+        });
+    }
+    Ok(workers)
+}
+
+/// A session being started: what the steps of [`VecEnv::start_placed`] share.
+struct Starting<'a> {
+    id: &'a str,
+    /// The session's config (its `num_envs`: the whole session's).
+    config: &'a envhub_core::EnvConfig,
+    options: &'a SessionOptions,
+    session: &'a str,
+    slots: SlotsName,
+    policy: WaitPolicy,
+    /// Envs of the whole session (rows of a batch slot).
+    num_envs: usize,
+    local_workers: usize,
+    /// Whether steps also return the final observation of an episode that ended.
+    with_final: bool,
+}
+
+impl Starting<'_> {
+    /// One link per local worker (each slice placed here split among them) and one per
+    /// remote slice, in env order.
+    fn plan_links(
+        &self,
+        slices: &[Slice],
+        route: Option<&Route>,
+    ) -> Result<Vec<Planned>, HubError> {
+        let mut planned = Vec::new();
+        let mut offset = 0;
+        let mut worker_index = 0;
+        for slice in slices {
+            if slice.place != LOCAL {
+                planned.push(Planned::Remote {
+                    hub: slice.place.clone(),
+                    env_offset: offset,
+                    envs: slice.num_envs,
+                });
+                offset += slice.num_envs;
+                continue;
+            }
+            let route = route.ok_or_else(|| {
+                HubError::Internal("envs placed here without a local route".into())
+            })?;
+            for (local_offset, count) in split_envs(slice.num_envs, self.local_workers) {
+                planned.push(Planned::Local(Box::new(self.local_job(
+                    route,
+                    offset + local_offset,
+                    count,
+                    worker_index,
+                ))));
+                worker_index += 1;
+            }
+            offset += slice.num_envs;
+        }
+        Ok(planned)
+    }
+
+    /// The job of local worker `worker_index`, hosting `count` envs from `env_offset`.
+    fn local_job(
+        &self,
+        route: &Route,
+        env_offset: usize,
+        count: usize,
+        worker_index: usize,
+    ) -> WorkerJob {
+        WorkerJob {
+            adapter: route.adapter.clone(),
+            env_id: route.env_id.clone(),
+            config: config_for(&route.config, count),
+            env_offset,
+            worker_envs: count,
+            session_envs: self.num_envs,
+            channel: ChannelName {
+                prefix: self.options.namespace.clone(),
+                service: String::new(),
+            },
+            slots: self.slots.clone(),
+            worker_index,
+            session_workers: self.local_workers,
+            owner_pid: std::process::id(),
+            spin_us: self.policy.spin.as_micros() as u64,
+            max_spin_us: self.options.max_spin.as_micros() as u64,
+            info_row_bytes: self.options.info_row_bytes,
+            python: route.python.clone(),
+        }
+    }
+
+    /// Starts every planned link, in parallel: a simulator that takes a while to load
+    /// (MuJoCo, Python) costs its load time once, not once per worker or hub. A remote
+    /// link comes with the route its hub chose.
+    fn start_links(
+        &self,
+        planned: Vec<Planned>,
+        bells: Option<&Arc<Doorbells>>,
+        opener: Option<&Arc<dyn SliceOpener>>,
+        launcher: &Arc<dyn Launch>,
+    ) -> Vec<Result<(WorkerLink, Option<Route>), HubError>> {
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = planned
+                .into_iter()
+                .enumerate()
+                .map(|(index, plan)| {
+                    scope.spawn(move || match plan {
+                        Planned::Local(job) => {
+                            let bell = bells
+                                .expect("made for local workers")
+                                .bell(job.worker_index)?;
+                            let link = WorkerLink::start(
+                                index,
+                                *job,
+                                self.session,
+                                0,
+                                self.policy,
+                                self.options.start_timeout,
+                                launcher,
+                                bell,
+                            )?;
+                            Ok((link, None))
+                        }
+                        Planned::Remote {
+                            hub,
+                            env_offset,
+                            envs,
+                        } => {
+                            let opener = opener.ok_or_else(|| {
+                                HubError::Internal("remote envs without a network".into())
+                            })?;
+                            let (link, route) =
+                                self.open_remote(opener, index, &hub, env_offset, envs)?;
+                            Ok((link, Some(route)))
+                        }
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join().unwrap_or_else(|_| {
+                        Err(HubError::Internal("a worker start thread panicked".into()))
+                    })
+                })
+                .collect()
+        })
+    }
+
+    /// Opens the slice of `envs` envs (from `env_offset`) on `hub` as link `index`.
+    fn open_remote(
+        &self,
+        opener: &Arc<dyn SliceOpener>,
+        index: usize,
+        hub: &str,
+        env_offset: usize,
+        envs: usize,
+    ) -> Result<(WorkerLink, Route), HubError> {
+        let request = OpenRequest {
+            id: self.id.to_string(),
+            // A session of its own on that hub: its `num_envs` is the slice's.
+            config: envhub_core::EnvConfig {
+                num_envs: envs,
+                ..self.config.clone()
+            },
+            client: opener.client_id(),
+            restart_on_crash: self.options.restart_on_crash,
+            step_timeout_ms: self.options.step_timeout.as_millis() as u64,
+        };
+        let (reply, conn) = opener.open(
+            hub,
+            &request,
+            index,
+            self.with_final,
+            self.options.start_timeout,
+        )?;
+        let job = WorkerJob {
+            adapter: reply.route.adapter.clone(),
+            env_id: reply.route.env_id.clone(),
+            config: request.config,
+            env_offset,
+            worker_envs: envs,
+            session_envs: self.num_envs,
+            channel: ChannelName {
+                prefix: String::new(),
+                service: String::new(),
+            },
+            slots: self.slots.clone(),
+            worker_index: index,
+            session_workers: 0,
+            owner_pid: std::process::id(),
+            spin_us: 0,
+            max_spin_us: 0,
+            info_row_bytes: 0,
+            python: None,
+        };
+        Ok((
+            WorkerLink::remote(index, job, reply.spec, conn),
+            reply.route,
+        ))
+    }
+
+    /// The links, once every one started, with the session's route (the local one, else
+    /// the first remote hub's); else the first error, the others closed.
+    fn all_started(
+        &self,
+        started: Vec<Result<(WorkerLink, Option<Route>), HubError>>,
+        mut route: Option<Route>,
+    ) -> Result<(Vec<WorkerLink>, Route), HubError> {
+        let mut links = Vec::with_capacity(started.len());
+        let mut failure = None;
+        for result in started {
+            match result {
+                Ok((link, remote_route)) => {
+                    if route.is_none() {
+                        route = remote_route;
+                    }
+                    links.push(link);
+                }
+                Err(e) => failure = failure.or(Some(e)),
+            }
+        }
+        if let Some(e) = failure {
+            self.abandon(links);
+            return Err(e);
+        }
+        Ok((links, route.expect("some link started")))
+    }
+
+    /// The batch slots' layout for this session's envs. The spaces came from other
+    /// processes (workers running user code, hubs): sizes are checked before a slot is laid
+    /// out by them.
+    fn batch_layout(&self, observation_space: &Space) -> Result<BatchLayout, HubError> {
+        let (id, num_envs) = (self.id, self.num_envs);
+        observation_space
+            .check()
+            .ok()
+            .and_then(|obs| BatchLayout::checked(num_envs, obs, self.with_final))
+            .and_then(|layout| layout.with_info_columns(self.options.info_row_bytes))
+            .ok_or_else(|| {
+                HubError::SpacesDiffer(format!(
+                    "`{id}` has an observation space too large for a batch of {num_envs} envs: {observation_space}"
+                ))
+            })
+    }
+
+    /// Closes what started and removes the session's slots: a later step failed.
+    fn abandon(&self, links: Vec<WorkerLink>) {
+        close_all(links);
+        self.slots.unlink_all();
+    }
+}
+
+/// The config a worker hosting `count` envs is started with: the session's, with its
+/// `num_envs` the worker's own (what an adapter builds, `make_vec(num_envs=...)` included).
+fn config_for(session: &envhub_core::EnvConfig, count: usize) -> envhub_core::EnvConfig {
+    envhub_core::EnvConfig {
+        num_envs: count,
+        ..session.clone()
+    }
+}
+
+/// The spaces every link reports, which must be the same everywhere (hubs running
+/// different versions of an env would not batch).
+fn same_spaces(id: &str, links: &[WorkerLink]) -> Result<(Space, Space), HubError> {
+    let observation_space = links[0].spec.observation_space.clone();
+    let action_space = links[0].spec.action_space.clone();
+    if let Some(odd) = links.iter().find(|l| {
+        l.spec.observation_space != observation_space || l.spec.action_space != action_space
+    }) {
+        let where_ = |l: &WorkerLink| {
+            l.remote_conn().map_or_else(
+                || "this machine".to_string(),
+                |r| format!("hub `{}`", r.hub()),
+            )
+        };
+        return Err(HubError::SpacesDiffer(format!(
+            "`{id}` has different spaces on {} ({} / {}) and {} ({} / {}); the hubs run different versions of it",
+            where_(&links[0]),
+            observation_space,
+            action_space,
+            where_(odd),
+            odd.spec.observation_space,
+            odd.spec.action_space
+        )));
+    }
+    Ok((observation_space, action_space))
+}
+
+fn close_all(links: Vec<WorkerLink>) {
+    for mut link in links {
+        link.close();
     }
 }

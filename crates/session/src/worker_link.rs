@@ -5,7 +5,7 @@
 use crate::launch::{Launch, Process};
 use crate::remote::RemoteSlice;
 use envhub_protocol::HubError;
-use envhub_protocol::wire::{RemoteAnswer, RequestBody};
+use envhub_protocol::batch_codec::{RemoteAnswer, RequestBody};
 use envhub_shm::{
     Bell, ClientChannel, DataPlaneError, ProcessWatch, ReadySpec, Response, ResponseHeader,
     WaitPolicy, WorkerJob, command, status,
@@ -129,11 +129,11 @@ impl WorkerLink {
         let pid = process.pid();
         // The spaces are the word of user code: checked before a size is computed from them.
         let mut process = process;
-        let layout = match envhub_protocol::untrusted::check_worker_spaces(&spec, job.num_envs) {
+        let layout = match envhub_protocol::untrusted::check_worker_spaces(&spec, job.worker_envs) {
             Ok(layout) => layout,
             Err(e) => {
                 process.kill_now();
-                return Err(HubError::InvalidState(format!(
+                return Err(HubError::SpacesDiffer(format!(
                     "worker {index} (pid {pid}, envs {}) announced {e}",
                     env_range(&job)
                 )));
@@ -487,7 +487,7 @@ impl WorkerLink {
         start_timeout: Duration,
     ) -> Result<(), HubError> {
         let Conn::Local(local) = &self.conn else {
-            return Err(HubError::InvalidState(
+            return Err(HubError::Internal(
                 "a remote slice is placed again by its session, not restarted".into(),
             ));
         };
@@ -545,7 +545,7 @@ impl Drop for LocalConn {
 }
 
 pub(crate) fn env_range(job: &WorkerJob) -> String {
-    format!("{}..{}", job.env_offset, job.env_offset + job.num_envs)
+    format!("{}..{}", job.env_offset, job.env_offset + job.worker_envs)
 }
 
 /// Splits `num_envs` over `workers` as evenly as possible: (offset, count) per worker.

@@ -16,12 +16,15 @@ pub struct WorkerJob {
     pub adapter: String,
     /// Framework env id (`CartPole-v1`).
     pub env_id: String,
-    /// How to create each env.
+    /// How to create each env (its `num_envs`: this worker's, `worker_envs`: what the
+    /// adapter builds).
     pub config: EnvConfig,
     /// Index of this worker's first env in the session (its first row in the batch slots).
     pub env_offset: usize,
-    /// Envs this worker hosts.
-    pub num_envs: usize,
+    /// Envs this worker hosts (of the session's `session_envs`). `num_envs` on the wire, as
+    /// the Python worker reads it.
+    #[serde(rename = "num_envs")]
+    pub worker_envs: usize,
     /// Envs of the whole session (rows of a batch slot).
     pub session_envs: usize,
     /// The channel the owner created.

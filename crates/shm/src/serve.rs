@@ -13,7 +13,7 @@ use std::time::Duration;
 /// What the worker loop serves: all of one worker's envs, answering each request for the
 /// whole batch at once.
 ///
-/// [`EnvBatch`](crate::EnvBatch) implements it over one [`Env`](envhub_core::Env) per env and
+/// `EnvBatch` (in `batch`) implements it over one [`Env`](envhub_core::Env) per env and
 /// applies the autoreset mode itself; a simulator that holds its envs in one object, steps
 /// them together and autoresets them itself (a Gymnasium `VectorEnv`, Isaac Lab) implements
 /// it directly. Every method that answers with blocks writes every block the client reads for
@@ -88,26 +88,26 @@ pub fn serve_batch(
 ) -> Result<(), DataPlaneError> {
     let io =
         |e: std::io::Error| DataPlaneError::PeerGone(format!("cannot reply to the owner: {e}"));
-    if batch.len() != job.num_envs {
+    if batch.len() != job.worker_envs {
         batch.close();
         return reply(&WorkerReply::Error(format!(
             "the worker made {} envs for a job of {}\nhint: a batch must hold exactly the job's `num_envs`",
             batch.len(),
-            job.num_envs
+            job.worker_envs
         )))
         .map_err(io);
     }
-    if job.env_offset + job.num_envs > job.session_envs {
+    if job.env_offset + job.worker_envs > job.session_envs {
         batch.close();
         return reply(&WorkerReply::Error(format!(
             "envs {}..{} of a session of {}",
             job.env_offset,
-            job.env_offset + job.num_envs,
+            job.env_offset + job.worker_envs,
             job.session_envs
         )))
         .map_err(io);
     }
-    let layout = Layout::new(job.num_envs, ready.action_space.byte_len());
+    let layout = Layout::new(job.worker_envs, ready.action_space.byte_len());
     let plain = BatchLayout::new(
         job.session_envs,
         ready.observation_space.byte_len(),
@@ -165,7 +165,7 @@ pub fn serve_batch(
         DataPlaneError::PeerGone(format!("the owner process {} is gone: {e}", job.owner_pid))
     })?;
     reply(&WorkerReply::Ready(ready)).map_err(io)?;
-    tracing::debug!(envs = job.num_envs, "worker ready");
+    tracing::debug!(envs = job.worker_envs, "worker ready");
 
     let alive = || {
         if owner.exited() {
@@ -300,7 +300,7 @@ mod tests {
             env_id: "Lockstep-v0".into(),
             config: EnvConfig::default(),
             env_offset: 0,
-            num_envs,
+            worker_envs: num_envs,
             session_envs: num_envs,
             channel: ChannelName {
                 prefix: prefix.into(),

@@ -75,7 +75,7 @@ fn inproc_throughput(
         env_id: route.env_id.clone(),
         config: route.config.clone(),
         env_offset: 0,
-        num_envs: env.num_envs(),
+        worker_envs: env.num_envs(),
         session_envs: env.num_envs(),
         channel: ChannelName {
             prefix: String::new(),
