@@ -33,7 +33,8 @@ class EnvhubEnv(EnvConfig):
     `--env.hub`: where the envs run (`local`, `all` live hubs, or hub names, comma-separated);
     `--env.workers`: worker processes per task (default: one per core, at most one per env);
     `--env.step_timeout`: seconds a reset or step may take before its worker counts as hung;
-    `--env.registry`: more registry files. The LIBERO options are LeRobot's `LiberoEnv`'s."""
+    `--env.registry`: more registry files. The LIBERO options are LeRobot's `LiberoEnv`'s;
+    `--env.episode_length` (where the rollout stops) applies to every suite."""
 
     task: str | None = None
     fps: int = 0  # 0: the suite's (LIBERO 20, Meta-World 80, an entry's render_fps)
@@ -59,6 +60,8 @@ class EnvhubEnv(EnvConfig):
     def __post_init__(self) -> None:
         self._plan: _tasks.Plan | None = None
         self._converter: Converter | None = None
+        if self.episode_length is not None and (isinstance(self.episode_length, bool) or self.episode_length <= 0):
+            raise ValueError(f"--env.episode_length must be a positive number of steps; got {self.episode_length}")
         if not self.task:
             return
         plan = self.plan()
@@ -163,19 +166,24 @@ class EnvhubEnv(EnvConfig):
         if kind == "metaworld":
             options.update(obs_type=self.obs_type, freeze_after_episode_end=freeze)
             return LeRobotVectorEnv(
-                task.entry, n_envs, options=options, max_episode_steps=task.max_episode_steps, render_fps=80, **common
+                task.entry, n_envs, options=options, max_episode_steps=self._horizon(task), render_fps=80, **common
             )
         return LeRobotVectorEnv(
             task.entry,
             n_envs,
             options=options,
-            max_episode_steps=task.max_episode_steps,
+            max_episode_steps=self._horizon(task),
             render_fps=self.fps or 30,
             convert=self._converter,
             success_key="success",
             passes_rollout_option=False,
             **common,
         )
+
+    def _horizon(self, task: _tasks.Task) -> int | None:
+        """Where LeRobot's rollout stops: `--env.episode_length` (LeRobot's LIBERO option,
+        taken for every suite here), else the task's own horizon."""
+        return task.max_episode_steps if self.episode_length is None else int(self.episode_length)
 
     def create_envs(self, n_envs: int, use_async_envs: bool = False) -> dict[str, dict[int, Any]]:
         """`{group: {task_id: vector env}}`, one envhub session per task, started on first use."""

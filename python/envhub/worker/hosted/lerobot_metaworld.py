@@ -85,6 +85,7 @@ class LeRobotMetaWorldEnv(gym.Env):
         env._freeze_rand_vec = False
         env.seeded_rand_vec = True
         self._env = env
+        self._last_frame: Any = None
         self.task = task
         self.camera_name = camera_name
         self.obs_type = obs_type
@@ -104,13 +105,19 @@ class LeRobotMetaWorldEnv(gym.Env):
         return np.flip(image, (0, 1)) if self.camera_name == CORNER2 else image
 
     def _obs(self, state: Any) -> dict[str, Any]:
-        obs = {"pixels": self._frame().copy()}
+        self._last_frame = self._frame().copy()
+        obs = {"pixels": self._last_frame}
         if self.obs_type == "pixels_agent_pos":
             obs["agent_pos"] = state[:4]
         return obs
 
     def render(self) -> Any:
-        return self._frame()
+        """The frame of the last observation: the simulator has not moved since, and MuJoCo
+        would draw the same pixels again (LeRobot's env draws them twice a step; software
+        rendering is most of a step's cost)."""
+        if self._last_frame is None:
+            self._last_frame = self._frame().copy()
+        return self._last_frame
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
