@@ -55,6 +55,8 @@ EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.par
 INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 #: envhub's own folder inside a dataset: the lock and files not yet committed.
 PRIVATE = ".envhub"
+#: The episodes files' kind (`_files.py`), and their columns' prefix.
+EPISODES = "meta/episodes"
 
 
 @dataclass
@@ -68,18 +70,6 @@ class Episode:
     video_stats: dict[str, dict[str, Any]] = field(default_factory=dict)
     task: str = ""
     success: bool | None = None
-
-
-@dataclass
-class _Open:
-    """The last file of a kind: where it is, and its committed rows (or frames)."""
-
-    at: tuple[int, int]
-    count: int
-
-
-def _next(chunk: int, file: int) -> tuple[int, int]:
-    return (chunk + 1, 0) if file == CHUNKS_SIZE - 1 else (chunk, file + 1)
 
 
 def _ours(rel: str, template: str) -> bool:
@@ -414,11 +404,12 @@ class Dataset:
                 self.info[key] = value
         rows = self._rows
         self._remove_uncommitted(rows)
-        self._meta = self._last_file(rows, "meta/episodes")
         self._files = {"data": Files("data", DATA_PATH, self.info["data_files_size_in_mb"], video=False)}
         for k in self.video_keys:
             self._files[k] = Files(k, VIDEO_PATH.replace("{video_key}", k), self.info["video_files_size_in_mb"],
                                    video=True)
+        # Last, so that its joins come after those that rewrite its files (`_repoint`).
+        self._files[EPISODES] = Files(EPISODES, EPISODES_PATH, self.info["data_files_size_in_mb"], video=False)
         for files in self._files.values():
             self._find_run(rows, files)
         self._trim()
@@ -480,23 +471,6 @@ class Dataset:
                 stacklevel=4,
             )
 
-    def _last_file(self, rows: list[dict[str, Any]], prefix: str) -> _Open | None:
-        """The file of `prefix` (`data`, `meta/episodes`, `videos/<key>`) that the last
-        committed episode is in, and how much of it is committed: rows for Parquet files
-        (episodes may span several commits), frames for videos."""
-        if not rows or rows[-1].get(f"{prefix}/chunk_index") is None:
-            return None
-        last = rows[-1]
-        at = (int(last[f"{prefix}/chunk_index"]), int(last[f"{prefix}/file_index"]))
-        same = [r for r in rows if (r[f"{prefix}/chunk_index"], r[f"{prefix}/file_index"]) == at]
-        if prefix == "data":
-            count = int(last["dataset_to_index"]) - min(int(r["dataset_from_index"]) for r in same)
-        elif prefix == "meta/episodes":
-            count = len(same)
-        else:
-            count = round(float(last[f"{prefix}/to_timestamp"]) * self.info["fps"])
-        return _Open(at, count)
-
     def _find_run(self, rows: list[dict[str, Any]], files: Files) -> None:
         """The run of `files` the committed episodes leave: the newest files that together stay
         under the kind's size (the last one always), with their rows or frames and episodes."""
@@ -514,7 +488,7 @@ class Dataset:
             if files.video:
                 part.count = round(float(r[f"{prefix}/to_timestamp"]) * fps)
             else:
-                part.count += int(r["length"])
+                part.count += 1 if files.kind == EPISODES else int(r["length"])
         if not parts:
             return
         files.last = parts[-1].at
@@ -649,11 +623,11 @@ class Dataset:
         On an error nothing is committed and the dataset's state here is as before."""
         if not episodes:
             return []
-        rows = sum(ep.length for ep in episodes)
         for key, files in self._files.items():  # LeRobot's roll: the run joined, the next file new
             if files.video:
                 adding = sum(os.path.getsize(ep.videos[key]) for ep in episodes)
-            else:
+            else:  # at the run's bytes per row (frame, or episode)
+                rows = len(episodes) if key == EPISODES else sum(ep.length for ep in episodes)
                 adding = sum(p.size for p in files.run) * rows // max(sum(p.count for p in files.run), 1)
             if files.rolls(adding):
                 self._join(files, 0)
@@ -688,6 +662,9 @@ class Dataset:
                           "they stay as they are", stacklevel=4)
 
     def _join_parts(self, commits: list[Commit], files: Files, first: int, parts: list[Part]) -> None:
+        if files.kind == EPISODES:
+            self._join_episodes(commits, files, first, parts)
+            return
         target = files.after_last(CHUNKS_SIZE)
         commit = Commit(self.root, self.staging)
         commits.append(commit)
@@ -723,6 +700,36 @@ class Dataset:
         (self.root / files.rel(target)).unlink()
         fsync_dir((self.root / files.rel(target)).parent)
         joined.at = files.last = home
+
+    def _join_episodes(self, commits: list[Commit], files: Files, first: int, parts: list[Part]) -> None:
+        """Episodes files are in `meta/`, which changes whole: the joined file replaces the
+        first one, the others go, in one swap (or, without an atomic exchange, the joined file
+        first, so LeRobot's loader, which takes the glob's row `e` as episode `e`, reads the
+        committed episodes in order at every step)."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        commit = Commit(self.root, self.staging)
+        commits.append(commit)
+        home = parts[0].at
+        paths = [self.root / files.rel(p.at) for p in parts]
+        out = commit.meta_file(files.rel(home)[len("meta/"):])
+        schema = pq.read_schema(paths[0])
+        with pq.ParquetWriter(out, schema, compression="snappy") as writer:
+            for path in paths:
+                f = pq.ParquetFile(path)
+                for g in range(f.num_row_groups):
+                    table = f.read_row_group(g).cast(schema)
+                    for name, value in (("meta/episodes/chunk_index", home[0]), ("meta/episodes/file_index", home[1])):
+                        i = schema.get_field_index(name)
+                        table = table.set_column(i, schema.field(i), pa.array(np.full(len(table), value)).cast(schema.field(i).type))
+                    writer.write_table(table)
+        for p in parts[1:]:
+            commit.remove_meta_file(files.rel(p.at)[len("meta/"):])
+        commit.apply()
+        files.run[first:] = [Part(home, sum(p.count for p in parts), os.path.getsize(self.root / files.rel(home)),
+                                  parts[0].first, sum(p.episodes for p in parts))]
+        files.last = home
 
     def _repoint(self, commit: Commit, files: Files, parts: list[Part], at: tuple[int, int],
                  shifts: np.ndarray) -> None:
@@ -808,9 +815,9 @@ class Dataset:
             meta[f"videos/{key}/to_timestamp"] = (starts + lengths) / fps
             placed[key] = (at, total, video)
         sizes = {key: os.path.getsize(path) for key, (_, _, path) in placed.items()}
-        meta_last = self._grow(self._meta, EPISODES_PATH, self.info["data_files_size_in_mb"], new=count)
-        meta["meta/episodes/chunk_index"] = np.full(count, meta_last.at[0])
-        meta["meta/episodes/file_index"] = np.full(count, meta_last.at[1])
+        meta_at = self._files[EPISODES].after_last(CHUNKS_SIZE)
+        meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
+        meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
         for key, values in columns.items():
             per_episode, whole = column_stats(values, starts, lengths)
             self.stats[key] = aggregate(self.stats.get(key), whole)
@@ -823,10 +830,11 @@ class Dataset:
                 meta[f"stats/{key}/{name}"] = np.stack([ep.video_stats[key][name] for ep in episodes])
         meta["success"] = [ep.success for ep in episodes]
 
-        meta_table = self._episodes_table(meta)
-        if meta_last.count:
-            meta_table = self._prepend(meta_table, _fmt(EPISODES_PATH, meta_last.at), meta_last.count)
-        self._write_table(meta_table, commit.meta_file(_fmt(EPISODES_PATH, meta_last.at)[len("meta/"):]))
+        # A new episodes file too (LeRobot's loader takes the glob's row `e` as episode `e`).
+        episodes_file = commit.meta_file(_fmt(EPISODES_PATH, meta_at)[len("meta/"):])
+        self._write_table(self._episodes_table(meta), episodes_file)
+        placed[EPISODES] = (meta_at, count, episodes_file)
+        sizes[EPISODES] = os.path.getsize(episodes_file)
         if new_tasks:
             self._write_tasks(commit.meta_file("tasks.parquet"))
         self._write_json({k: {s: np.asarray(v).tolist() for s, v in d.items()} for k, d in self.stats.items()},
@@ -839,7 +847,6 @@ class Dataset:
         self._write_json(info, commit.meta_file("info.json"))
         commit.apply()  # the commit point: `meta/` swapped in whole
         self.info = info
-        self._meta = _Open(meta_last.at, meta_last.count + count)
         for key, (at, frames, _) in placed.items():
             files = self._files[key]
             files.run.append(Part(at, frames, sizes[key], first_ep, count))
@@ -848,28 +855,6 @@ class Dataset:
             for path in ep.videos.values():
                 path.unlink(missing_ok=True)
         return list(range(first_ep, first_ep + count))
-
-    def _grow(self, last: _Open | None, template: str, limit_mb: float, *, new: int = 0,
-              adding: int | None = None, key: str = "") -> _Open:
-        """Where this commit's part goes: the last file (`count` of it committed) unless its
-        size plus `adding` bytes (by default `new` rows at the file's bytes per row) would
-        reach `limit_mb` (LeRobot's rule), else the next file (nothing of it committed)."""
-        if last is None:
-            return _Open((0, 0), 0)
-        size = os.path.getsize(self.root / _fmt(template, last.at, video_key=key))
-        if adding is None:
-            adding = size * new // max(last.count, 1)
-        if last.count == 0 or (size + adding) / 2**20 < limit_mb:
-            return last
-        return _Open(_next(*last.at), 0)
-
-    def _prepend(self, table: Any, rel: str, count: int) -> Any:
-        """`table` after the first `count` rows of the committed file `rel`."""
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        old = pq.read_table(self.root / rel).slice(0, count)
-        return pa.concat_tables([old, table.cast(old.schema)])
 
     def _data_table(self, columns: dict[str, np.ndarray]) -> Any:
         import pyarrow as pa

@@ -85,6 +85,7 @@ class Commit:
         self._written: list[Path] = []
         self._serial = 0
         self._staged: list[Path] = []
+        self._removed: list[str] = []
 
     def staged(self, name: str) -> Path:
         """A fresh path in the staging folder."""
@@ -111,6 +112,11 @@ class Commit:
         path.unlink(missing_ok=True)
         self._written.append(path)
         return path
+
+    def remove_meta_file(self, rel: str) -> None:
+        """`meta/<rel>` is not part of the new `meta/` (removed after the files written)."""
+        (self.meta / rel).unlink()
+        self._removed.append(rel)
 
     def apply(self) -> None:
         for tmp, _ in self._renames:
@@ -147,4 +153,7 @@ class Commit:
             (old / rel).parent.mkdir(parents=True, exist_ok=True)
             _hook(f"meta/{rel}")
             os.replace(path, old / rel)
+            fsync_dir((old / rel).parent)
+        for rel in self._removed:
+            (old / rel).unlink(missing_ok=True)
             fsync_dir((old / rel).parent)

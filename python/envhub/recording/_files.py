@@ -67,8 +67,8 @@ class Files:
         return (chunk + 1, 0) if file == chunks_size - 1 else (chunk, file + 1)
 
     def prefix(self) -> str:
-        """The episodes' column prefix for this kind."""
-        return "data" if not self.video else f"videos/{self.kind}"
+        """The episodes' column prefix for this kind (`data`, `meta/episodes`, `videos/KEY`)."""
+        return f"videos/{self.kind}" if self.video else self.kind
 
     def rolls(self, adding: int) -> bool:
         """Whether `adding` bytes would take the run to the size (LeRobot's rule)."""

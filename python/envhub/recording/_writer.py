@@ -1,11 +1,11 @@
 """The writer thread: turns the steps the recorder hands it into episodes on disk.
 
-It keeps every column time-major (`(steps, envs, ...)`, one copy per step, whatever the
-number of envs) from the oldest step of an episode in flight, encodes each env's camera frames
-into that episode's MP4 as they arrive, and when an env's episode ends cuts its rows out with
-one slice per column. Ended episodes are committed together, at most every `commit_every`
-seconds (or four times as long as the last commit took, if longer) and when the recorder
-closes.
+It keeps the rows of the episodes in flight (`_rows.py`: one copy per step and column, whatever
+the number of envs), encodes each env's camera frames into that episode's MP4 as they arrive,
+and when an env's episode ends takes its rows out. Ended episodes are committed together, at
+most every `commit_every` seconds (or four times as long as the last commit took, if longer),
+as soon as their rows reach `PENDING_BYTES` (or `queue_bytes`, if smaller), and when the
+recorder closes.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 
 from ._budget import ByteQueue
 from ._dataset import Dataset, Episode
+from ._rows import Rows
 from ._video import EpisodeVideo
 
 
@@ -52,39 +53,8 @@ class Reset:
 
 
 STOP = object()
-
-
-class _Rows:
-    """Time-major storage of the numeric columns, from row `base` on."""
-
-    def __init__(self) -> None:
-        self.base = 0
-        self.count = 0  # rows stored
-        self.arrays: dict[str, np.ndarray] = {}
-
-    def append(self, values: dict[str, np.ndarray], keep_from: int) -> None:
-        if not self.arrays:
-            self.arrays = {k: np.empty((64, *v.shape), v.dtype) for k, v in values.items()}
-        cap = next(iter(self.arrays.values())).shape[0]
-        if self.count == cap:
-            drop = max(0, keep_from - self.base)
-            live = self.count - drop
-            if live * 2 > cap:  # grow
-                self.arrays = {
-                    k: np.concatenate([a[drop:], np.empty_like(a)]) for k, a in self.arrays.items()
-                }
-            else:  # compact in place
-                for a in self.arrays.values():
-                    a[:live] = a[drop : self.count]
-            self.base += drop
-            self.count = live
-        for k, v in values.items():
-            self.arrays[k][self.count] = v
-        self.count += 1
-
-    def episode(self, name: str, env: int, start: int, end: int) -> np.ndarray:
-        """Rows `start..end` (global, inclusive) of env `env`."""
-        return self.arrays[name][start - self.base : end + 1 - self.base, env].copy()
+#: Ended episodes' rows held before a commit comes early (a commit copies them about twice).
+PENDING_BYTES = 64 * 2**20
 
 
 class Writer:
@@ -117,8 +87,9 @@ class Writer:
         self.commit_every = commit_every
         self.stats = stats
         self.queue = ByteQueue(queue_bytes)
+        self._pending_limit = min(queue_bytes, PENDING_BYTES)
         self.error: BaseException | None = None
-        self._rows = _Rows()
+        self._rows = Rows(num_envs)
         self._t = 0  # global index of the next row
         self._start = np.zeros(num_envs, dtype=np.int64)
         self._live = np.zeros(num_envs, dtype=bool)  # recording the env's current episode
@@ -130,6 +101,7 @@ class Writer:
         self._pool = ThreadPoolExecutor(threads, thread_name_prefix="envhub-encoder") if threads > 1 else None
         self._threads = threads
         self._pending: list[Episode] = []
+        self._pending_bytes = 0  # their rows: a commit comes early past `PENDING_BYTES`
         self._last_commit = time.monotonic()
         self._interval = commit_every  # until a commit: `commit_every`, or 4x the last commit's time
         self._serial = 0
@@ -159,7 +131,8 @@ class Writer:
                 finally:
                     del item  # its arrays, before the budget says they are gone
                     self.queue.done(nbytes)
-                if self._pending and time.monotonic() - self._last_commit >= self._interval:
+                if self._pending and (time.monotonic() - self._last_commit >= self._interval
+                                      or self._pending_bytes >= self._pending_limit):
                     self._commit()
             self._commit()
         except BaseException as e:  # reported by the recorder on its next call
@@ -197,13 +170,12 @@ class Writer:
 
     def _step(self, s: Step) -> None:
         t = self._t
-        keep_from = int(self._start[self._live].min()) if self._live.any() else t
         values = {name: s.obs[name] for name in self.numeric if name in s.obs}
         values["action"] = s.action
         values["next.reward"] = s.reward
         values["next.terminated"] = s.terminated
         values["next.truncated"] = s.truncated
-        self._rows.append(values, keep_from)
+        self._rows.append(values, self._start, self._live)
         self._t += 1
         done = np.logical_or(s.terminated, s.truncated)
         # Masks over the envs, so that only envs with something to do cost a Python step.
@@ -246,6 +218,7 @@ class Writer:
             list(self._pool.map(_encode_frames, jobs))  # re-raises an encoder's error
 
     def _abandon(self, i: int) -> None:
+        self._rows.forget(i)
         for video in self._encoders[i].values():
             video.abandon()
         self._encoders[i] = {}
@@ -267,6 +240,8 @@ class Writer:
                 values = values.reshape(-1)
             columns[name] = values
         columns["next.done"] = np.logical_or(columns["next.terminated"], columns["next.truncated"])
+        self._rows.forget(i)
+        self._pending_bytes += sum(c.nbytes for c in columns.values())
         videos, video_stats = {}, {}
         for key, video in self._encoders[i].items():
             video.finish()
@@ -287,7 +262,7 @@ class Writer:
     def _commit(self) -> None:
         start = time.monotonic()
         if self._pending:
-            pending, self._pending = self._pending, []
+            pending, self._pending, self._pending_bytes = self._pending, [], 0
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
         self._last_commit = time.monotonic()
