@@ -3,8 +3,9 @@
 //! daemon's error, a worker's failure report, a daemon request, a registry file, a Python
 //! worker's info-column schema.
 //!
-//! Each target runs as a normal test: first its corpus (`crates/hub/fuzz/corpus/<target>/`, the
-//! seeds and every input that once found a bug), then inputs that proptest makes by mutating
+//! Each target runs as a normal test: first its corpus (`fuzz/corpus/<target>/`, the one corpus
+//! both tiers read: the seeds and every input that once found a bug, in the format the
+//! cargo-fuzz target of the same name reads), then inputs that proptest makes by mutating
 //! corpus entries (bit flips, boundary words, insertions, cuts, splices) or from raw bytes,
 //! until `ENVHUB_FUZZ_SECS` seconds (default 2) have passed. A target fails on a panic or on a
 //! broken invariant, and proptest shrinks the input it prints. Every run prints its count of
@@ -89,9 +90,10 @@ fn apply(seed: &[u8], corpus: &[Vec<u8>], mutations: &[Mutation]) -> Vec<u8> {
     b
 }
 
+/// `fuzz/corpus/<target>/` of the repository: the cargo-fuzz targets' corpus.
 fn corpus_dir(target: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("fuzz/corpus")
+        .join("../../fuzz/corpus")
         .join(target)
 }
 
@@ -181,12 +183,15 @@ mod targets {
     use envhub_protocol::{Frame, HubError, OpenReply};
     use envhub_shm::{BatchLayout, Layout, command};
 
-    /// Layouts a frame is read against, picked by the input's first byte.
+    /// Layouts a frame is read against, picked by the input's first byte: the table of the
+    /// cargo-fuzz crate's `layouts` (`fuzz/src/lib.rs`), so that a corpus input means the
+    /// same message to both tiers.
     fn layouts(pick: u8) -> (Layout, BatchLayout) {
-        let (n, act, obs, fin) = match pick % 4 {
+        let (n, act, obs, fin) = match pick % 5 {
             0 => (3, 4, 16, false),
             1 => (1, 8, 4, true),
             2 => (8, 1, 1, false),
+            3 => (2, 0, 0, true),
             _ => (0, 0, 0, true),
         };
         (Layout::new(n, act), BatchLayout::new(n, obs, fin))
@@ -201,7 +206,7 @@ mod targets {
     #[test]
     fn fuzz_wire_request() {
         let mut seeds = Vec::new();
-        for pick in 0..4u8 {
+        for pick in 0..5u8 {
             let (layout, _) = layouts(pick);
             let n = layout.num_envs;
             let actions = vec![7u8; n * layout.act_bytes];
@@ -243,7 +248,7 @@ mod targets {
     #[test]
     fn fuzz_wire_response() {
         let mut seeds = Vec::new();
-        for pick in 0..4u8 {
+        for pick in 0..5u8 {
             let (_, rows) = layouts(pick);
             let n = rows.num_envs;
             let mut block = vec![0u8; rows.size()];
@@ -403,9 +408,21 @@ mod targets {
     #[test]
     fn fuzz_failure_report() {
         fuzz("failure_report", Vec::new(), |bytes| {
-            let sent = [4usize, 5, 7];
-            if let Ok(report) = read_failure_report(bytes, "worker 0", &sent, 4)
-                && let Some((k, _)) = report.failed.iter().find(|(k, _)| !sent.contains(&(4 + k)))
+            // As the cargo-fuzz target reads its input: the first byte's high nibble is the
+            // worker's first env, its low one which of the worker's 4 envs were sent.
+            let Some((&pick, msg)) = bytes.split_first() else {
+                return Ok(());
+            };
+            let offset = usize::from(pick >> 4);
+            let sent: Vec<usize> = (0..4)
+                .filter(|i| pick & (1 << i) != 0)
+                .map(|i| offset + i)
+                .collect();
+            if let Ok(report) = read_failure_report(msg, "worker 0", &sent, offset)
+                && let Some((k, _)) = report
+                    .failed
+                    .iter()
+                    .find(|(k, _)| !sent.contains(&(offset + k)))
             {
                 return Err(format!("env {k} passed, which was not sent"));
             }
