@@ -8,7 +8,7 @@ under Mesa's software renderer: 0.26 s of a 0.88 s reset). A camera sensor's sha
 what it was made with (camera, width, height, depth; the same code), so each such sensor is
 checked for real once per worker and its shape reused after. Rendering reads the simulation
 and writes nothing to it: the observations, camera images included, stay those of the suite
-without this (`test_py_suites.py` counts the renders and compares the images).
+without this (`tests/python/pyenv/test_suites.py` counts the renders and compares the images).
 
 The same hard reset ends robosuite 1.4's `MjSim.free` with a full `gc.collect()`, over every
 object of every module imported so far (torch's and robosuite's, 270,000 objects: 0.16 s).
