@@ -1,19 +1,24 @@
 """`lerobot-eval` episodes per minute through the plugin (`--env.type=envhub`) against
-LeRobot's own env (`--env.type=metaworld`, the suite in LeRobot's interpreter, stepped in
-Gymnasium's `AsyncVectorEnv`), same policy, seed, batch and machine, in one run:
+LeRobot's own env (`--env.type=libero` or `metaworld`: the suite in LeRobot's interpreter,
+stepped in Gymnasium's `AsyncVectorEnv`), same policy, seed, batch and machine, in one run:
 
-    .venv/bin/python integrations/lerobot/bench_eval.py --task push-v3 --batch 10 --episodes 10
+    .venv/bin/python integrations/lerobot/bench_eval.py --suite libero --batch 10 --episodes 10
+    .venv/bin/python integrations/lerobot/bench_eval.py --suite metaworld --task push-v3
 
-The policy is a random-init ACT saved with LeRobot's `save_pretrained` (or `--policy DIR`).
-Both sides write the videos `lerobot-eval` writes (its first 10 episodes, rendered each step).
-Prints one JSON object: each side's wall time, episodes per minute, the ratio, and whether
-the per-episode results of `eval_info.json` are equal. Uses the interpreters the tests use
-(tests/python/lerobot_envs.py): .venv-lerobot-next, and the reference venv in the user cache.
+LIBERO's horizon and camera size are LeRobot's own options (`--episode-length`, `--size`);
+the defaults keep a run within minutes on a small machine. The policy is a random-init ACT
+saved with LeRobot's `save_pretrained` (or `--policy DIR`). Both sides write the videos
+`lerobot-eval` writes (its first 10 episodes, rendered every step). Prints one JSON object:
+each side's wall time, episodes per minute, the ratio, and whether the per-episode results of
+`eval_info.json` and the videos are equal. Uses the interpreters the tests use
+(tests/python/support/lerobot_envs.py): .venv-lerobot-next, and the reference venv in the
+user cache (built on first use).
 """
 
 from __future__ import annotations
 
 import argparse
+import filecmp
 import json
 import subprocess
 import sys
@@ -22,18 +27,22 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "tests" / "python"))
+SUPPORT = REPO / "tests" / "python" / "support"
+sys.path.insert(0, str(SUPPORT))
 
 import lerobot_envs  # noqa: E402
+
+EPISODE_KEYS = ("sum_rewards", "max_rewards", "successes")
 
 
 def lerobot_eval(python: Path, site: Path | None, args: list[str], out: Path) -> tuple[float, dict]:
     start = time.monotonic()
+    env = {**lerobot_envs.user_env(site), **lerobot_envs.libero_config(python)}
     done = subprocess.run(
         [str(python), "-m", "lerobot.scripts.lerobot_eval", *args, f"--output_dir={out}"],
         capture_output=True,
         text=True,
-        env=lerobot_envs.user_env(site),
+        env=env,
         cwd=out.parent,
     )
     wall = time.monotonic() - start
@@ -42,16 +51,49 @@ def lerobot_eval(python: Path, site: Path | None, args: list[str], out: Path) ->
     return wall, json.loads((out / "eval_info.json").read_text())
 
 
+def episodes(info: dict) -> list[dict]:
+    """Each task's per-episode results, in task order."""
+    return [
+        {"task": [t["task_group"], t["task_id"]], **{k: t["metrics"][k] for k in EPISODE_KEYS}} for t in info["per_task"]
+    ]
+
+
+def same_videos(a: Path, b: Path) -> bool:
+    mine = sorted(p.relative_to(a) for p in a.rglob("*.mp4"))
+    theirs = sorted(p.relative_to(b) for p in b.rglob("*.mp4"))
+    return bool(mine) and mine == theirs and all(filecmp.cmp(a / p, b / p, shallow=False) for p in mine)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="push-v3", help="a Meta-World task")
+    parser.add_argument("--suite", choices=("libero", "metaworld"), default="libero")
+    parser.add_argument("--task", help="LIBERO: a suite (libero_spatial); Meta-World: a task (push-v3)")
+    parser.add_argument("--task-id", type=int, default=0, help="LIBERO: the task's index in its suite")
+    parser.add_argument("--size", type=int, default=128, help="LIBERO: camera height and width (LeRobot's default 360)")
+    parser.add_argument("--episode-length", type=int, default=60, help="LIBERO: steps per episode (0: LeRobot's horizon)")
     parser.add_argument("--batch", type=int, default=10)
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--policy", type=Path, help="a saved policy folder (default: a random-init ACT)")
     args = parser.parse_args()
 
     python = lerobot_envs.lerobot_python()
-    reference = lerobot_envs.reference_venv(python, "metaworld", lerobot_envs.METAWORLD_REFERENCE)
+    if args.suite == "libero":
+        task = args.task or "libero_spatial"
+        config = {
+            "task": task,
+            "task_ids": [args.task_id],
+            "observation_height": args.size,
+            "observation_width": args.size,
+            **({"episode_length": args.episode_length} if args.episode_length else {}),
+        }
+        reference = lerobot_envs.reference_venv(
+            python, "libero", lerobot_envs.LIBERO_REFERENCE, lerobot_envs.LIBERO_FIRST
+        )
+    else:
+        task = args.task or "push-v3"
+        config = {"task": task}
+        reference = lerobot_envs.reference_venv(python, "metaworld", lerobot_envs.METAWORLD_REFERENCE)
+    env_args = [f"--env.{k}={json.dumps(v) if isinstance(v, list) else v}" for k, v in config.items()]
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         site = lerobot_envs.install_plugin(python, tmp / "plugin")
@@ -59,9 +101,9 @@ def main() -> None:
         if policy is None:
             policy = tmp / "policy"
             spec = tmp / "policy.json"
-            spec.write_text(json.dumps({"type": "envhub", "config": {"task": args.task}}))
+            spec.write_text(json.dumps({"type": "envhub", "config": config}))
             subprocess.run(
-                [str(python), str(REPO / "tests" / "python" / "lerobot_policy.py"), str(spec), str(policy)],
+                [str(python), str(SUPPORT / "lerobot_policy.py"), str(spec), str(policy)],
                 check=True,
                 env=lerobot_envs.user_env(site),
                 capture_output=True,
@@ -69,34 +111,30 @@ def main() -> None:
         common = [
             f"--policy.path={policy}",
             "--policy.device=cpu",
-            f"--env.task={args.task}",
+            *env_args,
             f"--eval.batch_size={args.batch}",
             f"--eval.n_episodes={args.episodes}",
             "--seed=1000",
         ]
-        results = {}
-        for name, py, s, env_type in (("envhub", python, site, "envhub"), ("lerobot", reference, None, "metaworld")):
+        results, infos = {}, {}
+        for name, py, s, env_type in (("envhub", python, site, "envhub"), ("lerobot", reference, None, args.suite)):
             (tmp / name).mkdir()
-            wall, info = lerobot_eval(py, s, [*common, f"--env.type={env_type}"], tmp / name / "out")
-            episodes = info["overall"]["n_episodes"]
-            results[name] = {
-                "wall_s": round(wall, 1),
-                "episodes": episodes,
-                "episodes_per_min": round(60 * episodes / wall, 2),
-                "per_task": info["per_task"],
-            }
-        same = [t["metrics"]["sum_rewards"] for t in results["envhub"]["per_task"]] == [
-            t["metrics"]["sum_rewards"] for t in results["lerobot"]["per_task"]
-        ]
-        for r in results.values():
-            r.pop("per_task")
+            wall, infos[name] = lerobot_eval(py, s, [*common, f"--env.type={env_type}"], tmp / name / "out")
+            n = infos[name]["overall"]["n_episodes"]
+            results[name] = {"wall_s": round(wall, 1), "episodes": n, "episodes_per_min": round(60 * n / wall, 2)}
+            print(json.dumps({name: results[name]}), file=sys.stderr, flush=True)
         ratio = results["envhub"]["episodes_per_min"] / results["lerobot"]["episodes_per_min"]
-        print(
-            json.dumps(
-                {"task": args.task, "batch": args.batch, **results, "ratio": round(ratio, 2), "same_rewards": same},
-                indent=2,
-            )
-        )
+        summary = {
+            "suite": args.suite,
+            "env": config,
+            "batch": args.batch,
+            **results,
+            "ratio": round(ratio, 2),
+            "same_episodes": episodes(infos["envhub"]) == episodes(infos["lerobot"]),
+            "same_videos": same_videos(tmp / "envhub" / "out" / "videos", tmp / "lerobot" / "out" / "videos"),
+            "episodes_envhub": episodes(infos["envhub"]),
+        }
+        print(json.dumps(summary, indent=2))
 
 
 if __name__ == "__main__":
