@@ -309,6 +309,8 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
     // Each open with a hello of its own, valid (an attacker is a client like any other): the
     // hub reads the request past the key exchange's checks.
     let identity = envhub_protocol::handshake::Identity::generate().unwrap();
+    // Its token is named by its identity (a hub takes no other), and it holds none.
+    let client = identity.public_hex();
     let envelope = |kwarg: &str| {
         let now = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -316,7 +318,7 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
             .as_millis() as u64;
         let (hello, _) = envhub_protocol::handshake::client_hello(&identity, &a.name, now).unwrap();
         format!(
-            r#"{{"request":{{"id":"gym-cartpole","config":{{"num_envs":1,"extra":{{"k":{kwarg}}}}},"client":"attacker","restart_on_crash":false,"step_timeout_ms":1000}},"hello":{}}}"#,
+            r#"{{"request":{{"id":"gym-cartpole","config":{{"num_envs":1,"extra":{{"k":{kwarg}}}}},"client":"{client}","restart_on_crash":false,"step_timeout_ms":1000}},"hello":{}}}"#,
             serde_json::to_string(&hello).unwrap()
         )
     };
@@ -394,7 +396,7 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
         .expect("an answer");
     let text = String::from_utf8_lossy(&orphan.result().unwrap().payload().to_bytes()).to_string();
     assert!(
-        text.contains("envhub/client/attacker") && text.contains("not on the network"),
+        text.contains(&format!("envhub/client/{client}")) && text.contains("not on the network"),
         "an open without a client token was not refused: {text}"
     );
     // The hub still opens sessions.

@@ -432,7 +432,21 @@ fn expect_refused(result: Result<envhub_hub::VecEnv, HubError>, needle: &str) {
 
 #[test]
 fn remote_clients_cannot_name_files_and_the_hub_s_limits_hold() {
-    let a = RemoteHub::start("sa", &["--max-envs", "4", "--max-workers", "2"], &[]);
+    // One client may take all of it here (the shares are `fair_shares`' test).
+    let a = RemoteHub::start(
+        "sa",
+        &[
+            "--max-envs",
+            "4",
+            "--max-workers",
+            "2",
+            "--max-envs-per-client",
+            "0",
+            "--max-workers-per-client",
+            "0",
+        ],
+        &[],
+    );
     let hub = client("security", &[&a]);
     let on_a = hubs(&[&a]);
     let with_asset = EnvConfig {

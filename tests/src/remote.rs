@@ -125,11 +125,15 @@ pub fn net_to(hubs: &[&RemoteHub]) -> NetConfig {
     }
 }
 
-/// A `known_hubs` file of this test process, in a folder of its own (fake hubs have new
-/// identities in every run: they are not pinned in the user's file).
+/// The `known_hubs` file of this test process: in the config folder the test binary made
+/// for it (`XDG_CONFIG_HOME`, removed when it exits), never the user's (fake hubs have new
+/// identities in every run).
 pub fn known_hubs() -> std::path::PathBuf {
-    std::env::temp_dir()
-        .join(format!("e2e-known-hubs-{}", std::process::id()))
+    let home = std::env::var_os("XDG_CONFIG_HOME")
+        .filter(|_| std::env::var_os("ENVHUB_E2E_CONFIG_HOME").is_some())
+        .expect("the e2e binary gives each of its processes a config folder of its own");
+    std::path::PathBuf::from(home)
+        .join("envhub")
         .join("known_hubs")
 }
 

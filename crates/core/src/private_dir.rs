@@ -8,7 +8,8 @@
 //! `$XDG_CACHE_HOME/envhub/run`, else `~/.cache/envhub/run`, and before it is used every
 //! component of its path is checked with `lstat`: owned by this user or root, writable by no
 //! one else (unless sticky, as `/tmp` is), and the folder itself this user's, closed to
-//! others and not a link. Missing components are made with mode 0700. A folder that fails
+//! others and not a link. Missing components are made with mode 0700 (exactly: set through a
+//! descriptor, not left to the umask). A folder that fails
 //! is an error naming it, what is wrong and the fix; it is never used.
 //!
 //! Files are written through a temporary file of a random name, opened with
@@ -168,7 +169,7 @@ fn walk(dir: &Path, create: bool) -> Result<(), PrivateDirError> {
         let meta = match std::fs::symlink_metadata(&next) {
             Err(e) if create && e.kind() == std::io::ErrorKind::NotFound => {
                 match std::fs::DirBuilder::new().mode(0o700).create(&next) {
-                    Ok(()) => {}
+                    Ok(()) => set_dir_mode(&next, 0o700).map_err(io("set the mode of", &next))?,
                     // Made by another process meanwhile: checked below like any other.
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
                     Err(e) => return Err(io("create", &next)(e)),
@@ -291,6 +292,18 @@ fn random_name() -> String {
     format!("{bits:016x}")
 }
 
+/// Gives folder `dir` (just made by this process) mode `mode` exactly, whatever the umask:
+/// through a descriptor opened with `O_NOFOLLOW|O_DIRECTORY`, so a link put in its place
+/// meanwhile is refused, never followed.
+pub fn set_dir_mode(dir: &Path, mode: u32) -> std::io::Result<()> {
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(dir)?
+        .set_permissions(std::fs::Permissions::from_mode(mode))
+}
+
 /// Writes `body` to `path` (mode `mode`) whole: through a fresh temporary file beside it
 /// (random name, `O_CREAT|O_EXCL|O_NOFOLLOW`), then renamed over it (`replace`), or linked
 /// to it only where there is none yet (a file another process made first stays; returns
@@ -314,6 +327,9 @@ pub fn write_file(path: &Path, body: &[u8], mode: u32, replace: bool) -> std::io
         }
     };
     let done = (|| {
+        // The mode exactly, not the mode under the umask (fchmod of the descriptor).
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(mode))?;
         file.write_all(body)?;
         file.sync_all()?;
         if replace {
@@ -374,7 +390,7 @@ pub fn fresh_dir(parent: &Path, prefix: &str) -> std::io::Result<PathBuf> {
     loop {
         let dir = parent.join(format!("{prefix}{}", random_name()));
         match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
-            Ok(()) => return Ok(dir),
+            Ok(()) => return set_dir_mode(&dir, 0o700).map(|()| dir),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && tries < 8 => tries += 1,
             Err(e) => return Err(e),
         }
@@ -480,6 +496,45 @@ mod tests {
         chmod(&path, 0o600);
         assert!(read_file(&path, 2).is_err());
         assert!(read_file(&base.join("none"), 64).unwrap().is_none());
+        std::fs::remove_dir_all(&base).unwrap();
+    }
+
+    /// Folders and files get their modes exactly under any umask: the process's umask is
+    /// the process's, so this test sets it in a process of its own (this test binary run
+    /// again) and checks what that made.
+    #[test]
+    fn modes_are_exact_under_any_umask() {
+        const MADE_UNDER_UMASK: &str = "ENVHUB_TEST_MADE_UNDER_UMASK";
+        if let Ok(base) = std::env::var(MADE_UNDER_UMASK) {
+            let base = PathBuf::from(base);
+            // SAFETY: umask has no preconditions; this process runs this test alone.
+            unsafe { libc::umask(0o277) };
+            ensure(&base.join("a").join("b")).unwrap();
+            fresh_dir(&base, "s-").unwrap();
+            write_file(&base.join("a").join("f"), b"x", 0o640, true).unwrap();
+            return;
+        }
+        let base = scratch("umask");
+        let status = std::process::Command::new(std::env::current_exe().unwrap())
+            .args([
+                "--exact",
+                "private_dir::tests::modes_are_exact_under_any_umask",
+                "--nocapture",
+            ])
+            .env(MADE_UNDER_UMASK, &base)
+            .status()
+            .unwrap();
+        assert!(status.success(), "the child under umask 0277 failed");
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().mode() & 0o777;
+        assert_eq!(mode(&base.join("a")), 0o700);
+        assert_eq!(mode(&base.join("a").join("b")), 0o700);
+        assert_eq!(mode(&base.join("a").join("f")), 0o640);
+        let fresh = std::fs::read_dir(&base)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("s-"))
+            .expect("the fresh folder");
+        assert_eq!(mode(&fresh), 0o700);
         std::fs::remove_dir_all(&base).unwrap();
     }
 

@@ -514,12 +514,20 @@ impl State {
                 ));
             }
         }
-        // The session ends when the client's token goes: a client without one (an id made up,
-        // or another's) would hold it until the idle timeout.
-        let plain = !request.client.is_empty()
-            && request.client.len() <= 64
-            && request.client.bytes().all(|b| b.is_ascii_alphanumeric());
-        if !plain || !client_token_remains(&self.zenoh, &keys::client_token(&request.client)) {
+        // The session ends when the token of the key that opens it goes: a token of another
+        // client (whose sessions would then outlive their opener) or of no one (until the
+        // idle timeout) is refused.
+        if request.client != hello.identity {
+            return Err(self.refuse(
+                format!(
+                    "the client's liveliness token `{}` is not named by the identity that signed the open ({})",
+                    keys::client_token(&request.client).escape_debug(),
+                    hello.identity
+                ),
+                "a session lives as long as its opener's token `envhub/client/<identity>`: open sessions from an envhub client",
+            ));
+        }
+        if !client_token_remains(&self.zenoh, &keys::client_token(&request.client)) {
             return Err(self.refuse(
                 format!(
                     "the client's liveliness token `{}` is not on the network",

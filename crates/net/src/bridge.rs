@@ -89,7 +89,23 @@ pub struct Sessions {
 struct Starting {
     envs: usize,
     workers: usize,
-    by_client: HashMap<String, usize>,
+    by_client: HashMap<String, Held>,
+}
+
+/// What one client holds (or has set aside): what its per-client limits count.
+#[derive(Clone, Copy, Default, Debug)]
+struct Held {
+    sessions: usize,
+    envs: usize,
+    workers: usize,
+}
+
+impl Held {
+    fn add(&mut self, other: Held) {
+        self.sessions += other.sessions;
+        self.envs += other.envs;
+        self.workers += other.workers;
+    }
 }
 
 /// Envs and workers set aside for a session being started; given back if it fails.
@@ -105,9 +121,11 @@ impl Drop for Reservation<'_> {
         let mut starting = self.sessions.starting();
         starting.envs -= self.envs;
         starting.workers -= self.workers;
-        if let Some(n) = starting.by_client.get_mut(&self.client) {
-            *n -= 1;
-            if *n == 0 {
+        if let Some(held) = starting.by_client.get_mut(&self.client) {
+            held.sessions -= 1;
+            held.envs -= self.envs;
+            held.workers -= self.workers;
+            if held.sessions == 0 {
                 starting.by_client.remove(&self.client);
             }
         }
@@ -154,19 +172,23 @@ impl Sessions {
         // starting to open meanwhile (its entry added, then its reservation given back, which
         // waits for this lock) is counted once or twice, never zero times.
         let mut starting = self.starting();
-        let (open_envs, open_workers, open_of_client) = {
-            let entries = self.lock();
-            entries.values().fold((0, 0, 0), |(e, w, c), s| {
-                (
-                    e + s.envs,
-                    w + s.workers,
-                    c + usize::from(s.identity == client),
-                )
-            })
-        };
-        let used_envs = open_envs + starting.envs;
-        let used_workers = open_workers + starting.workers;
-        let of_client = open_of_client + starting.by_client.get(client).copied().unwrap_or(0);
+        let (mut all, mut of_client) = (Held::default(), Held::default());
+        for s in self.lock().values() {
+            let held = Held {
+                sessions: 1,
+                envs: s.envs,
+                workers: s.workers,
+            };
+            all.add(held);
+            if s.identity == client {
+                of_client.add(held);
+            }
+        }
+        let used_envs = all.envs + starting.envs;
+        let used_workers = all.workers + starting.workers;
+        if let Some(held) = starting.by_client.get(client) {
+            of_client.add(*held);
+        }
         if let Some(max) = policy.max_envs
             && used_envs.saturating_add(envs) > max
         {
@@ -192,16 +214,56 @@ impl Sessions {
             ));
         }
         if let Some(max) = policy.max_sessions_per_client
-            && of_client >= max
+            && of_client.sessions >= max
         {
             return Err((
-                format!("this client holds {of_client} sessions here, its limit is {max}"),
+                format!(
+                    "this client holds {} sessions here, its limit is {max}",
+                    of_client.sessions
+                ),
                 "close sessions it no longer uses; the hub's owner sets the limit with `envhub serve --max-sessions-per-client N`".to_string(),
+            ));
+        }
+        // One client's share: the rest is kept for other clients, whoever came first.
+        if let Some(max) = policy.max_envs_per_client
+            && of_client.envs.saturating_add(envs) > max
+        {
+            return Err((
+                format!(
+                    "{envs} envs would exceed this client's share of {max} (it holds {})",
+                    of_client.envs
+                ),
+                format!(
+                    "ask for at most {} envs here, or place the rest on other hubs; its owner sets the share with `envhub serve --max-envs-per-client N`",
+                    max.saturating_sub(of_client.envs)
+                ),
+            ));
+        }
+        if let Some(max) = policy.max_workers_per_client
+            && of_client.workers.saturating_add(workers) > max
+        {
+            return Err((
+                format!(
+                    "{workers} workers would exceed this client's share of {max} (it holds {})",
+                    of_client.workers
+                ),
+                format!(
+                    "ask for at most {} workers here (`workers=`), or place envs on other hubs; its owner sets the share with `envhub serve --max-workers-per-client N`",
+                    max.saturating_sub(of_client.workers)
+                ),
             ));
         }
         starting.envs += envs;
         starting.workers += workers;
-        *starting.by_client.entry(client.to_string()).or_default() += 1;
+        starting
+            .by_client
+            .entry(client.to_string())
+            .or_default()
+            .add(Held {
+                sessions: 1,
+                envs,
+                workers,
+            });
         Ok(Reservation {
             sessions: self,
             client: client.to_string(),
@@ -756,6 +818,7 @@ impl Out {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::policy::client_share;
     use std::time::Instant;
 
     /// Opens racing each other, more of them than the limit: sessions moving from "starting"
@@ -859,12 +922,57 @@ mod tests {
             .expect("a reservation given back frees its place");
     }
 
+    /// One key that came first and asks for everything gets its share; another key still
+    /// finds room, and the hub-wide limit still holds for both together.
+    #[test]
+    fn one_client_takes_at_most_its_share_and_another_finds_room() {
+        let sessions = Sessions::default();
+        let policy = ServePolicy {
+            max_workers: Some(8),
+            max_envs: Some(64),
+            max_workers_per_client: client_share(Some(8)),
+            max_envs_per_client: client_share(Some(64)),
+            ..ServePolicy::unlimited()
+        };
+        let mut held = Vec::new();
+        for _ in 0..8 {
+            match sessions.reserve("squatter", 1, 1, &policy) {
+                Ok(r) => held.push(r),
+                Err((reason, hint)) => {
+                    assert!(reason.contains("share of 4"), "{reason}");
+                    assert!(hint.contains("--max-workers-per-client"), "{hint}");
+                    break;
+                }
+            }
+        }
+        assert_eq!(held.len(), 4, "the first key's share of 8 workers");
+        let (reason, hint) = sessions
+            .reserve("squatter", 33, 0, &policy)
+            .err()
+            .expect("envs past the share");
+        assert!(reason.contains("share of 32"), "{reason}");
+        assert!(hint.contains("--max-envs-per-client"), "{hint}");
+        let _victim = sessions
+            .reserve("victim", 1, 4, &policy)
+            .expect("another key finds the rest");
+        let (reason, _) = sessions
+            .reserve("third", 1, 1, &policy)
+            .err()
+            .expect("the hub-wide limit");
+        assert!(reason.contains("limit of 8"), "{reason}");
+        drop(held);
+        let _again = sessions
+            .reserve("squatter", 1, 4, &policy)
+            .expect("a share given back is the key's again");
+    }
+
     #[test]
     fn the_default_policy_has_every_limit_on() {
         let p = ServePolicy::default();
         assert!(
             p.max_envs.is_some() && p.max_workers.is_some() && p.max_sessions_per_client.is_some()
         );
+        assert!(p.max_envs_per_client < p.max_envs && p.max_workers_per_client < p.max_workers);
         assert!(p.idle_timeout.is_some() && p.max_step_timeout < Duration::MAX);
         assert!(!p.allow_remote_files && !p.allow_provision && !p.insecure_listen);
         let sessions = Sessions::default();

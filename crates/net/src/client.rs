@@ -146,7 +146,11 @@ impl Network {
             reason: e.to_string(),
             hint: "the Zenoh session is failing".into(),
         };
-        let client_id = session.zid().to_string();
+        let identity = envhub_protocol::handshake::Identity::generate()
+            .map_err(|e| HubError::Internal(format!("cannot make a client identity: {e}")))?;
+        // The token is named by the identity: a hub ends a session when the token of the key
+        // that opened it goes, so a session cannot outlive its client on another's token.
+        let client_id = identity.public_hex();
         let liveness = Arc::new(Liveness::default());
         let watch = {
             let liveness = liveness.clone();
@@ -175,8 +179,6 @@ impl Network {
             .declare_token(keys::client_token(&client_id))
             .wait()
             .map_err(failed)?;
-        let identity = envhub_protocol::handshake::Identity::generate()
-            .map_err(|e| HubError::Internal(format!("cannot make a client identity: {e}")))?;
         Ok(Network {
             session,
             client_id,
@@ -189,7 +191,8 @@ impl Network {
         })
     }
 
-    /// This client's id (its token is `envhub/client/<id>`).
+    /// This client's id: its identity's public key, 64 hex digits (its token is
+    /// `envhub/client/<id>`).
     pub fn client_id(&self) -> &str {
         &self.client_id
     }

@@ -56,7 +56,7 @@ fn private_dir(dir: &Path) -> Result<(), String> {
             .map_err(|e| format!("cannot create `{}`: {e}", parent.display()))?;
     }
     match std::fs::create_dir(dir) {
-        Ok(()) => std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+        Ok(()) => envhub_core::private_dir::set_dir_mode(dir, 0o700)
             .map_err(|e| format!("cannot make `{}` private: {e}", dir.display()))?,
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
         Err(e) => return Err(format!("cannot create `{}`: {e}", dir.display())),
@@ -131,7 +131,11 @@ pub fn hub_identity() -> Result<Identity, HubError> {
                 .custom_flags(libc::O_NOFOLLOW)
                 .open(&tmp)
                 .map_err(|e| failed(format!("cannot create `{}`: {e}", tmp.display())))?;
-            let written = f.write_all(&pkcs8).and_then(|()| f.sync_all());
+            // 0600 exactly, whatever the umask.
+            let written = f
+                .set_permissions(std::fs::Permissions::from_mode(0o600))
+                .and_then(|()| f.write_all(&pkcs8))
+                .and_then(|()| f.sync_all());
             // A hub starting at the same time may have stored its key first: that one wins.
             let linked = written.and_then(|()| std::fs::hard_link(&tmp, &path));
             let _ = std::fs::remove_file(&tmp);
@@ -217,6 +221,8 @@ impl KnownHubs {
                         .custom_flags(libc::O_NOFOLLOW)
                         .open(&path)
                         .map_err(|e| failed(format!("cannot open `{}`: {e}", path.display())))?;
+                    f.set_permissions(std::fs::Permissions::from_mode(0o600))
+                        .map_err(|e| failed(format!("cannot chmod `{}`: {e}", path.display())))?;
                     // One write of one line: appends of clients pinning at once do not mix.
                     f.write_all(format!("{hub} {identity}\n").as_bytes())
                         .map_err(|e| failed(format!("cannot write `{}`: {e}", path.display())))?;

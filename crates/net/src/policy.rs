@@ -32,9 +32,15 @@ pub struct ServePolicy {
     pub max_envs: Option<usize>,
     /// Worker processes it runs for remote clients at once (`None`: no limit).
     pub max_workers: Option<usize>,
-    /// Sessions one client (by the id it gives) may hold at once (`None`: no limit). Client
-    /// ids are the clients' word: this stops a runaway client, the limits above stop a
-    /// hostile one.
+    /// Envs one client (by its identity key) may hold at once (`None`: up to `max_envs`).
+    pub max_envs_per_client: Option<usize>,
+    /// Worker processes one client (by its identity key) may hold at once (`None`: up to
+    /// `max_workers`). With the envs' share, what keeps one key from taking the whole hub
+    /// and locking every other key out.
+    pub max_workers_per_client: Option<usize>,
+    /// Sessions one client (by its identity key) may hold at once (`None`: no limit).
+    /// Identities are free to make: the per-client limits stop a runaway client and keep
+    /// room for others against one key; the hub-wide limits bound many keys together.
     pub max_sessions_per_client: Option<usize>,
     /// The longest `step_timeout` a client may ask for.
     pub max_step_timeout: Duration,
@@ -54,11 +60,21 @@ pub struct ServePolicy {
     pub multicast_scouting: bool,
 }
 
+/// A client's default share of a hub-wide limit: half of it, rounded up, so that one key
+/// always leaves room for another.
+pub fn client_share(limit: Option<usize>) -> Option<usize> {
+    limit.map(|max| max.div_ceil(2))
+}
+
 impl Default for ServePolicy {
     fn default() -> Self {
+        let max_envs = Some(DEFAULT_MAX_ENVS);
+        let max_workers = Some(DEFAULT_WORKERS_PER_CORE * envhub_session::cores());
         ServePolicy {
-            max_envs: Some(DEFAULT_MAX_ENVS),
-            max_workers: Some(DEFAULT_WORKERS_PER_CORE * envhub_session::cores()),
+            max_envs,
+            max_workers,
+            max_envs_per_client: client_share(max_envs),
+            max_workers_per_client: client_share(max_workers),
             max_sessions_per_client: Some(DEFAULT_MAX_SESSIONS_PER_CLIENT),
             max_step_timeout: DEFAULT_MAX_STEP_TIMEOUT,
             idle_timeout: Some(DEFAULT_IDLE_TIMEOUT),
@@ -77,6 +93,8 @@ impl ServePolicy {
         ServePolicy {
             max_envs: None,
             max_workers: None,
+            max_envs_per_client: None,
+            max_workers_per_client: None,
             max_sessions_per_client: None,
             max_step_timeout: Duration::MAX,
             idle_timeout: None,

@@ -151,8 +151,8 @@ pub fn check_client_hello(
 ) -> Result<[u8; PUBLIC_LEN], String> {
     let exchange =
         unhex::<PUBLIC_LEN>(&hello.exchange).ok_or("an exchange key that is not 64 hex digits")?;
-    let identity =
-        unhex::<PUBLIC_LEN>(&hello.identity).ok_or("an identity that is not 64 hex digits")?;
+    let identity = unhex::<PUBLIC_LEN>(&hello.identity)
+        .ok_or("an identity that is not 64 lowercase hex digits")?;
     let proof = unhex::<64>(&hello.proof).ok_or("a proof that is not 128 hex digits")?;
     if hello.time_ms.abs_diff(now_ms) > HELLO_FRESH_MS {
         return Err(format!(
@@ -339,13 +339,21 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// The bytes of `text`, exactly `2 * N` lowercase hex digits: one spelling per key, since
+/// identities are counted by their text (`ABCD` or `+f` would be a second name for a key).
 fn unhex<const N: usize>(text: &str) -> Option<[u8; N]> {
-    if text.len() != 2 * N || !text.is_ascii() {
+    let digit = |c: u8| match c {
+        b'0'..=b'9' => Some(c - b'0'),
+        b'a'..=b'f' => Some(c - b'a' + 10),
+        _ => None,
+    };
+    let text = text.as_bytes();
+    if text.len() != 2 * N {
         return None;
     }
     let mut out = [0u8; N];
     for (i, byte) in out.iter_mut().enumerate() {
-        *byte = u8::from_str_radix(&text[2 * i..2 * i + 2], 16).ok()?;
+        *byte = (digit(text[2 * i])? << 4) | digit(text[2 * i + 1])?;
     }
     Some(out)
 }
@@ -425,6 +433,18 @@ mod tests {
             ..hello.clone()
         };
         assert!(check_client_hello("lab", &claimed, 1_000_000).is_err());
+        // The same key spelled another way (identities are counted by their text).
+        for spelling in [
+            hello.identity.to_uppercase(),
+            format!("+{}", &hello.identity[1..]),
+        ] {
+            let respelled = ClientHello {
+                identity: spelling,
+                ..hello.clone()
+            };
+            let err = check_client_hello("lab", &respelled, 1_000_000).unwrap_err();
+            assert!(err.contains("lowercase hex digits"), "{err}");
+        }
         let mut seen = SeenHellos::default();
         let ex = check_client_hello("lab", &hello, 1_000_000).unwrap();
         seen.note(&ex, 1_000_000).unwrap();

@@ -43,6 +43,14 @@ pub(crate) struct Args {
     /// per core.
     #[arg(long, value_name = "N")]
     max_workers: Option<usize>,
+    /// Envs one client (one identity key) may hold here at once, so that one key leaves
+    /// room for others (0: up to `--max-envs`). Default: half of `--max-envs`.
+    #[arg(long, value_name = "N")]
+    max_envs_per_client: Option<usize>,
+    /// Worker processes one client (one identity key) may hold here at once (0: up to
+    /// `--max-workers`). Default: half of `--max-workers`.
+    #[arg(long, value_name = "N")]
+    max_workers_per_client: Option<usize>,
     /// Sessions one client may hold here at once (0: no limit).
     #[arg(long, value_name = "N", default_value_t = envhub_hub::DEFAULT_MAX_SESSIONS_PER_CLIENT)]
     max_sessions_per_client: usize,
@@ -84,9 +92,17 @@ pub(crate) fn run(hub: Hub, net: NetConfig, args: &Args) -> anyhow::Result<Outco
         let name = args.name.clone().unwrap_or_else(envhub_hub::host_name);
         let limit = |n: usize| (n > 0).then_some(n);
         let defaults = ServePolicy::default();
+        let max_envs = limit(args.max_envs);
+        let max_workers = args.max_workers.map_or(defaults.max_workers, limit);
         let policy = ServePolicy {
-            max_envs: limit(args.max_envs),
-            max_workers: args.max_workers.map_or(defaults.max_workers, limit),
+            max_envs,
+            max_workers,
+            max_envs_per_client: args
+                .max_envs_per_client
+                .map_or(envhub_hub::client_share(max_envs), limit),
+            max_workers_per_client: args
+                .max_workers_per_client
+                .map_or(envhub_hub::client_share(max_workers), limit),
             max_sessions_per_client: limit(args.max_sessions_per_client),
             max_step_timeout: Duration::from_secs(args.max_step_timeout),
             idle_timeout: (args.idle_timeout > 0).then(|| Duration::from_secs(args.idle_timeout)),
