@@ -404,6 +404,7 @@ class Dataset:
                 self.info[key] = value
         rows = self._rows
         self._remove_uncommitted(rows)
+        self._joins = True  # until a commit finds no atomic exchange (`_join`)
         self._files = {"data": Files("data", DATA_PATH, self.info["data_files_size_in_mb"], video=False)}
         for k in self.video_keys:
             self._files[k] = Files(k, VIDEO_PATH.replace("{video_key}", k), self.info["video_files_size_in_mb"],
@@ -650,7 +651,9 @@ class Dataset:
         file linked to the first one's name and `meta/` swapped again. On an error (a full
         disk) the run stays as it was, with a warning: the joins are an optimisation."""
         parts = files.run[first:]
-        if len(parts) < 2:
+        if len(parts) < 2 or not self._joins:
+            # Without an atomic exchange, a crash inside a join's `meta/` change would leave
+            # some episodes pointing at the joined file and others at the files it joined.
             return
         commits: list[Commit] = []
         try:
@@ -846,6 +849,7 @@ class Dataset:
         info["splits"] = {"train": f"0:{info['total_episodes']}"}
         self._write_json(info, commit.meta_file("info.json"))
         commit.apply()  # the commit point: `meta/` swapped in whole
+        self._joins = self._joins and commit.exchanged
         self.info = info
         for key, (at, frames, _) in placed.items():
             files = self._files[key]

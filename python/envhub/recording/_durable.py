@@ -86,6 +86,8 @@ class Commit:
         self._serial = 0
         self._staged: list[Path] = []
         self._removed: list[str] = []
+        #: False once `meta/` had to change file by file (no atomic exchange here).
+        self.exchanged = True
 
     def staged(self, name: str) -> Path:
         """A fresh path in the staging folder."""
@@ -140,6 +142,7 @@ class Commit:
         if not old.exists():
             os.rename(self.meta, old)
         elif not _exchange(self.meta, old):
+            self.exchanged = False
             self._rename_one_by_one(old)
         fsync_dir(self.root)
         shutil.rmtree(self.meta, ignore_errors=True)  # the previous `meta/`, after an exchange
