@@ -1,5 +1,6 @@
-"""The catalog's benchmarks: `benchmarks:` of the registry files (the first file naming a
-benchmark wins, as for entries), checked against the catalog's entries."""
+"""The catalog's benchmarks: `benchmarks:` of the registry files (a later file's benchmark
+replaces an earlier one of the same name, as for entries), checked against the catalog's
+entries."""
 
 from __future__ import annotations
 
@@ -35,5 +36,5 @@ class Catalog:
 
 def declared_benchmarks(registry: Any) -> dict[str, dict[str, Any]]:
     """`{name: declaration + source}`, as the Rust catalog read them from the registry files
-    (`benchmarks:`; the first file naming a benchmark wins)."""
+    (`benchmarks:`; the last file naming a benchmark wins)."""
     return json.loads(registry._inner.benchmarks_json())
