@@ -56,10 +56,12 @@ pub struct VecEnv {
 /// One link of a session to start: local worker `job`, or a remote hub's slice.
 enum Planned {
     Local(Box<WorkerJob>),
+    /// A lane of a hub's slice ([`crate::lanes::split`]).
     Remote {
         hub: String,
         env_offset: usize,
         num_envs: usize,
+        workers: Option<usize>,
     },
 }
 
@@ -150,11 +152,16 @@ impl VecEnv {
         let mut worker_index = 0;
         for slice in &slices {
             if slice.place != LOCAL {
-                planned.push(Planned::Remote {
-                    hub: slice.place.clone(),
-                    env_offset: offset,
-                    num_envs: slice.num_envs,
-                });
+                let lanes =
+                    crate::lanes::split(slice.num_envs, options.remote_lanes, config.workers);
+                for (lane_offset, num_envs, workers) in lanes {
+                    planned.push(Planned::Remote {
+                        hub: slice.place.clone(),
+                        env_offset: offset + lane_offset,
+                        num_envs,
+                        workers,
+                    });
+                }
                 offset += slice.num_envs;
                 continue;
             }
@@ -226,12 +233,14 @@ impl VecEnv {
                                 hub,
                                 env_offset,
                                 num_envs: n,
+                                workers,
                             } => {
                                 let opener = opener.as_ref().ok_or_else(|| {
                                     HubError::InvalidState("remote envs without a network".into())
                                 })?;
                                 let mut config = config.clone();
                                 config.num_envs = n;
+                                config.workers = workers;
                                 let request = OpenRequest {
                                     id: id.to_string(),
                                     config,
