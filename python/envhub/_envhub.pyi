@@ -47,6 +47,7 @@ def make_session(
     adapter: str | None = None,
     hubs: str | None = None,
     info_row_bytes: int = 0,
+    remote_lanes: int = 1,
 ) -> Session: ...
 def info_schema(
     text: str, row_bytes: int

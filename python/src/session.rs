@@ -286,7 +286,7 @@ fn invalid_config(py: Python<'_>, message: String) -> PyErr {
 /// usual way. With `adapter`, `id` is that adapter's env id and no registry is involved
 /// (`envhub.AsyncVectorEnv`'s factories, which no daemon's registry could know).
 #[pyfunction]
-#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None, info_row_bytes=0))]
+#[pyo3(signature = (id, num_envs, config_json, registry=None, step_timeout=None, restart_on_crash=false, pool_bytes=None, adapter=None, hubs=None, info_row_bytes=0, remote_lanes=1))]
 #[allow(clippy::too_many_arguments)] // Python keyword arguments
 pub(crate) fn make_session(
     py: Python<'_>,
@@ -300,7 +300,14 @@ pub(crate) fn make_session(
     adapter: Option<String>,
     hubs: Option<String>,
     info_row_bytes: usize,
+    remote_lanes: usize,
 ) -> PyResult<Session> {
+    if remote_lanes == 0 {
+        return Err(invalid_config(
+            py,
+            "remote_lanes must be at least 1 (sessions per remote hub's slice)".into(),
+        ));
+    }
     let config: EnvConfig = serde_json::from_str(config_json)
         .map_err(|e| invalid_config(py, format!("invalid env config: {e}")))?;
     let timeout = match step_timeout {
@@ -345,6 +352,7 @@ pub(crate) fn make_session(
                 options.pool_bytes = bytes;
             }
             options.info_row_bytes = info_row_bytes;
+            options.remote_lanes = remote_lanes;
             let hub = hub.with_options(options);
             let vec = match adapter {
                 Some(adapter) => {

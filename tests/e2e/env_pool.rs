@@ -7,13 +7,13 @@ use envhub_hub::EnvConfig;
 use rand::SeedableRng;
 
 /// Env `e`'s action at its step `t`: the same in every run, whatever the order.
-fn action(env: &envhub_hub::VecEnv, e: usize, t: usize, out: &mut [u8]) {
+pub(crate) fn action(env: &envhub_hub::VecEnv, e: usize, t: usize, out: &mut [u8]) {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(((e as u64) << 32) | t as u64);
     env.action_space().sample_into(&mut rng, out);
 }
 
 /// One env's results of a reset or step as bytes: observation, reward, done flags.
-fn record(b: &envhub_hub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
+pub(crate) fn record(b: &envhub_hub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
     let mut row = b.obs[k * ob..(k + 1) * ob].to_vec();
     row.extend(b.rewards[k].to_le_bytes());
     row.extend([b.terminated[k] as u8, b.truncated[k] as u8]);
@@ -21,7 +21,11 @@ fn record(b: &envhub_hub::Batch<'_>, k: usize, ob: usize) -> Vec<u8> {
 }
 
 /// Per env, the reset and `steps` steps in lock step.
-fn lock_step(env: &mut envhub_hub::VecEnv, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
+pub(crate) fn lock_step(
+    env: &mut envhub_hub::VecEnv,
+    seed: u64,
+    steps: usize,
+) -> Vec<Vec<Vec<u8>>> {
     let (n, ob, ab) = (
         env.num_envs(),
         env.observation_space().byte_len(),
@@ -47,7 +51,12 @@ fn lock_step(env: &mut envhub_hub::VecEnv, seed: u64, steps: usize) -> Vec<Vec<V
 
 /// Per env, the reset and at least `steps` steps through `async_reset`/`send`/`recv` with
 /// `batch_size` M: each `recv` must hold exactly M distinct envs.
-fn env_pool(env: &mut envhub_hub::VecEnv, m: usize, seed: u64, steps: usize) -> Vec<Vec<Vec<u8>>> {
+pub(crate) fn env_pool(
+    env: &mut envhub_hub::VecEnv,
+    m: usize,
+    seed: u64,
+    steps: usize,
+) -> Vec<Vec<Vec<u8>>> {
     let (n, ob, ab) = (
         env.num_envs(),
         env.observation_space().byte_len(),
@@ -82,7 +91,12 @@ fn env_pool(env: &mut envhub_hub::VecEnv, m: usize, seed: u64, steps: usize) -> 
     out
 }
 
-fn assert_same_per_env(id: &str, sync: &[Vec<Vec<u8>>], pool: &[Vec<Vec<u8>>], steps: usize) {
+pub(crate) fn assert_same_per_env(
+    id: &str,
+    sync: &[Vec<Vec<u8>>],
+    pool: &[Vec<Vec<u8>>],
+    steps: usize,
+) {
     for (e, (a, b)) in sync.iter().zip(pool).enumerate() {
         for t in 0..=steps {
             assert_eq!(a[t], b[t], "{id}: env {e} differs at its step {t}");

@@ -16,6 +16,7 @@ mod collect;
 mod env;
 mod env_pool;
 mod env_pool_state;
+mod lanes;
 mod launch;
 mod remote;
 mod results;

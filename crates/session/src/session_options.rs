@@ -41,6 +41,12 @@ pub struct SessionOptions {
     /// reads them sets it (the Python drop-in); Python workers then write infos that fit
     /// their learned schema there, and the rest as JSON (see `envhub_protocol::info_columns`).
     pub info_row_bytes: usize,
+    /// Sessions each remote hub's slice is opened as ("lanes", at most one per env and, when
+    /// `EnvConfig.workers` is set, one per worker, which they share). Each lane takes its own
+    /// requests, so with `send`/`recv` one lane steps while another's results travel: a
+    /// remote session is then bound by its link's bandwidth rather than its round trip.
+    /// 1: one session per hub.
+    pub remote_lanes: usize,
 }
 
 /// A duration in seconds from the environment variable `name`, else `default`; a value that
@@ -76,6 +82,7 @@ impl Default for SessionOptions {
                 .unwrap_or_else(|_| "envhub_".to_string()),
             pool_bytes: 512 << 20,
             info_row_bytes: 0,
+            remote_lanes: 1,
         }
     }
 }

@@ -56,11 +56,14 @@ pub struct VecEnv {
 /// One link of a session to start: local worker `job`, or a remote hub's slice.
 enum Planned {
     Local(Box<WorkerJob>),
+    /// A lane of a hub's slice ([`crate::lanes::split`]).
     Remote {
         hub: String,
         env_offset: usize,
-        /// The envs of the slice.
+        /// The envs of the lane.
         envs: usize,
+        /// The lane's share of the session's `workers`, if it names them.
+        workers: Option<usize>,
     },
 }
 
@@ -719,11 +722,19 @@ impl Starting<'_> {
         let mut worker_index = 0;
         for slice in slices {
             if slice.place != LOCAL {
-                planned.push(Planned::Remote {
-                    hub: slice.place.clone(),
-                    env_offset: offset,
-                    envs: slice.num_envs,
-                });
+                let lanes = crate::lanes::split(
+                    slice.num_envs,
+                    self.options.remote_lanes,
+                    self.config.workers,
+                );
+                for (lane_offset, envs, workers) in lanes {
+                    planned.push(Planned::Remote {
+                        hub: slice.place.clone(),
+                        env_offset: offset + lane_offset,
+                        envs,
+                        workers,
+                    });
+                }
                 offset += slice.num_envs;
                 continue;
             }
@@ -810,12 +821,13 @@ impl Starting<'_> {
                             hub,
                             env_offset,
                             envs,
+                            workers,
                         } => {
                             let opener = opener.ok_or_else(|| {
                                 HubError::Internal("remote envs without a network".into())
                             })?;
                             let (link, route) =
-                                self.open_remote(opener, index, &hub, env_offset, envs)?;
+                                self.open_remote(opener, index, &hub, env_offset, envs, workers)?;
                             Ok((link, Some(route)))
                         }
                     })
@@ -832,7 +844,8 @@ impl Starting<'_> {
         })
     }
 
-    /// Opens the slice of `envs` envs (from `env_offset`) on `hub` as link `index`.
+    /// Opens the lane of `envs` envs (from `env_offset`, on `workers` workers if the session
+    /// names them) on `hub` as link `index`.
     fn open_remote(
         &self,
         opener: &Arc<dyn SliceOpener>,
@@ -840,12 +853,14 @@ impl Starting<'_> {
         hub: &str,
         env_offset: usize,
         envs: usize,
+        workers: Option<usize>,
     ) -> Result<(WorkerLink, Route), HubError> {
         let request = OpenRequest {
             id: self.id.to_string(),
-            // A session of its own on that hub: its `num_envs` is the slice's.
+            // A session of its own on that hub: its `num_envs` is the lane's.
             config: envhub_core::EnvConfig {
                 num_envs: envs,
+                workers,
                 ..self.config.clone()
             },
             client: opener.client_id(),

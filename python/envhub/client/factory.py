@@ -93,6 +93,7 @@ def make_vec(
     strict_actions: bool = False,
     hubs: HubsArg = None,
     batch_size: int | None = None,
+    remote_lanes: int = 1,
     **extra: Any,
 ) -> VectorEnv:
     """`num_envs` envs of registry entry `id` over `num_workers` worker processes (a
@@ -108,7 +109,11 @@ def make_vec(
 
     `batch_size` gives EnvPool's asynchronous contract: after `async_reset()`, `recv()`
     returns exactly `batch_size` envs, the first to finish (`info["env_id"]`), and
-    `send(actions, env_id)` steps them again."""
+    `send(actions, env_id)` steps them again.
+
+    `remote_lanes` opens each remote hub's slice as that many sessions, each taking requests
+    of its own, so that with `send`/`recv` one steps while another's results travel (at most
+    one per env, and per worker when `num_workers` is given; default 1)."""
     return VectorEnv(
         id,
         num_envs,
@@ -125,6 +130,7 @@ def make_vec(
         strict_actions=strict_actions,
         hubs=hubs,
         batch_size=batch_size,
+        remote_lanes=remote_lanes,
         **extra,
     )
 

@@ -35,10 +35,12 @@ def start(
     adapter: str | None = None,
     hubs: HubsArg = None,
     info_row_bytes: int = 0,
+    remote_lanes: int = 1,
 ) -> Any:
     """Starts the workers of `config.num_envs` envs of entry `registry_id` (with `adapter`:
     of that adapter's env id `registry_id`, no registry involved). `info_row_bytes`: typed
-    info columns of that many bytes per env in the batch slots (`envhub._info_columns`)."""
+    info columns of that many bytes per env in the batch slots (`envhub._info_columns`).
+    `remote_lanes`: sessions each remote hub's slice is opened as (see `make_vec`)."""
     if not isinstance(registry_id, str):
         raise InvalidConfigError(f"the env id must be a string, got {type(registry_id).__name__}")
     if isinstance(config.num_envs, bool) or not isinstance(config.num_envs, int) or config.num_envs < 1:
@@ -55,6 +57,7 @@ def start(
         adapter=adapter,
         hubs=placement(hubs),
         info_row_bytes=info_row_bytes,
+        remote_lanes=remote_lanes,
     )
 
 

@@ -80,6 +80,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         strict_actions: bool = False,
         hubs: HubsArg = None,
         batch_size: int | None = None,
+        remote_lanes: int = 1,
         _adapter: str | None = None,
         _info_row_bytes: int = INFO_ROW_BYTES,
         **extra: Any,
@@ -99,8 +100,19 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             autoreset_mode=_RUST_MODES[mode],
             strict_actions=strict_actions,
         )
+        if isinstance(remote_lanes, bool) or not isinstance(remote_lanes, int | np.integer) or remote_lanes < 1:
+            raise InvalidConfigError(f"remote_lanes must be a positive integer, got {remote_lanes!r}")
         self._session = start(
-            registry_id, config, registry, step_timeout, restart_on_crash, pool_bytes, _adapter, hubs, _info_row_bytes
+            registry_id,
+            config,
+            registry,
+            step_timeout,
+            restart_on_crash,
+            pool_bytes,
+            _adapter,
+            hubs,
+            _info_row_bytes,
+            int(remote_lanes),
         )
         row_bytes = int(self._session.info_row_bytes)
         self._columns = ColumnReader(row_bytes, self._session.info_schema) if row_bytes else None

@@ -14,9 +14,12 @@ initial condition, the settling steps with the protocol's fixed action, then pol
 (an action chunk is executed one action per step before the slot asks again) until success
 (when the rule stops there), the env's own end, or the horizon. One policy call per step
 gathers every slot whose turn it is, whatever its task. Only envs with an episode are stepped
-(`send` to those ids, `recv` until all are back), so an env never runs past its episode. An
+(`send` to those ids), so an env never runs past its episode. The runner takes the envs that
+are ready: each round receives what the session's first workers answered and asks the policy
+for those envs while the other workers still step, so a slow worker holds back its own envs
+only; a reset, which takes the whole session, waits until the session's envs are back. An
 episode's result depends on its initial condition and the policy's answers alone: the same
-with 1 env or 16, local or remote.
+with 1 env or 16, local or remote, whatever order the envs come back in.
 """
 
 from __future__ import annotations
@@ -79,7 +82,7 @@ class _Session:
         self.tasks: list[str | None] = [None] * len(ids)  # the task each env last ran (its id)
         self.finished = 0  # episodes that ended without an error
         self.broken = broken  # sessions of these episodes that broke before this one
-        self.sent: list[int] = []
+        self.waiting: set[int] = set()  # envs sent whose results have not been received
         self.first = True
         # Videos of envs with no image observation: frames from `render()`, once per step of
         # the session (every env rendered), kept per env until the runner takes them.
@@ -369,11 +372,15 @@ class Runner:
         return s.queue.popleft()
 
     def _tick(self, s: _Session) -> None:
-        """Receives the session's step (if sent), then starts the next episodes on the envs
-        whose episode ended."""
-        if s.sent:
-            self._recv(s)
+        """Receives what the session's first workers answered (if envs are out), then starts
+        the next episodes on the envs whose episode ended, once every env is back (a reset
+        takes the whole session)."""
+        if s.waiting:
+            self._recv(s, all_back=s.render)
         ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
+        if ended and s.queue and s.waiting:
+            self._recv(s, all_back=True)
+            ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
         for i in ended:
             s.slots[i] = _Slot()
         assign: dict[int, Job] = {}
@@ -391,7 +398,10 @@ class Runner:
             (s, i)
             for s in self.sessions
             for i, slot in enumerate(s.slots)
-            if slot.running and slot.settle_left == 0 and (slot.chunk is None or slot.pos >= len(slot.chunk))
+            if slot.running
+            and i not in s.waiting
+            and slot.settle_left == 0
+            and (slot.chunk is None or slot.pos >= len(slot.chunk))
         ]
         if not need:
             return
@@ -432,11 +442,8 @@ class Runner:
             slot.pos = 0
 
     def _send_all(self) -> None:
-        from ..wire.errors import EnvHubError
-
         for s in list(self.sessions):
-            ids = [i for i, slot in enumerate(s.slots) if slot.running]
-            s.sent = ids
+            ids = [i for i, slot in enumerate(s.slots) if slot.running and i not in s.waiting]
             if not ids:
                 continue
             actions = np.empty((len(ids), *s.space.shape), dtype=s.space.dtype)
@@ -448,26 +455,26 @@ class Runner:
                     actions[j] = slot.chunk[slot.pos]  # type: ignore[index]
                     slot.action = actions[j]
                     slot.pos += 1
-            try:
-                s.envs.send(actions, ids)
-            except EnvHubError:
-                s.sent = []
-                raise
+            s.envs.send(actions, ids)
+            s.waiting.update(ids)
 
-    def _recv(self, s: _Session) -> None:
-        waiting = set(s.sent)
-        s.sent = []
-        self.env_steps += len(waiting)
+    def _recv(self, s: _Session, all_back: bool) -> None:
+        """Receives the results of the first workers to answer, or (`all_back`) of every env
+        out."""
         later = []  # with `render()` frames: the results, taken once every env is back and rendered
-        while waiting:
+        while s.waiting:
             obs, rewards, terminated, truncated, info = s.envs.recv()
-            for j, i in enumerate(info["env_id"].tolist()):
-                waiting.discard(i)
+            ids = info["env_id"].tolist()
+            self.env_steps += len(ids)
+            for j, i in enumerate(ids):
+                s.waiting.discard(i)
                 step = (s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
                 if s.render:
                     later.append((*step[:2], _copy(step[2]), *step[3:6], _info_row(info, j), 0))
                 else:
                     self._after_step(*step)
+            if not all_back:
+                break
         if later:
             s.rendered = s.envs.render()
             for step in later:
