@@ -35,7 +35,7 @@ pub struct Settings {
     /// `envhub.EnvAdapter` subclasses; registry entries with their `framework` route to them.
     pub adapters: Vec<String>,
     /// How to reach other hubs over Zenoh (`connect`, `listen`, `config`, `multicast`,
-    /// `lease_ms`); the command line and `ENVHUB_CONNECT` add to it.
+    /// `lease_ms`, `known_hubs`); the command line and `ENVHUB_CONNECT` add to it.
     pub zenoh: envhub_net::NetConfig,
     /// Where the settings came from, for messages.
     #[serde(skip)]
@@ -56,7 +56,7 @@ pub enum SettingsError {
     },
     /// The file is not valid.
     #[error(
-        "{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `python_install`, `adapters`, `zenoh` (with `connect`, `listen`, `config`, `multicast`, `lease_ms`)"
+        "{path}: {message}\nhint: valid fields are `env_registry_path`, `python`, `python_install`, `adapters`, `zenoh` (with `connect`, `listen`, `config`, `multicast`, `lease_ms`, `known_hubs`)"
     )]
     Parse {
         /// The file.
