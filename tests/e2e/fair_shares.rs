@@ -8,7 +8,8 @@
 
 use envhub_e2e::remote::{RemoteHub, known_hubs, net_to};
 use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry};
-use envhub_protocol::handshake::{Identity, OpenMessage, client_hello};
+use envhub_protocol::OpenMessage;
+use envhub_protocol::handshake::{Identity, client_hello};
 use rand::SeedableRng;
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdout, Command, Stdio};
