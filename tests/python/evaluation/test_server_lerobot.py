@@ -25,6 +25,7 @@ import subprocess
 import time
 
 import eval_peers
+import lerobot_peer
 import numpy as np
 import pytest
 from harness import REPO_ROOT, SUPPORT, import_envhub
@@ -97,10 +98,10 @@ def served(lerobot, tmp_path_factory):
 
 
 def observation(rng: np.random.Generator) -> dict[str, np.ndarray]:
-    h, w = eval_peers.LEROBOT_CAMERA
+    h, w = lerobot_peer.LEROBOT_CAMERA
     return {
         "front_image": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
-        "state": rng.standard_normal(eval_peers.LEROBOT_STATE),
+        "state": rng.standard_normal(lerobot_peer.LEROBOT_STATE),
     }
 
 
@@ -109,12 +110,12 @@ def test_lerobots_server_gives_what_it_computes_in_process(lerobot, served) -> N
 
     url = (
         f"lerobot://127.0.0.1:{served['port']}?policy_type=act&pretrained={served['folder']}"
-        f"&actions_per_chunk={eval_peers.LEROBOT_CHUNK}"
+        f"&actions_per_chunk={lerobot_peer.LEROBOT_CHUNK}"
     )
     task = Task("bench", "bench/0", "bench-entry", "pick the cube", 0)
     episode = Episode(task, 0)
     rng = np.random.default_rng(7)
-    requests = [Request(0, episode, step, observation(rng)) for step in range(0, 12, eval_peers.LEROBOT_CHUNK)]
+    requests = [Request(0, episode, step, observation(rng)) for step in range(0, 12, lerobot_peer.LEROBOT_CHUNK)]
     with connect("lerobot", url, timeout=300) as policy:
         policy.start(0, episode)
         chunks = [policy.act([r])[0] for r in requests]
@@ -124,8 +125,8 @@ def test_lerobots_server_gives_what_it_computes_in_process(lerobot, served) -> N
     # The raw observation LeRobot's robot client would send: state entries by name, the
     # camera by its name, the task's text.
     features, raw = sent[0]
-    assert features["observation.state"]["names"] == [f"state.{i}" for i in range(eval_peers.LEROBOT_STATE)]
-    assert features["observation.images.front"]["shape"] == (*eval_peers.LEROBOT_CAMERA, 3)
+    assert features["observation.state"]["names"] == [f"state.{i}" for i in range(lerobot_peer.LEROBOT_STATE)]
+    assert features["observation.images.front"]["shape"] == (*lerobot_peer.LEROBOT_CAMERA, 3)
     assert raw["task"] == "pick the cube"
     inputs, outputs = served["work"] / "in.pkl", served["work"] / "out.pkl"
     inputs.write_bytes(pickle.dumps(sent))
@@ -137,7 +138,7 @@ def test_lerobots_server_gives_what_it_computes_in_process(lerobot, served) -> N
     want = pickle.loads(outputs.read_bytes())
     assert len(chunks) == len(want) == 3
     for got, expected in zip(chunks, want):
-        assert got.shape == (eval_peers.LEROBOT_CHUNK, eval_peers.LEROBOT_ACTION) and got.dtype == np.float32
+        assert got.shape == (lerobot_peer.LEROBOT_CHUNK, lerobot_peer.LEROBOT_ACTION) and got.dtype == np.float32
         # The same torch ops in two processes: equal to float32's rounding.
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
     assert not np.allclose(chunks[0], chunks[1])  # the observations steer the policy
@@ -163,7 +164,7 @@ def test_lerobots_server_drives_an_envhub_evaluation(lerobot, served, tmp_path) 
 
     url = (
         f"lerobot://127.0.0.1:{served['port']}?policy_type=act&pretrained={served['folder']}"
-        f"&actions_per_chunk={eval_peers.LEROBOT_CHUNK}&images=agentview_image:front"
+        f"&actions_per_chunk={lerobot_peer.LEROBOT_CHUNK}&images=agentview_image:front"
         "&state=robot0_eef_pos,robot0_gripper_qpos"
     )
     try:

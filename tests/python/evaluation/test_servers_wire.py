@@ -22,8 +22,8 @@ import os
 import pickle
 import subprocess
 
-import eval_peers
 import numpy as np
+import peer_servers
 import pytest
 from harness import REPO_ROOT, SUPPORT, import_envhub
 from policy_servers import (
@@ -142,7 +142,7 @@ def test_the_hello_chooses_what_a_vla_eval_server_is_sent(peers, tmp_path) -> No
             described = policy.describe()
     finally:
         server.stop()
-    np.testing.assert_array_equal(action, eval_peers.fixed_action(0))
+    np.testing.assert_array_equal(action, peer_servers.fixed_action(0))
     (seen,) = read_log(log)
     want_state = np.concatenate(
         [obs["robot0_eef_pos"], axis_angle(obs["robot0_eef_quat"], "antipodal"), obs["robot0_gripper_qpos"]]
@@ -219,7 +219,7 @@ def test_openpi_on_libero_sends_the_examples_keys() -> None:
         policy.close()
     assert list(sent) == ["observation/image", "observation/wrist_image", "observation/state", "prompt"]
     assert sent["observation/image"].shape == (224, 224, 3) and sent["observation/image"].dtype == np.uint8
-    state = eval_peers.quat2axisangle(obs["robot0_eef_quat"].copy())
+    state = peer_servers.quat2axisangle(obs["robot0_eef_quat"].copy())
     assert_same(
         sent["observation/state"],
         np.concatenate([obs["robot0_eef_pos"], state, obs["robot0_gripper_qpos"]]),
