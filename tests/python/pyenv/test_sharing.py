@@ -209,7 +209,7 @@ def start_client(package: Path, cache: Path, log: Path) -> subprocess.Popen:
     env = {
         **os.environ,
         "ENVHUB_PYENV_DIR": str(cache),
-        "ENVHUB_LOG": "warn,envhub::launcher=debug,envhub::fork_server=debug",
+        "ENVHUB_LOG": "warn,envhub_hub::launcher=debug,envhub_hub::fork_server=debug",
     }
     env.pop("ENVHUB_PYTHON", None)
     env.pop("PYTHONPATH", None)
