@@ -116,6 +116,8 @@ pub fn join(
         .declare_token(keys::hub_token(name))
         .wait()
         .map_err(zenoh_error("declare token"))?;
+    // Last: this user's clients take the entry to mean the hub answers.
+    let local = local.and_then(envhub_net::LocalEntry::publish);
     Ok(HubNode {
         name: name.to_string(),
         _session: session,

@@ -162,8 +162,39 @@ pub struct HubSession {
     /// What to print at start: the warning when the hub is open to the network without
     /// credentials, or how to open it up when it was kept on loopback.
     pub notice: Option<String>,
-    /// Its entry among this machine's hubs (loopback only), removed when dropped.
-    pub local: Option<crate::local::Published>,
+    /// Its entry among this machine's hubs (loopback only), to write once the hub answers.
+    pub local: Option<LocalEntry>,
+}
+
+/// A loopback hub's entry among this machine's hubs, not yet written: the file tells this
+/// user's clients the hub is there, so it is written only once the hub's tokens and
+/// queryables are declared (a client that reads it sooner could give up before the hub
+/// answers).
+pub struct LocalEntry {
+    name: String,
+    endpoints: Vec<String>,
+}
+
+impl LocalEntry {
+    fn new(name: &str, endpoints: &[String]) -> LocalEntry {
+        LocalEntry {
+            name: name.to_string(),
+            endpoints: endpoints.to_vec(),
+        }
+    }
+
+    /// Writes the entry; it is removed when the result is dropped. A failure is a warning
+    /// (the hub still serves clients that name its endpoint).
+    pub fn publish(self) -> Option<crate::local::Published> {
+        crate::local::publish(&self.name, &self.endpoints)
+            .inspect_err(|e| {
+                tracing::warn!(
+                    "this machine's clients will not find this hub without `--connect {}`: {e}",
+                    self.endpoints.join(",")
+                )
+            })
+            .ok()
+    }
 }
 
 /// Opens hub `name`'s Zenoh session: listening on loopback only (and found by this user's
@@ -220,8 +251,7 @@ pub fn open_hub(
             .map_err(|e| open_failed(net, e))?;
         let local = exposure
             .local_credential
-            .then(|| publish_local(name, &exposure.listen))
-            .flatten();
+            .then(|| LocalEntry::new(name, &exposure.listen));
         return Ok(HubSession {
             session,
             notice: exposure.notice,
@@ -255,7 +285,7 @@ pub fn open_hub(
                 return Ok(HubSession {
                     session,
                     notice: exposure.notice,
-                    local: publish_local(name, std::slice::from_ref(&endpoint)),
+                    local: Some(LocalEntry::new(name, std::slice::from_ref(&endpoint))),
                 });
             }
             Err(e) if tries >= 3 => return Err(open_failed(net, e)),
@@ -284,18 +314,6 @@ fn check_local_credential(config: &mut zenoh::Config) -> Result<(), HubError> {
             what: "zenoh config",
             reason: format!("`transport/auth/usrpwd/dictionary_file`: {e}"),
         })
-}
-
-/// Tells this user's clients where the hub listens (they present the local credential there).
-fn publish_local(name: &str, endpoints: &[String]) -> Option<crate::local::Published> {
-    crate::local::publish(name, endpoints)
-        .inspect_err(|e| {
-            tracing::warn!(
-                "this machine's clients will not find this hub without `--connect {}`: {e}",
-                endpoints.join(",")
-            )
-        })
-        .ok()
 }
 
 fn open_failed(net: &NetConfig, e: zenoh::Error) -> HubError {

@@ -20,7 +20,8 @@ mod policy;
 pub use bridge::{Client, DROPPED, Sessions, dispatch, new_session_id, start};
 pub use client::{DISCOVERY, Network, unknown_hub};
 pub use config::{
-    DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, HubSession, NetConfig, open, open_hub,
+    DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, HubSession, LocalEntry, NetConfig, open,
+    open_hub,
 };
 pub use exposure::LOOPBACK_LISTENER;
 pub use link::UNSEALED;
