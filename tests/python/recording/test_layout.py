@@ -142,7 +142,7 @@ LEROBOT_WRITER = textwrap.dedent(
     """\
     # In LeRobot's interpreter: LeRobot's own writer given the same episodes (states, actions,
     # decoded frames) as the dataset at argv[1]; prints the files each holds.
-    import json, sys
+    import inspect, json, sys
     from pathlib import Path
     import av, numpy as np, pyarrow as pa, pyarrow.parquet as pq
     try:
@@ -161,7 +161,12 @@ LEROBOT_WRITER = textwrap.dedent(
             frames[mp4.relative_to(src)] = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
     feats = {k: {"dtype": f["dtype"], "shape": tuple(f["shape"]), "names": f.get("names")}
              for k, f in info["features"].items() if k in ("observation.state", "action", key)}
-    ds = LeRobotDataset.create("envhub/theirs", fps=info["fps"], features=feats, root=out, vcodec="h264")
+    if "vcodec" in inspect.signature(LeRobotDataset.create).parameters:  # lerobot-dataset 0.4
+        codec = {"vcodec": "h264"}
+    else:  # lerobot 0.6: the codec in an encoder config
+        from lerobot.configs.video import RGBEncoderConfig
+        codec = {"rgb_encoder": RGBEncoderConfig(vcodec="h264")}
+    ds = LeRobotDataset.create("envhub/theirs", fps=info["fps"], features=feats, root=out, **codec)
     state = np.array(data.column("observation.state").to_pylist())
     action = np.array(data.column("action").to_pylist(), dtype=np.float32).reshape(data.num_rows, -1)
     for e in range(eps.num_rows):
