@@ -70,19 +70,15 @@ LIBERO_STAMP := $(LIBERO_VENV)/.installed
 # Written by `make libero` once the adapter is available (assets included).
 LIBERO_READY := $(LIBERO_VENV)/.ready
 LIBERO_PACKAGE := hf-libero==0.1.4
-# LeRobot's dataset loader (with torch, ~5 GB) in an interpreter of its own: the judge of the
-# recorder's tests (requirements-lerobot.txt says why it is not .venv/). uv, from .venv/,
-# downloads in parallel.
+# LeRobot 0.6.1 (CPython 3.12, torch, ~7 GB) in an interpreter of its own, the tests' one
+# LeRobot: the recorder tests' loader, the plugin's LeRobot commands, LeRobot's policy server
+# (requirements-lerobot.txt says why it is not .venv/). uv, from .venv/, downloads in
+# parallel. The 3.12 interpreter: pyenv's or PATH's.
 LEROBOT_VENV := .venv-lerobot
 LEROBOT_STAMP := $(LEROBOT_VENV)/.installed
-# LeRobot 0.6.1 itself (CPython 3.12, torch), where tests/python/integrations/test_lerobot_plugin.py runs
-# LeRobot's own commands with the plugin (requirements-lerobot-next.txt); meant to replace
-# .venv-lerobot once the recorder's loader moves to it. The 3.12 interpreter: pyenv's or PATH's.
-LEROBOT_NEXT_VENV := .venv-lerobot-next
-LEROBOT_NEXT_STAMP := $(LEROBOT_NEXT_VENV)/.installed
 PYTHON312 = $(shell for p in $$(pyenv root 2>/dev/null)/versions/3.12*/bin/python3.12 $$(command -v python3.12); do "$$p" -c 'import sys; assert sys.version_info[:2] == (3, 12)' 2>/dev/null && { echo "$$p"; break; }; done)
 
-.PHONY: fuzz help demo test build-all suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot lerobot-next wheel env
+.PHONY: fuzz help demo test build-all suite-envs lint lint-rust fmt rust-test py-test py-install build venv setup clean bench maniskill libero lerobot wheel env
 
 help:
 	@echo "make demo   run the main job: a rollout on the embedded hub"
@@ -96,8 +92,7 @@ help:
 	@echo "make wheel  the Python wheel (module, CLI, workers) in dist/, from the one release build"
 	@echo "make maniskill  opt-in: ManiSkill3 + a CPU Vulkan driver (about 5 GB; tests then run it)"
 	@echo "make libero  opt-in: LIBERO in .venv-libero + its assets from the Hugging Face Hub (about 7 GB)"
-	@echo "make lerobot  LeRobot's dataset loader in .venv-lerobot, the recorder tests' judge (about 5 GB; make py-test does it)"
-	@echo "make lerobot-next  LeRobot 0.6.1 in .venv-lerobot-next, where the LeRobot plugin's tests run (about 7 GB; make py-test does it)"
+	@echo "make lerobot  LeRobot 0.6.1 in .venv-lerobot: the recorder tests' loader, the plugin's LeRobot commands (about 7 GB; make py-test does it)"
 
 # Packages go in with uv (pinned in requirements-dev.txt; pip brings it in first): it resolves
 # fast and links files from its cache (~/.cache/uv) instead of copying them, so a second clone
@@ -196,21 +191,13 @@ libero: py-install $(LIBERO_STAMP) $(MESA_STAMP)
 	touch $(LIBERO_READY)
 
 $(LEROBOT_STAMP): requirements-lerobot.txt $(VENV_BASE)
+	@test -n "$(PYTHON312)" || { echo "error: LeRobot 0.6.1 needs CPython 3.12: install it (pyenv install 3.12, or uv python install 3.12)" >&2; exit 1; }
 	rm -rf $(LEROBOT_VENV)
-	$(PYTHON) -m venv $(LEROBOT_VENV)
+	$(UV) venv --quiet --python $(PYTHON312) $(LEROBOT_VENV)
 	$(UV) pip install --quiet --python $(LEROBOT_VENV)/bin/python -r requirements-lerobot.txt
 	touch $@
 
 lerobot: $(LEROBOT_STAMP)
-
-$(LEROBOT_NEXT_STAMP): requirements-lerobot-next.txt $(VENV_BASE)
-	@test -n "$(PYTHON312)" || { echo "error: LeRobot 0.6.1 needs CPython 3.12: install it (pyenv install 3.12, or uv python install 3.12)" >&2; exit 1; }
-	rm -rf $(LEROBOT_NEXT_VENV)
-	$(UV) venv --quiet --python $(PYTHON312) $(LEROBOT_NEXT_VENV)
-	$(UV) pip install --quiet --python $(LEROBOT_NEXT_VENV)/bin/python -r requirements-lerobot-next.txt
-	touch $@
-
-lerobot-next: $(LEROBOT_NEXT_STAMP)
 
 # What the demo and the Python package run: the CLI, the workers and the extension module
 # (the tests' build, `make lint`, compiles the rest and reuses these: check_one_build.py;
@@ -322,7 +309,7 @@ wheel: build-all
 # (pytest-xdist; the isolation rules are in tests/python/README.md). `--dist loadgroup` hands
 # out one test at a time, slow ones first (conftest.py). PY_TEST_JOBS=0: one at a time.
 PY_TEST_JOBS ?= 2
-py-test: py-install $(LEROBOT_STAMP) $(LEROBOT_NEXT_STAMP) $(BROWSER_STAMP)
+py-test: py-install $(LEROBOT_STAMP) $(BROWSER_STAMP)
 	ENVHUB_PY_REQUIRED=1 ENVHUB_LEROBOT_REQUIRED=1 ENVHUB_MUJOCO_REQUIRED=1 ENVHUB_PYENV_REQUIRED=1 ENVHUB_SUITES_REQUIRED=1 ENVHUB_RECORD_REQUIRED=1 ENVHUB_BROWSER_REQUIRED=$(BROWSER_REQUIRED) $(VPY) -m pytest tests/python -q -p no:cacheprovider -n $(PY_TEST_JOBS) --dist loadgroup --durations=25
 	@if [ -f $(LIBERO_READY) ]; then \
 		ENVHUB_PY_REQUIRED=1 ENVHUB_LIBERO_REQUIRED=1 ENVHUB_PYTHON=$(abspath $(LIBERO_VPY)) \
@@ -342,7 +329,7 @@ suite-envs: py-install
 # build of every other target while the suites' environments are built; then the checks and
 # the tests, one after the other.
 test:
-	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(LEROBOT_NEXT_STAMP) $(BROWSER_STAMP)
+	$(MAKE) --no-print-directory -j4 build venv $(LEROBOT_STAMP) $(BROWSER_STAMP)
 	$(MAKE) --no-print-directory -j2 lint-rust suite-envs
 	$(MAKE) --no-print-directory lint rust-test py-test
 
@@ -370,7 +357,7 @@ fuzz:
 
 clean:
 	$(CARGO) clean
-	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) $(LEROBOT_NEXT_VENV) .build dist
+	rm -rf $(VENV) $(LIBERO_VENV) $(LEROBOT_VENV) .build dist
 
 # The variables cargo sees here, for running it by hand: `eval "$$(make -s env)"`.
 env:

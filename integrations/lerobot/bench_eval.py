@@ -11,7 +11,7 @@ saved with LeRobot's `save_pretrained` (or `--policy DIR`). Both sides write the
 `lerobot-eval` writes (its first 10 episodes, rendered every step). Prints one JSON object:
 each side's wall time, episodes per minute, the ratio, and whether the per-episode results of
 `eval_info.json` and the videos are equal. Uses the interpreters the tests use
-(tests/python/support/lerobot_envs.py): .venv-lerobot-next, and the reference venv in the
+(tests/python/support/lerobot_envs.py): .venv-lerobot, and the reference venv in the
 user cache (built on first use).
 """
 

@@ -3,7 +3,7 @@ protocol client (`envhub eval --server lerobot://... --server-protocol lerobot`)
 
 The server is started with LeRobot's own entry point (`python -m
 lerobot.async_inference.policy_server`) in a CPython 3.12 interpreter with LeRobot 0.6.1
-(the repository's `.venv-lerobot-next` when it has the server's gRPC dependencies, else one
+(the repository's `.venv-lerobot` when it has the server's gRPC dependencies, else one
 the tests build, eval_peers.lerobot_peer_python), serving a small ACT policy saved with
 LeRobot's `save_pretrained` (random weights, no download). An episode's requests through
 envhub's client (grpcio alone in envhub's interpreter) get the action chunks LeRobot's own

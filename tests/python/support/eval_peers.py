@@ -192,22 +192,23 @@ def libero_peer_env(python: str) -> dict[str, str]:
 # -- LeRobot's async-inference policy server ---------------------------------------------------
 
 #: LeRobot with its policy server's extra (grpcio, protobuf), torch as the repository's LeRobot
-#: environment pins it (requirements-lerobot-next.txt).
+#: environment pins it (requirements-lerobot.txt).
 LEROBOT_PEERS = ["lerobot[async]==0.6.1", "torch==2.10.0", "torchvision==0.25.0"]
 
 
 def lerobot_peer_python(repo: Path) -> str | None:
     """A CPython 3.12 interpreter with LeRobot 0.6.1 and its policy server's dependencies:
-    the repository's `.venv-lerobot-next` when it has them, else one built with uv into the
-    cache folder (pinned to that environment's versions where it exists, so uv's cache
-    serves it); None with the reason when neither can be had."""
+    the tests' LeRobot (`ENVHUB_LEROBOT_PYTHON`, else the repository's `.venv-lerobot`) when
+    it has them, else one built with uv into the cache folder (pinned to that environment's
+    versions where it exists, so uv's cache serves it); None with the reason when neither can
+    be had."""
     import fcntl
     import hashlib
     import json
     import shutil
 
     probe = "import grpc, lerobot.async_inference.policy_server"
-    ready = repo / ".venv-lerobot-next" / "bin" / "python"
+    ready = Path(os.environ.get("ENVHUB_LEROBOT_PYTHON") or repo / ".venv-lerobot" / "bin" / "python")
     if ready.exists() and subprocess.run([str(ready), "-c", probe], capture_output=True, check=False).returncode == 0:
         return str(ready)
     uv = shutil.which("uv") or str(Path(sys.executable).with_name("uv"))

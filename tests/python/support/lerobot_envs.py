@@ -19,7 +19,7 @@ BINARIES = ("lib_envhub.so", "envhub", "envhub-worker", "envhub-worker-mujoco", 
 UV = REPO_ROOT / ".venv" / "bin" / "uv"
 MUJOCO = next(line for line in (REPO_ROOT / "requirements-dev.txt").read_text().splitlines() if line.startswith("mujoco=="))
 # LeRobot's Meta-World as LeRobot 0.6.1's lock pins it (lerobot[metaworld] resolved today takes
-# mujoco 4.0.0, on which metaworld 3.0.0 fails); torch as .venv-lerobot-next has it.
+# mujoco 4.0.0, on which metaworld 3.0.0 fails); torch as .venv-lerobot has it.
 METAWORLD_REFERENCE = [
     "lerobot[metaworld]==0.6.1",
     "torch==2.10.0",
@@ -49,10 +49,10 @@ class Unavailable(Exception):
 
 
 def lerobot_python() -> Path:
-    """LeRobot 0.6.1's interpreter: `ENVHUB_LEROBOT_NEXT_PYTHON`, else .venv-lerobot-next."""
-    path = Path(os.environ.get("ENVHUB_LEROBOT_NEXT_PYTHON") or REPO_ROOT / ".venv-lerobot-next" / "bin" / "python")
+    """LeRobot 0.6.1's interpreter: `ENVHUB_LEROBOT_PYTHON`, else .venv-lerobot."""
+    path = Path(os.environ.get("ENVHUB_LEROBOT_PYTHON") or REPO_ROOT / ".venv-lerobot" / "bin" / "python")
     if not path.exists():
-        raise Unavailable(f"LeRobot 0.6.1's interpreter {path} is missing; run `make lerobot-next`")
+        raise Unavailable(f"LeRobot 0.6.1's interpreter {path} is missing; run `make lerobot`")
     done = subprocess.run(
         [str(path), "-c", "import lerobot; print(lerobot.__version__)"], capture_output=True, text=True, timeout=120
     )
