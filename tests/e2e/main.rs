@@ -13,6 +13,7 @@ mod env_pool_remote;
 mod failures;
 mod fair_shares;
 mod hub_bounds;
+mod lab_netns;
 mod lan_peer;
 mod local_files;
 mod lying_hub;

@@ -111,17 +111,17 @@ fn refused(stderr: &str) -> bool {
 /// Two "machines": namespaces `ns[0]` and `ns[1]`, joined by veth `veth[0]`–`veth[1]` with
 /// addresses `addr[0]`, `addr[1]`. Dropping it kills every process in them and deletes them
 /// (the veth pair and the tmpfs mounts go with them).
-struct TwoHosts {
-    ns: [String; 2],
+pub(crate) struct TwoHosts {
+    pub(crate) ns: [String; 2],
     veth: [String; 2],
-    addr: [String; 2],
+    pub(crate) addr: [String; 2],
     /// Logs of the processes, on the host.
-    dir: PathBuf,
+    pub(crate) dir: PathBuf,
 }
 
 impl TwoHosts {
     /// Creates the namespaces; `None` (with the reason printed) where this machine cannot.
-    fn new(test: &str) -> Option<TwoHosts> {
+    pub(crate) fn new(test: &str) -> Option<TwoHosts> {
         if !supported(test) {
             return None;
         }
@@ -199,12 +199,19 @@ impl TwoHosts {
 
     /// Starts `envhub ARGS` on host `side`, in its own `/dev/shm` and `/tmp`; `tag` names its
     /// logs.
-    fn envhub(&self, side: usize, tag: &str, args: &[&str]) -> Proc {
+    pub(crate) fn envhub(&self, side: usize, tag: &str, args: &[&str]) -> Proc {
         self.envhub_with(side, tag, args, &[])
     }
 
-    /// [`TwoHosts::envhub`] with `vars` added to its environment.
-    fn envhub_with(&self, side: usize, tag: &str, args: &[&str], vars: &[(&str, &str)]) -> Proc {
+    /// [`TwoHosts::envhub`] with `vars` added to its environment (one with an empty value is
+    /// removed from it instead).
+    pub(crate) fn envhub_with(
+        &self,
+        side: usize,
+        tag: &str,
+        args: &[&str],
+        vars: &[(&str, &str)],
+    ) -> Proc {
         let out = self.dir.join(format!("{tag}.out"));
         let err = self.dir.join(format!("{tag}.err"));
         let mut cmd = Command::new("ip");
@@ -231,7 +238,13 @@ impl TwoHosts {
             // the LAN only when told to (it trusts this one).
             cmd.env(envhub_hub::ENVHUB_MULTICAST, "1");
         }
-        cmd.envs(vars.iter().copied());
+        for (var, value) in vars {
+            if value.is_empty() {
+                cmd.env_remove(var);
+            } else {
+                cmd.env(var, value);
+            }
+        }
         // `ip netns exec`, `unshare` and `sh` each exec the next: the child is envhub itself
         // (its workers are its children, its namespaces are the hub's).
         let child = cmd.spawn().expect("ip netns exec starts");
@@ -408,7 +421,7 @@ fn ip(args: &[&str]) -> Result<(), String> {
 
 /// A process in a namespace, its output in files (nothing blocks on a full pipe). Killed
 /// when dropped.
-struct Proc {
+pub(crate) struct Proc {
     child: Child,
     out: PathBuf,
     err: PathBuf,
@@ -416,25 +429,25 @@ struct Proc {
 }
 
 impl Proc {
-    fn stdout(&self) -> String {
+    pub(crate) fn stdout(&self) -> String {
         std::fs::read_to_string(&self.out).unwrap_or_default()
     }
 
-    fn stderr(&self) -> String {
+    pub(crate) fn stderr(&self) -> String {
         std::fs::read_to_string(&self.err).unwrap_or_default()
     }
 
-    fn said(&self) -> String {
+    pub(crate) fn said(&self) -> String {
         format!("{} said:\n{}{}", self.what, self.stdout(), self.stderr())
     }
 
     /// Its exit status if it has ended.
-    fn ended(&mut self) -> Option<ExitStatus> {
+    pub(crate) fn ended(&mut self) -> Option<ExitStatus> {
         self.child.try_wait().expect("try_wait")
     }
 
     /// Waits (at most `limit_s` seconds, else fails) for it to end: status, stdout, stderr.
-    fn finish(mut self, limit_s: u64) -> (ExitStatus, String, String) {
+    pub(crate) fn finish(mut self, limit_s: u64) -> (ExitStatus, String, String) {
         let deadline = Instant::now() + Duration::from_secs(limit_s);
         loop {
             if let Some(status) = self.ended() {
@@ -487,7 +500,12 @@ impl Drop for Proc {
 }
 
 /// The JSON line of `envhub run --json`.
-fn run_summary(status: ExitStatus, out: &str, err: &str, what: &str) -> serde_json::Value {
+pub(crate) fn run_summary(
+    status: ExitStatus,
+    out: &str,
+    err: &str,
+    what: &str,
+) -> serde_json::Value {
     assert!(status.success(), "{what} failed ({status}):\n{out}{err}");
     serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{what} printed {out:?}: {e}"))
 }

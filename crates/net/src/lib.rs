@@ -12,6 +12,7 @@ mod config;
 mod endpoint;
 mod exposure;
 pub mod identity;
+pub mod lab;
 mod link;
 pub mod local;
 mod opener;

@@ -6,6 +6,7 @@ mod env_cmd;
 mod envs;
 mod eval;
 mod hubs;
+mod lab;
 mod match_cmd;
 mod record;
 mod run;
@@ -63,6 +64,8 @@ enum Command {
     Serve(serve::Args),
     /// List the live hubs on the network.
     Hubs(hubs::Args),
+    /// Hubs and clients on several machines that trust one another: make a lab, add members.
+    Lab(lab::Args),
     /// The Python environments suites run in (`python_envs:`): list, build, remove.
     Env(env_cmd::Args),
     /// Record episodes into a LeRobot dataset (v3: Parquet, MP4 per camera, meta/).
@@ -112,6 +115,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<Outcome> {
             None => envs::run(&registry()?, &args),
         },
         Command::Hubs(args) => hubs::run(&hub()?, &args),
+        Command::Lab(args) => lab::run(&args),
         Command::Env(args) => env_cmd::run(&registry()?, &args),
         Command::Show(args) => show::run(&registry()?, &args),
         Command::Match(args) => match_cmd::run(&registry()?, &args),

@@ -1,0 +1,282 @@
+//! A lab: hubs and clients on several machines that trust one another, and no one else, made
+//! by two commands (`envhub lab init`, `envhub lab add`).
+//!
+//! The lab is a certificate authority of its own (an ECDSA P-256 key in a folder only its user
+//! can enter) and one Zenoh config per member: the member's certificate and key, signed by the
+//! lab's CA, and the CA, inline (`*_base64`), with TLS client certificates on (`enable_mtls`).
+//! Members open and accept `tls/` links only (`transport/link/protocols`). Every link between
+//! members is then checked at both ends by the one CA, so a hub may listen
+//! beyond loopback, scout and connect out (see [`crate::exposure`]), a client scouts and follows
+//! gossip, and a peer without a certificate of this lab gets no link at all. Names are not
+//! checked on connect (`verify_name_on_connect: false`): the lab's CA is the trust, whatever
+//! address a member is reached at. Session keys still come from the key exchange with each
+//! hub's pinned identity ([`crate::identity`]); TLS adds that nothing of a link is readable.
+//!
+//! A member's config holds its private key: it is written 0600 and copied to that machine only.
+//! A member whose key leaked is shut out by making a new lab (there is no revocation list).
+
+use base64::Engine;
+use envhub_core::private_dir;
+use rcgen::{
+    BasicConstraints, CertificateParams, DistinguishedName, DnType, ExtendedKeyUsagePurpose, IsCa,
+    Issuer, KeyPair, KeyUsagePurpose,
+};
+use std::path::{Path, PathBuf};
+
+/// The lab's CA certificate, in the lab's folder.
+pub const CA_CERT: &str = "ca.pem";
+/// The lab's CA key (0600), in the lab's folder: whoever holds it can add members.
+pub const CA_KEY: &str = "ca.key";
+/// The port a router's config listens on.
+pub const ROUTER_PORT: u16 = 7447;
+/// How long certificates are valid, in years.
+const YEARS: u64 = 5;
+
+/// What a member's config makes of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// A hub or a client (`mode: peer`): `envhub --zenoh-config NAME.json5 serve|hubs|run ...`.
+    Member,
+    /// A client that reaches the lab through one router (`mode: client`: every message goes
+    /// through it; a `peer` client's interests do not cross a router in Zenoh 1.10, so it sees
+    /// no hub there): `envhub --zenoh-config NAME.json5 --connect tls/ROUTER:7447 hubs`.
+    RouterClient,
+    /// A Zenoh router that members reach one another through (`mode: router`, listening on
+    /// `tls/[::]:7447`): `zenohd -c NAME.json5`, or `envhub lab router NAME.json5`.
+    Router,
+}
+
+/// A member's or a lab's name: 1 to 64 of `A-Z a-z 0-9 . _ -`, not starting with `.` or `-`
+/// (it names a file and a certificate).
+pub fn check_name(what: &str, name: &str) -> Result<(), String> {
+    let ok = (1..=64).contains(&name.len())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+        && !name.starts_with(['.', '-']);
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "`{name}` is not a valid {what} name\nhint: 1 to 64 letters, digits, `.`, `_` or `-`, \
+             not starting with `.` or `-`"
+        ))
+    }
+}
+
+/// Makes lab `name` in folder `dir` (made 0700 where missing, every component checked): its
+/// CA certificate and key. A folder that already holds a CA is refused, never overwritten.
+pub fn init(dir: &Path, name: &str) -> Result<(), String> {
+    check_name("lab", name)?;
+    private_dir::ensure(dir).map_err(|e| format!("cannot use `{}`: {e}", dir.display()))?;
+    let key_path = dir.join(CA_KEY);
+    if key_path.symlink_metadata().is_ok() {
+        return Err(format!(
+            "`{}` already holds a lab (its `{CA_KEY}`)\nhint: add members with `envhub lab add \
+             {} NAME`, or choose another folder for a new lab",
+            dir.display(),
+            dir.display()
+        ));
+    }
+    let key = KeyPair::generate().map_err(|e| format!("cannot make the lab's key: {e}"))?;
+    let cert = ca_params(name)
+        .self_signed(&key)
+        .map_err(|e| format!("cannot make the lab's certificate: {e}"))?;
+    // The key first and without replacing: of two `init`s at once, one wins whole.
+    if !write(&key_path, key.serialize_pem().as_bytes(), false)? {
+        return Err(format!(
+            "`{}` was made by another process meanwhile",
+            key_path.display()
+        ));
+    }
+    write(&dir.join(CA_CERT), cert.pem().as_bytes(), true)?;
+    Ok(())
+}
+
+/// Adds member `member` to the lab in `dir`: writes `DIR/MEMBER.json5` (0600), its Zenoh config
+/// with a certificate of the lab's CA. An existing config of that name is refused.
+pub fn add(dir: &Path, member: &str, role: Role) -> Result<PathBuf, String> {
+    check_name("member", member)?;
+    private_dir::check(dir).map_err(|e| format!("cannot use `{}`: {e}", dir.display()))?;
+    let read = |file: &str| -> Result<String, String> {
+        let path = dir.join(file);
+        match private_dir::read_file(&path, 64 * 1024) {
+            Ok(Some(body)) => String::from_utf8(body)
+                .map_err(|_| format!("`{}` is not a PEM file", path.display())),
+            Ok(None) => Err(format!(
+                "`{}` holds no lab (no `{file}`)\nhint: make one with `envhub lab init {}`",
+                dir.display(),
+                dir.display()
+            )),
+            Err(e) => Err(format!("cannot read `{}`: {e}", path.display())),
+        }
+    };
+    let ca_key = KeyPair::from_pem(&read(CA_KEY)?)
+        .map_err(|e| format!("`{}` is not a key: {e}", dir.join(CA_KEY).display()))?;
+    let ca_pem = read(CA_CERT)?;
+    let issuer = Issuer::from_ca_cert_pem(&ca_pem, &ca_key).map_err(|e| {
+        format!(
+            "`{}` is not a certificate: {e}",
+            dir.join(CA_CERT).display()
+        )
+    })?;
+    let key = KeyPair::generate().map_err(|e| format!("cannot make {member}'s key: {e}"))?;
+    let cert = member_params(member)?
+        .signed_by(&key, &issuer)
+        .map_err(|e| format!("cannot sign {member}'s certificate: {e}"))?;
+    let config = member_config(member, role, &ca_pem, &cert.pem(), &key.serialize_pem());
+    let path = dir.join(format!("{member}.json5"));
+    if !write(&path, config.as_bytes(), false)? {
+        return Err(format!(
+            "`{}` already exists\nhint: a member keeps its config; remove the file to make a \
+             new one (the old one still works until the lab is made anew)",
+            path.display()
+        ));
+    }
+    Ok(path)
+}
+
+fn write(path: &Path, body: &[u8], replace: bool) -> Result<bool, String> {
+    private_dir::write_file(path, body, 0o600, replace)
+        .map_err(|e| format!("cannot write `{}`: {e}", path.display()))
+}
+
+/// The validity of certificates made now: from a day ago (clocks differ) for [`YEARS`] years.
+fn validity(params: &mut CertificateParams) {
+    const DAY: u64 = 86_400;
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    let from = rcgen::date_time_ymd(1970, 1, 1) + now - std::time::Duration::from_secs(DAY);
+    params.not_before = from;
+    params.not_after = from + std::time::Duration::from_secs(YEARS * 365 * DAY);
+}
+
+fn ca_params(lab: &str) -> CertificateParams {
+    let mut params = CertificateParams::default();
+    let mut dn = DistinguishedName::new();
+    dn.push(DnType::CommonName, format!("envhub lab {lab}"));
+    params.distinguished_name = dn;
+    params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
+    params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
+    validity(&mut params);
+    params
+}
+
+fn member_params(member: &str) -> Result<CertificateParams, String> {
+    let mut params = CertificateParams::new(vec![member.to_string()])
+        .map_err(|e| format!("`{member}` cannot name a certificate: {e}"))?;
+    let mut dn = DistinguishedName::new();
+    dn.push(DnType::CommonName, member);
+    params.distinguished_name = dn;
+    params.is_ca = IsCa::ExplicitNoCa;
+    params.key_usages = vec![KeyUsagePurpose::DigitalSignature];
+    // Every member both accepts links (a hub, a router) and opens them (all of them).
+    params.extended_key_usages = vec![
+        ExtendedKeyUsagePurpose::ServerAuth,
+        ExtendedKeyUsagePurpose::ClientAuth,
+    ];
+    validity(&mut params);
+    Ok(params)
+}
+
+/// The Zenoh config (JSON5) of `member`: TLS with client certificates of the lab on every link.
+fn member_config(member: &str, role: Role, ca: &str, cert: &str, key: &str) -> String {
+    let b64 = |pem: &str| base64::engine::general_purpose::STANDARD.encode(pem.as_bytes());
+    let mut tls = serde_json::Map::new();
+    for (k, v) in [
+        ("root_ca_certificate_base64", b64(ca)),
+        ("listen_certificate_base64", b64(cert)),
+        ("listen_private_key_base64", b64(key)),
+        ("connect_certificate_base64", b64(cert)),
+        ("connect_private_key_base64", b64(key)),
+    ] {
+        tls.insert(k.into(), v.into());
+    }
+    tls.insert("enable_mtls".into(), true.into());
+    tls.insert("verify_name_on_connect".into(), false.into());
+    let mut config = serde_json::json!({
+        "mode": match role {
+            Role::Member => "peer",
+            Role::RouterClient => "client",
+            Role::Router => "router",
+        },
+        // TLS only: no link of a member is ever unchecked (and a client scouts by default).
+        "transport": { "link": { "protocols": ["tls"], "tls": tls } },
+    });
+    if role == Role::Router {
+        config["listen"] = serde_json::json!({ "endpoints": [format!("tls/[::]:{ROUTER_PORT}")] });
+    }
+    let how = match role {
+        Role::Member => {
+            "a hub (`envhub --zenoh-config FILE serve --listen tls/0.0.0.0:7447`) or a client \
+             (`envhub --zenoh-config FILE hubs`)"
+        }
+        Role::RouterClient => {
+            "a client through a router (`envhub --zenoh-config FILE --connect tls/ROUTER:7447 \
+             hubs`)"
+        }
+        Role::Router => "a Zenoh router (`zenohd -c FILE`, or `envhub lab router FILE`)",
+    };
+    format!(
+        "// envhub lab member `{member}`: {how}.\n// It holds {member}'s private key: copy it to \
+         that machine only, mode 0600.\n{}\n",
+        serde_json::to_string_pretty(&config).expect("JSON serializes")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    fn fresh(tag: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("envhub-lab-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        dir
+    }
+
+    #[test]
+    fn a_lab_makes_private_configs_zenoh_reads_and_refuses_to_overwrite() {
+        let dir = fresh("make");
+        init(&dir, "test").unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&dir), 0o700);
+        assert_eq!(mode(&dir.join(CA_KEY)), 0o600);
+        let e = init(&dir, "test").unwrap_err();
+        assert!(e.contains("already holds a lab"), "{e}");
+        for (name, role, mode_json) in [
+            ("box1", Role::Member, "\"peer\""),
+            ("far", Role::RouterClient, "\"client\""),
+            ("hop", Role::Router, "\"router\""),
+        ] {
+            let path = add(&dir, name, role).unwrap();
+            assert_eq!(mode(&path), 0o600);
+            let config = zenoh::Config::from_file(&path).unwrap();
+            assert_eq!(config.get_json("mode").unwrap(), mode_json);
+            assert_eq!(
+                config.get_json("transport/link/tls/enable_mtls").unwrap(),
+                "true"
+            );
+            let e = add(&dir, name, role).unwrap_err();
+            assert!(e.contains("already exists"), "{e}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn bad_names_and_a_folder_without_a_lab_are_named() {
+        let dir = fresh("bad");
+        for name in ["", "../x", "-x", "a b", &"x".repeat(65)] {
+            let e = init(&dir, name).unwrap_err();
+            assert!(e.contains("not a valid lab name"), "{name:?}: {e}");
+        }
+        private_dir::ensure(&dir).unwrap();
+        let e = add(&dir, "box1", Role::Member).unwrap_err();
+        assert!(
+            e.contains("holds no lab") && e.contains("envhub lab init"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,258 @@
+//! The several-machines recipe of docs/guide/remote.md, exactly, on two "machines" (network
+//! namespaces joined by a veth, see `remote_netns`): `envhub lab init`, `envhub lab add` per
+//! member, then
+//! - a hub of the lab is found by a client of the lab by multicast alone and runs its session,
+//!   while a client of another lab, or one without a certificate, sees no hub even given the
+//!   endpoint;
+//! - through a router (`envhub lab router`, the Zenoh router as `zenohd` runs it): a hub that
+//!   only the router can reach and a client on the other machine that reaches only the router
+//!   meet and run a session; an outsider reaching the router sees nothing.
+//!
+//! Skipped as `remote_netns` is (root, `ip`, `unshare`; `ENVHUB_NETNS_REQUIRED` fails a skip).
+
+use crate::remote_netns::{Proc, TwoHosts, run_summary};
+use envhub_e2e::binary;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// A lab with `members` (name, `envhub lab add` flag), and another lab with members `mallory` (a peer) and `mallory-c` (a client); their configs' paths by name
+/// (and `NAME.sock`, a path for hub NAME's socket).
+/// Made outside `/tmp` (each namespace gets a fresh one) beside the binaries, which the
+/// namespaces see.
+fn labs(tag: &str, members: &[(&str, &str)]) -> (PathBuf, impl Fn(&str) -> String) {
+    let root = envhub_e2e::bin_dir().join(format!("e2e-lab-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let lab = |args: &[&str]| {
+        let out = Command::new(binary("envhub"))
+            .arg("lab")
+            .args(args)
+            .output()
+            .expect("envhub runs");
+        assert!(
+            out.status.success(),
+            "envhub lab {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let (ours, theirs) = (root.join("ours"), root.join("theirs"));
+    let s = |p: &Path| p.display().to_string();
+    lab(&["init", &s(&ours), "--name", "ours"]);
+    let ours_dir = s(&ours);
+    for (member, flag) in members {
+        let mut args = vec!["add", ours_dir.as_str(), member];
+        if !flag.is_empty() {
+            args.push(flag);
+        }
+        lab(&args);
+    }
+    lab(&["init", &s(&theirs), "--name", "theirs"]);
+    lab(&["add", &s(&theirs), "mallory"]);
+    lab(&["add", &s(&theirs), "mallory-c", "--client"]);
+    let dir = root.clone();
+    (root, move |member: &str| {
+        let lab = if member.starts_with("mallory") {
+            "theirs"
+        } else {
+            "ours"
+        };
+        s(&dir.join(lab).join(format!("{member}.json5")))
+    })
+}
+
+/// Waits (at most `limit`) until `proc` prints `line` on stdout; fails at once if it ends.
+fn wait_for_line(proc: &mut Proc, line: &str, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    while !proc.stdout().contains(line) {
+        assert!(proc.ended().is_none(), "{}", proc.said());
+        assert!(
+            Instant::now() < deadline,
+            "no `{line}` after {limit:?}; {}",
+            proc.said()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `envhub --zenoh-config CONFIG [ARGS] hubs --json` on host 1, asked up to `tries` times
+/// until it lists `name` (discovery over a veth can take more than one 2 s window): the
+/// names it listed last.
+fn hubs_from_b(
+    hosts: &TwoHosts,
+    tag: &str,
+    config: &str,
+    args: &[&str],
+    vars: &[(&str, &str)],
+    name: &str,
+    tries: usize,
+) -> Vec<String> {
+    let mut names = Vec::new();
+    for k in 0..tries {
+        let mut all = vec!["--zenoh-config", config];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["hubs", "--json"]);
+        let (_, out, _) = hosts
+            .envhub_with(1, &format!("{tag}-{k}"), &all, vars)
+            .finish(60);
+        let listed: Vec<serde_json::Value> = serde_json::from_str(&out).unwrap_or_default();
+        names = listed
+            .iter()
+            .filter_map(|h| h["name"].as_str().map(String::from))
+            .collect();
+        if names.iter().any(|n| n == name) {
+            break;
+        }
+    }
+    names
+}
+
+/// A 200-step CartPole rollout on hub `hub`, from host 1.
+fn run_on(hosts: &TwoHosts, config: &str, args: &[&str], vars: &[(&str, &str)], hub: &str) {
+    let mut all = vec!["--zenoh-config", config];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&[
+        "run",
+        "gym-cartpole",
+        "--hub",
+        hub,
+        "--num-envs",
+        "2",
+        "--steps",
+        "200",
+        "--json",
+    ]);
+    let (status, out, err) = hosts.envhub_with(1, "run", &all, vars).finish(120);
+    let summary = run_summary(status, &out, &err, "a lab client's run");
+    assert_eq!(summary["steps"], 200, "{summary}");
+}
+
+#[test]
+fn netns_lab_members_find_and_use_each_other_and_outsiders_see_nothing() {
+    let test = "netns_lab_members_find_and_use_each_other_and_outsiders_see_nothing";
+    let Some(hosts) = TwoHosts::new(test) else {
+        return;
+    };
+    let (root, config) = labs("peers", &[("box-a", ""), ("you", "")]);
+    let socket = |hub: &str| config(&format!("{hub}.sock"));
+    let listen = format!("tls/{}:7447", hosts.addr[0]);
+    let box_a = config("box-a");
+    let mut hub = hosts.envhub(
+        0,
+        "hub-a",
+        &[
+            "--zenoh-config",
+            &box_a,
+            "serve",
+            "--name",
+            "a",
+            "--listen",
+            &listen,
+            "--socket",
+            &socket("a"),
+        ],
+    );
+    wait_for_line(
+        &mut hub,
+        "on the network as hub `a`",
+        Duration::from_secs(60),
+    );
+    // Multicast left to the lab's default (on: every link is checked at both ends).
+    let default_multicast = [(envhub_hub::ENVHUB_MULTICAST, "")];
+    let you = config("you");
+    let seen = hubs_from_b(&hosts, "you", &you, &[], &default_multicast, "a", 5);
+    assert_eq!(
+        seen,
+        ["a"],
+        "a client of the lab did not find its hub by multicast"
+    );
+    run_on(&hosts, &you, &[], &default_multicast, "a");
+    // Outsiders, given the endpoint: a client of another lab, and one without a certificate.
+    let mallory = config("mallory");
+    let seen = hubs_from_b(
+        &hosts,
+        "mallory",
+        &mallory,
+        &["--connect", &listen],
+        &[],
+        "a",
+        1,
+    );
+    assert!(seen.is_empty(), "a client of another lab saw {seen:?}");
+    let (_, out, err) = hosts
+        .envhub(1, "bare", &["--connect", &listen, "hubs", "--json"])
+        .finish(60);
+    assert!(
+        !out.contains("\"a\""),
+        "a client without a certificate saw hub a: {out}{err}"
+    );
+    drop(hub);
+    let _ = std::fs::remove_dir_all(root);
+}
+
+#[test]
+fn netns_a_hub_and_a_client_of_a_lab_meet_through_a_router() {
+    let test = "netns_a_hub_and_a_client_of_a_lab_meet_through_a_router";
+    let Some(hosts) = TwoHosts::new(test) else {
+        return;
+    };
+    let (root, config) = labs(
+        "router",
+        &[("hop", "--router"), ("box-b", ""), ("you", "--client")],
+    );
+    let socket = |hub: &str| config(&format!("{hub}.sock"));
+    let mut router = hosts.envhub(0, "router", &["lab", "router", &config("hop")]);
+    wait_for_line(&mut router, "router listening on", Duration::from_secs(60));
+    // Hub `b` listens on host 0's loopback only and connects to the router: only the router
+    // can reach it from host 1.
+    let box_b = config("box-b");
+    let mut hub = hosts.envhub(
+        0,
+        "hub-b",
+        &[
+            "--zenoh-config",
+            &box_b,
+            "--connect",
+            "tls/127.0.0.1:7447",
+            "serve",
+            "--name",
+            "b",
+            "--listen",
+            "tls/127.0.0.1:7448",
+            "--socket",
+            &socket("b"),
+        ],
+    );
+    wait_for_line(
+        &mut hub,
+        "on the network as hub `b`",
+        Duration::from_secs(60),
+    );
+    let via_router = format!("tls/{}:7447", hosts.addr[0]);
+    let no_multicast = [(envhub_hub::ENVHUB_MULTICAST, "0")];
+    let you = config("you");
+    let at_router = ["--connect", via_router.as_str()];
+    let seen = hubs_from_b(&hosts, "you", &you, &at_router, &no_multicast, "b", 5);
+    assert_eq!(
+        seen,
+        ["b"],
+        "a client of the lab did not find hub b through the router"
+    );
+    run_on(&hosts, &you, &at_router, &no_multicast, "b");
+    let mallory = config("mallory-c");
+    let seen = hubs_from_b(
+        &hosts,
+        "mallory",
+        &mallory,
+        &at_router,
+        &no_multicast,
+        "b",
+        1,
+    );
+    assert!(
+        seen.is_empty(),
+        "a client of another lab saw {seen:?} through the router"
+    );
+    drop(hub);
+    drop(router);
+    let _ = std::fs::remove_dir_all(root);
+}
