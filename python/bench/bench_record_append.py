@@ -1,11 +1,12 @@
 """What a recording holds in memory beyond `queue_bytes`, and what a commit costs as the last
 video file grows (issue 42's items 3 and 4: the figures docs/guide/recording.md gives).
 
-    .venv/bin/python python/bench/bench_record_append.py memory [--envs 8] [--long 3000]
+    .venv/bin/python python/bench/bench_record_append.py memory [--envs 8] [--long 3000] [--steps N]
     .venv/bin/python python/bench/bench_record_append.py append [--mb 200]
 
 `memory`: Gymnasium vector env of `--envs` envs with 4 KiB observations (512 float64), env 0's
-episodes `--long` steps, the others' 10, a 1 MiB queue; the process's resident set is sampled
+episodes `--long` steps, the others' 10, a 1 MiB queue, `--steps` steps (`--long` + 1 unless
+given); the process's resident set is sampled
 every 5 ms, and its rise over the baseline (after the first reset) reported, held at the end and
 at the peak. `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
 committed every 0.2 s (or 4x the last commit's time), until the camera's last video file (its
@@ -79,7 +80,7 @@ class _Noise(gymnasium.Env):
         return self._obs(), 0.0, False, self.t >= 10, {}
 
 
-def memory(envs: int, long: int) -> dict:
+def memory(envs: int, long: int, steps: int | None = None) -> dict:
     fns = [lambda: _Wide(long)] + [lambda: _Wide(10)] * (envs - 1)
     env = gymnasium.vector.SyncVectorEnv(fns)
     with tempfile.TemporaryDirectory() as tmp:
@@ -95,7 +96,7 @@ def memory(envs: int, long: int) -> dict:
         sampler = threading.Thread(target=sample, daemon=True)
         sampler.start()
         actions = np.zeros((envs, 1), np.float32)
-        for _ in range(long + 1):
+        for _ in range(long + 1 if steps is None else steps):
             rec.step(actions)
         held = _rss()
         rec.close()
@@ -142,10 +143,11 @@ def main() -> None:
     p.add_argument("what", choices=["memory", "append"])
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--long", type=int, default=3000)
+    p.add_argument("--steps", type=int, default=None)
     p.add_argument("--mb", type=float, default=200)
     a = p.parse_args()
     if a.what == "memory":
-        print(json.dumps(memory(a.envs, a.long)))
+        print(json.dumps(memory(a.envs, a.long, a.steps)))
     else:
         for row in append(a.mb):
             print(json.dumps(row))

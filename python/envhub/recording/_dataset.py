@@ -38,7 +38,7 @@ import numpy as np
 from . import _encoding as encoding
 from ._durable import Commit, fsync_dir, fsync_file, link_or_copy
 from ._encoding import Encoding
-from ._files import Files, Part, join_parquet, to_join
+from ._files import PARQUET, Files, Part, group_rows, join_parquet, to_join
 from ._stats import NAMES, aggregate, aggregate_all, column_stats
 from ._video import concatenate, count_frames, pix_fmt
 from .errors import DatasetLayoutError, RecordingError
@@ -228,7 +228,14 @@ class Dataset:
     def __init__(self, root: str | os.PathLike, fps: int, features: dict[str, dict], robot_type: str | None,
                  data_files_size_in_mb: float | None = None, video_files_size_in_mb: float | None = None, *,
                  codec: str | None = None, crf: int | None = None, gop: int | None = None) -> None:
-        import pyarrow  # noqa: F401  (fails early, before any file is touched)
+        # Fails early, before any file is touched; and loads now what commits use (pyarrow's
+        # Parquet, and pandas, which `pa.array` imports where installed: about 50 MiB), so that
+        # a recording's memory is the recording's (recording.md's bound is over the process
+        # once the dataset is opened).
+        import pyarrow as pa
+        import pyarrow.parquet
+
+        pa.array(np.zeros(1))
 
         self.root = Path(root)
         private = self.root / PRIVATE
@@ -612,7 +619,7 @@ class Dataset:
     def _write_table(table: Any, path: Path) -> None:
         import pyarrow.parquet as pq
 
-        pq.write_table(table, path, compression="snappy")
+        pq.write_table(table, path, row_group_size=group_rows(table), **PARQUET)
 
     @staticmethod
     def _write_json(data: dict[str, Any], path: Path) -> None:
@@ -718,11 +725,11 @@ class Dataset:
         paths = [self.root / files.rel(p.at) for p in parts]
         out = commit.meta_file(files.rel(home)[len("meta/"):])
         schema = pq.read_schema(paths[0])
-        with pq.ParquetWriter(out, schema, compression="snappy") as writer:
+        with pq.ParquetWriter(out, schema, **PARQUET) as writer:
             for path in paths:
                 f = pq.ParquetFile(path)
                 for g in range(f.num_row_groups):
-                    table = f.read_row_group(g).cast(schema)
+                    table = f.read_row_group(g, use_threads=False).cast(schema)
                     for name, value in (("meta/episodes/chunk_index", home[0]), ("meta/episodes/file_index", home[1])):
                         i = schema.get_field_index(name)
                         table = table.set_column(i, schema.field(i), pa.array(np.full(len(table), value)).cast(schema.field(i).type))
@@ -737,7 +744,8 @@ class Dataset:
     def _repoint(self, commit: Commit, files: Files, parts: list[Part], at: tuple[int, int],
                  shifts: np.ndarray) -> None:
         """Writes into `commit`'s `meta/` the episodes files with the episodes of `parts`
-        pointing at the file `at`, where part `k` starts `shifts[k]` frames in."""
+        pointing at the file `at`, where part `k` starts `shifts[k]` frames in. Row group by
+        row group (a commit's episodes each): an episodes file grows to 100 MB."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -745,21 +753,28 @@ class Dataset:
         shift = np.repeat(np.asarray(shifts, dtype=np.int64), [p.episodes for p in parts])
         prefix, fps = files.prefix(), self.info["fps"]
         for path in reversed(self._episode_files()):
-            index = pq.read_table(path, columns=["episode_index"]).column(0).to_numpy()
-            chosen = (index >= start) & (index < end)
-            if chosen.any():
-                table = pq.read_table(path)
-                moved = np.where(chosen, shift[np.clip(index - start, 0, len(shift) - 1)], 0)
-                new = {f"{prefix}/chunk_index": np.where(chosen, at[0], table.column(f"{prefix}/chunk_index")),
-                       f"{prefix}/file_index": np.where(chosen, at[1], table.column(f"{prefix}/file_index"))}
-                if files.video:
-                    for name in ("from_timestamp", "to_timestamp"):
-                        old = table.column(f"{prefix}/{name}").to_numpy()
-                        new[f"{prefix}/{name}"] = np.where(moved != 0, (np.round(old * fps) + moved) / fps, old)
-                for name, values in new.items():
-                    i = table.schema.get_field_index(name)
-                    table = table.set_column(i, table.schema.field(i), pa.array(values).cast(table.schema.field(i).type))
-                self._write_table(table, commit.meta_file(str(path.relative_to(self.root / "meta"))))
+            source = pq.ParquetFile(path)
+            index = source.read(columns=["episode_index"], use_threads=False).column(0).to_numpy()
+            if ((index >= start) & (index < end)).any():
+                out = commit.meta_file(str(path.relative_to(self.root / "meta")))
+                with pq.ParquetWriter(out, source.schema_arrow, **PARQUET) as writer:
+                    for g in range(source.num_row_groups):
+                        table = source.read_row_group(g, use_threads=False)
+                        rows = table.column("episode_index").to_numpy()
+                        chosen = (rows >= start) & (rows < end)
+                        moved = np.where(chosen, shift[np.clip(rows - start, 0, len(shift) - 1)], 0)
+                        new = {f"{prefix}/chunk_index": np.where(chosen, at[0], table.column(f"{prefix}/chunk_index")),
+                               f"{prefix}/file_index": np.where(chosen, at[1], table.column(f"{prefix}/file_index"))}
+                        if files.video:
+                            for name in ("from_timestamp", "to_timestamp"):
+                                old = table.column(f"{prefix}/{name}").to_numpy()
+                                new[f"{prefix}/{name}"] = np.where(moved != 0, (np.round(old * fps) + moved) / fps, old)
+                        for name, values in new.items():
+                            i = table.schema.get_field_index(name)
+                            table = table.set_column(i, table.schema.field(i),
+                                                     pa.array(values).cast(table.schema.field(i).type))
+                        writer.write_table(table)
+                        del table
             if len(index) and index.min() <= start:
                 break
 
@@ -782,7 +797,8 @@ class Dataset:
         columns: dict[str, np.ndarray] = {}
         for key, f in self.features.items():
             if f["dtype"] != "video" and key not in INDEX_KEYS:
-                columns[key] = np.concatenate([ep.columns[key] for ep in episodes])
+                parts = [ep.columns[key] for ep in episodes]  # (one episode: no copy)
+                columns[key] = parts[0] if len(parts) == 1 else np.concatenate(parts)
         columns["timestamp"] = (frame_index / fps).astype(np.float32)
         columns["frame_index"] = frame_index
         columns["episode_index"] = np.repeat(np.arange(first_ep, first_ep + count, dtype=np.int64), lengths)

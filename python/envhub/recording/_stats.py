@@ -21,6 +21,8 @@ QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 QUANTILE_KEYS = tuple(f"q{int(q * 100):02d}" for q in QUANTILES)
 BINS = 5000
 NAMES = ("min", "max", "mean", "std", "count", *QUANTILE_KEYS)
+#: The float64 values `column_stats` takes at once (dimensions of a wide column in turn).
+SLICE_BYTES = 2**20
 
 
 def _bins(v: np.ndarray, lo: np.ndarray, step: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -71,10 +73,24 @@ def episode_quantiles(v: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lo
 def column_stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
     """A column's statistics (`(frames,)` or `(frames, dims)`) per episode (rows `starts[e]`
     on, `lengths[e]` of them; each of shape `(episodes, dims)`, dims 1 for scalars) and over
-    all of them (each `(dims,)`)."""
+    all of them (each `(dims,)`). Taken a few dimensions at a time, so that the temporaries
+    (about ten float64 copies of what they cover) stay near `SLICE_BYTES` for any width."""
+    values = np.asarray(values)
+    if values.ndim == 1:
+        values = values[:, None]
+    frames, dims = values.shape
+    step = max(1, SLICE_BYTES // max(8 * frames, 1))
+    if step >= dims:
+        return _column_stats(values, starts, lengths)
+    parts = [_column_stats(values[:, d : d + step], starts, lengths) for d in range(0, dims, step)]
+    per_episode = {k: v if k == "count" else np.concatenate([p[0][k] for p in parts], axis=1)
+                   for k, v in parts[0][0].items()}
+    whole = {k: v if k == "count" else np.concatenate([p[1][k] for p in parts]) for k, v in parts[0][1].items()}
+    return per_episode, whole
+
+
+def _column_stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
     v = np.asarray(values, dtype=np.float64)
-    if v.ndim == 1:
-        v = v[:, None]
     n = lengths[:, None].astype(np.float64)
     mean = np.add.reduceat(v, starts, axis=0) / n
     centred = v - np.repeat(mean, lengths, axis=0)

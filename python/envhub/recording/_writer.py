@@ -4,8 +4,9 @@ It keeps the rows of the episodes in flight (`_rows.py`: one copy per step and c
 the number of envs), encodes each env's camera frames into that episode's MP4 as they arrive,
 and when an env's episode ends takes its rows out. Ended episodes are committed together, at
 most every `commit_every` seconds (or four times as long as the last commit took, if longer),
-as soon as their rows reach `PENDING_BYTES` (or `queue_bytes`, if smaller), and when the
-recorder closes.
+as soon as their rows and statistics reach `PENDING_BYTES` (or `queue_bytes`, if smaller), and
+when the recorder closes. After each commit the allocators are asked to give back what it freed
+(`_memory.py`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from ._budget import ByteQueue
 from ._dataset import Dataset, Episode
+from ._memory import release
 from ._rows import Rows
 from ._video import EpisodeVideo
 
@@ -53,8 +55,9 @@ class Reset:
 
 
 STOP = object()
-#: Ended episodes' rows held before a commit comes early (a commit copies them about twice).
-PENDING_BYTES = 64 * 2**20
+#: Ended episodes' rows (and their statistics' rows) held before a commit comes early: a commit
+#: takes a few times this for a moment (its copies, Parquet's buffers), so it bounds that too.
+PENDING_BYTES = 16 * 2**20
 
 
 class Writer:
@@ -241,7 +244,8 @@ class Writer:
             columns[name] = values
         columns["next.done"] = np.logical_or(columns["next.terminated"], columns["next.truncated"])
         self._rows.forget(i)
-        self._pending_bytes += sum(c.nbytes for c in columns.values())
+        # Its rows, and its row of `meta/episodes/` (ten statistics per value of a row).
+        self._pending_bytes += sum(c.nbytes + 80 * c[:1].size for c in columns.values())
         videos, video_stats = {}, {}
         for key, video in self._encoders[i].items():
             video.finish()
@@ -265,6 +269,8 @@ class Writer:
             pending, self._pending, self._pending_bytes = self._pending, [], 0
             self.dataset.commit(pending)
             self.stats["episodes_written"] += len(pending)
+            del pending
+            release()
         self._last_commit = time.monotonic()
         # Spacing commits by four times their duration keeps committing (and the joins of small
         # files it may do) under a fifth of the writer's time.
