@@ -189,30 +189,32 @@ impl Sessions {
         if let Some(held) = starting.by_client.get(client) {
             of_client.add(*held);
         }
-        if let Some(max) = policy.max_envs
-            && used_envs.saturating_add(envs) > max
-        {
-            return Err((
-                format!("{envs} envs would exceed its limit of {max} (it runs {used_envs})"),
-                format!(
-                    "ask for at most {} envs here, or place the rest on other hubs; its owner sets the limit with `envhub serve --max-envs N`",
-                    max.saturating_sub(used_envs)
-                ),
-            ));
-        }
-        if let Some(max) = policy.max_workers
-            && used_workers.saturating_add(workers) > max
-        {
-            return Err((
-                format!(
-                    "{workers} workers would exceed its limit of {max} (it runs {used_workers})"
-                ),
-                format!(
-                    "ask for at most {} workers here (`workers=`), or place envs on other hubs; its owner sets the limit with `envhub serve --max-workers N`",
-                    max.saturating_sub(used_workers)
-                ),
-            ));
-        }
+        let cap = |max, held, asked, noun, scope, flag| Cap {
+            max,
+            held,
+            asked,
+            noun,
+            scope,
+            flag,
+        };
+        cap(
+            policy.max_envs,
+            used_envs,
+            envs,
+            "envs",
+            Scope::Hub,
+            "max-envs",
+        )
+        .check()?;
+        cap(
+            policy.max_workers,
+            used_workers,
+            workers,
+            "workers",
+            Scope::Hub,
+            "max-workers",
+        )
+        .check()?;
         if let Some(max) = policy.max_sessions_per_client
             && of_client.sessions >= max
         {
@@ -225,34 +227,24 @@ impl Sessions {
             ));
         }
         // One client's share: the rest is kept for other clients, whoever came first.
-        if let Some(max) = policy.max_envs_per_client
-            && of_client.envs.saturating_add(envs) > max
-        {
-            return Err((
-                format!(
-                    "{envs} envs would exceed this client's share of {max} (it holds {})",
-                    of_client.envs
-                ),
-                format!(
-                    "ask for at most {} envs here, or place the rest on other hubs; its owner sets the share with `envhub serve --max-envs-per-client N`",
-                    max.saturating_sub(of_client.envs)
-                ),
-            ));
-        }
-        if let Some(max) = policy.max_workers_per_client
-            && of_client.workers.saturating_add(workers) > max
-        {
-            return Err((
-                format!(
-                    "{workers} workers would exceed this client's share of {max} (it holds {})",
-                    of_client.workers
-                ),
-                format!(
-                    "ask for at most {} workers here (`workers=`), or place envs on other hubs; its owner sets the share with `envhub serve --max-workers-per-client N`",
-                    max.saturating_sub(of_client.workers)
-                ),
-            ));
-        }
+        cap(
+            policy.max_envs_per_client,
+            of_client.envs,
+            envs,
+            "envs",
+            Scope::Client,
+            "max-envs-per-client",
+        )
+        .check()?;
+        cap(
+            policy.max_workers_per_client,
+            of_client.workers,
+            workers,
+            "workers",
+            Scope::Client,
+            "max-workers-per-client",
+        )
+        .check()?;
         starting.envs += envs;
         starting.workers += workers;
         starting
@@ -812,6 +804,55 @@ impl Out {
         } else {
             Vec::new()
         }
+    }
+}
+
+/// Whose count a [`Cap`] bounds.
+#[derive(Clone, Copy)]
+enum Scope {
+    /// The hub's, over every client (`--max-envs`, `--max-workers`).
+    Hub,
+    /// One client's share (`--max-envs-per-client`, `--max-workers-per-client`).
+    Client,
+}
+
+/// One count limit of an admission: `asked` more `noun` on top of `held` may not pass `max`
+/// (`None`: no limit). `flag` is the `envhub serve` option that sets it.
+struct Cap {
+    max: Option<usize>,
+    held: usize,
+    asked: usize,
+    noun: &'static str,
+    scope: Scope,
+    flag: &'static str,
+}
+
+impl Cap {
+    /// Why the admission is refused and what would fit, or nothing where it fits.
+    fn check(&self) -> Result<(), (String, String)> {
+        let Some(max) = self.max else {
+            return Ok(());
+        };
+        if self.held.saturating_add(self.asked) <= max {
+            return Ok(());
+        }
+        let (held, asked, noun, flag) = (self.held, self.asked, self.noun, self.flag);
+        let (bound, holds, sets) = match self.scope {
+            Scope::Hub => ("its limit", "runs", "limit"),
+            Scope::Client => ("this client's share", "holds", "share"),
+        };
+        let instead = if noun == "workers" {
+            "workers here (`workers=`), or place envs on other hubs"
+        } else {
+            "envs here, or place the rest on other hubs"
+        };
+        Err((
+            format!("{asked} {noun} would exceed {bound} of {max} (it {holds} {held})"),
+            format!(
+                "ask for at most {} {instead}; its owner sets the {sets} with `envhub serve --{flag} N`",
+                max.saturating_sub(held)
+            ),
+        ))
     }
 }
 
