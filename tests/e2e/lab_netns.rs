@@ -10,14 +10,14 @@
 //!
 //! Skipped as `remote_netns` is (root, `ip`, `unshare`; `ENVHUB_NETNS_REQUIRED` fails a skip).
 
-use crate::remote_netns::{Proc, TwoHosts, run_summary};
+use crate::remote_netns::{TwoHosts, run_summary};
 use envhub_e2e::binary;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-/// A lab with `members` (name, `envhub lab add` flag), and another lab with members `mallory` (a peer) and `mallory-c` (a client); their configs' paths by name
-/// (and `NAME.sock`, a path for hub NAME's socket).
+/// A lab with `members` (name, `envhub lab add` flag), and another lab with members `mallory`
+/// (a peer) and `mallory-c` (a client); their configs' paths by name.
 /// Made outside `/tmp` (each namespace gets a fresh one) beside the binaries, which the
 /// namespaces see.
 fn labs(tag: &str, members: &[(&str, &str)]) -> (PathBuf, impl Fn(&str) -> String) {
@@ -60,18 +60,13 @@ fn labs(tag: &str, members: &[(&str, &str)]) -> (PathBuf, impl Fn(&str) -> Strin
     })
 }
 
-/// Waits (at most `limit`) until `proc` prints `line` on stdout; fails at once if it ends.
-fn wait_for_line(proc: &mut Proc, line: &str, limit: Duration) {
-    let deadline = Instant::now() + limit;
-    while !proc.stdout().contains(line) {
-        assert!(proc.ended().is_none(), "{}", proc.said());
-        assert!(
-            Instant::now() < deadline,
-            "no `{line}` after {limit:?}; {}",
-            proc.said()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+/// Where hub `hub` of a lab test puts its socket (the default one is shared by every test's
+/// hubs): in the lab's folder, which the namespaces see.
+fn socket_in(root: &Path, hub: &str) -> String {
+    root.join("ours")
+        .join(format!("{hub}.sock"))
+        .display()
+        .to_string()
 }
 
 /// `envhub --zenoh-config CONFIG [ARGS] hubs --json` on host 1, asked up to `tries` times
@@ -133,7 +128,7 @@ fn netns_lab_members_find_and_use_each_other_and_outsiders_see_nothing() {
         return;
     };
     let (root, config) = labs("peers", &[("box-a", ""), ("you", "")]);
-    let socket = |hub: &str| config(&format!("{hub}.sock"));
+    let socket = |hub: &str| socket_in(&root, hub);
     let listen = format!("tls/{}:7447", hosts.addr[0]);
     let box_a = config("box-a");
     let mut hub = hosts.envhub(
@@ -151,11 +146,7 @@ fn netns_lab_members_find_and_use_each_other_and_outsiders_see_nothing() {
             &socket("a"),
         ],
     );
-    wait_for_line(
-        &mut hub,
-        "on the network as hub `a`",
-        Duration::from_secs(60),
-    );
+    hub.wait_for_line("on the network as hub `a`", Duration::from_secs(60));
     // Multicast left to the lab's default (on: every link is checked at both ends).
     let default_multicast = [(envhub_hub::ENVHUB_MULTICAST, "")];
     let you = config("you");
@@ -199,9 +190,9 @@ fn netns_a_hub_and_a_client_of_a_lab_meet_through_a_router() {
         "router",
         &[("hop", "--router"), ("box-b", ""), ("you", "--client")],
     );
-    let socket = |hub: &str| config(&format!("{hub}.sock"));
+    let socket = |hub: &str| socket_in(&root, hub);
     let mut router = hosts.envhub(0, "router", &["lab", "router", &config("hop")]);
-    wait_for_line(&mut router, "router listening on", Duration::from_secs(60));
+    router.wait_for_line("router listening on", Duration::from_secs(60));
     // Hub `b` listens on host 0's loopback only and connects to the router: only the router
     // can reach it from host 1.
     let box_b = config("box-b");
@@ -222,11 +213,7 @@ fn netns_a_hub_and_a_client_of_a_lab_meet_through_a_router() {
             &socket("b"),
         ],
     );
-    wait_for_line(
-        &mut hub,
-        "on the network as hub `b`",
-        Duration::from_secs(60),
-    );
+    hub.wait_for_line("on the network as hub `b`", Duration::from_secs(60));
     let via_router = format!("tls/{}:7447", hosts.addr[0]);
     let no_multicast = [(envhub_hub::ENVHUB_MULTICAST, "0")];
     let you = config("you");

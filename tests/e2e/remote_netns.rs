@@ -263,7 +263,7 @@ impl TwoHosts {
         let listen = format!("tcp/{}:7447", self.addr[0]);
         // Beyond loopback without credentials: allowed by the flag, with a warning; scouting
         // by a flag of its own.
-        let hub = self.envhub(
+        let mut hub = self.envhub(
             0,
             "hub-a",
             &[
@@ -276,15 +276,7 @@ impl TwoHosts {
                 "--multicast-scouting",
             ],
         );
-        let deadline = Instant::now() + Duration::from_secs(15);
-        while !hub.stdout().contains("on the network as hub `a`") {
-            assert!(
-                Instant::now() < deadline,
-                "hub `a` did not join the network within 15 s; {}",
-                hub.said()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        hub.wait_for_line("on the network as hub `a`", Duration::from_secs(15));
         assert!(
             hub.stderr().contains("without credentials")
                 && hub.stderr().contains("--insecure-listen"),
@@ -309,19 +301,11 @@ impl TwoHosts {
     fn hub_on_a(&self, name: &str, args: &[&str]) -> Proc {
         let mut all = vec!["serve", "--name", name];
         all.extend_from_slice(args);
-        let hub = self.envhub(0, &format!("hub-{name}"), &all);
-        let deadline = Instant::now() + Duration::from_secs(15);
-        while !hub
-            .stdout()
-            .contains(&format!("on the network as hub `{name}`"))
-        {
-            assert!(
-                Instant::now() < deadline,
-                "hub `{name}` did not join the network within 15 s; {}",
-                hub.said()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        let mut hub = self.envhub(0, &format!("hub-{name}"), &all);
+        hub.wait_for_line(
+            &format!("on the network as hub `{name}`"),
+            Duration::from_secs(15),
+        );
         hub
     }
 
@@ -439,6 +423,20 @@ impl Proc {
 
     pub(crate) fn said(&self) -> String {
         format!("{} said:\n{}{}", self.what, self.stdout(), self.stderr())
+    }
+
+    /// Waits (at most `limit`) until it prints `line` on stdout; fails at once if it ends.
+    pub(crate) fn wait_for_line(&mut self, line: &str, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        while !self.stdout().contains(line) {
+            assert!(self.ended().is_none(), "{}", self.said());
+            assert!(
+                Instant::now() < deadline,
+                "no `{line}` after {limit:?}; {}",
+                self.said()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 
     /// Its exit status if it has ended.
