@@ -59,6 +59,15 @@ def lerobot(grpc_here) -> str:
     return python
 
 
+def test_finding_the_server_leaves_nothing_where_it_runs(grpc_here, tmp_path, monkeypatch) -> None:
+    """Importing LeRobot's policy server opens a log under `./logs`; the probe that looks for
+    an interpreter with it runs elsewhere, so a test run writes nothing into the checkout."""
+    monkeypatch.chdir(tmp_path)
+    if eval_peers.lerobot_peer_python(REPO_ROOT) is None:
+        _skip(f"no LeRobot 0.6.1 interpreter with its policy server here: {eval_peers.LAST_REASON}")
+    assert list(tmp_path.iterdir()) == []
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

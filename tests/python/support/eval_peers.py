@@ -206,10 +206,17 @@ def lerobot_peer_python(repo: Path) -> str | None:
     import hashlib
     import json
     import shutil
+    import tempfile
 
     probe = "import grpc, lerobot.async_inference.policy_server"
     ready = Path(os.environ.get("ENVHUB_LEROBOT_PYTHON") or repo / ".venv-lerobot" / "bin" / "python")
-    if ready.exists() and subprocess.run([str(ready), "-c", probe], capture_output=True, check=False).returncode == 0:
+    # Importing LeRobot's policy server opens its log file under `./logs`: probed from a
+    # folder of its own, so nothing lands in the checkout.
+    with tempfile.TemporaryDirectory() as scratch:
+        usable = ready.exists() and subprocess.run(
+            [str(ready), "-c", probe], capture_output=True, check=False, cwd=scratch
+        ).returncode == 0
+    if usable:
         return str(ready)
     uv = shutil.which("uv") or str(Path(sys.executable).with_name("uv"))
     if not Path(uv).exists():
