@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import glob
 import json
 import os
@@ -38,8 +39,9 @@ import numpy as np
 from . import _encoding as encoding
 from ._durable import Commit, fsync_dir, fsync_file, link_or_copy
 from ._encoding import Encoding
-from ._files import PARQUET, Files, Part, group_rows, join_parquet, to_join
-from ._stats import NAMES, aggregate, aggregate_all, column_stats
+from ._files import GROUP_BYTES, PARQUET, Files, Part, group_rows, join_parquet, to_join
+from ._spill import Spilled, row_bytes, rows_of, values_of, width_of
+from ._stats import NAMES, aggregate, aggregate_all, sliced_stats
 from ._video import concatenate, count_frames, pix_fmt
 from .errors import DatasetLayoutError, RecordingError
 
@@ -159,6 +161,10 @@ def _same_stats(a: dict[str, dict[str, np.ndarray]], b: dict[str, dict[str, Any]
             if not np.allclose(np.asarray(other, dtype=np.float64), value, rtol=1e-6, atol=1e-9):
                 return False
     return True
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 def _nested(values: np.ndarray, leaf: Any) -> Any:
@@ -782,6 +788,8 @@ class Dataset:
         """Writes `episodes` into the dataset (see the module's doc for the order); returns
         their episode indices. Statistics are computed over all of them at once (one
         `reduceat` per column and statistic), since commits of many episodes are common."""
+        import pyarrow.parquet as pq
+
         first_ep, first_frame = self.info["total_episodes"], self.info["total_frames"]
         new_tasks = [e.task for e in episodes if e.task not in self.tasks]
         for task in dict.fromkeys(new_tasks):
@@ -792,25 +800,42 @@ class Dataset:
         lengths = np.array([ep.length for ep in episodes], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
         total = int(lengths.sum())
-        frame_index = np.arange(total, dtype=np.int64) - np.repeat(starts, lengths)
+        task_index = np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64)
+        keys = [k for k, f in self.features.items() if f["dtype"] != "video" and k not in INDEX_KEYS]
 
-        columns: dict[str, np.ndarray] = {}
-        for key, f in self.features.items():
-            if f["dtype"] != "video" and key not in INDEX_KEYS:
-                parts = [ep.columns[key] for ep in episodes]  # (one episode: no copy)
-                columns[key] = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        columns["timestamp"] = (frame_index / fps).astype(np.float32)
-        columns["frame_index"] = frame_index
-        columns["episode_index"] = np.repeat(np.arange(first_ep, first_ep + count, dtype=np.int64), lengths)
-        columns["index"] = np.arange(first_frame, first_frame + total, dtype=np.int64)
-        columns["task_index"] = np.repeat(np.array([self.tasks[ep.task] for ep in episodes], dtype=np.int64), lengths)
+        def rows(key: str, lo: int, hi: int) -> np.ndarray:
+            """Rows `lo..hi` of the commit's column `key`: episodes' columns, in memory or
+            spilled (`_spill.py`), are read a row group or a statistics' slice at a time."""
+            at = np.arange(lo, hi, dtype=np.int64)
+            ep = np.searchsorted(starts, at, "right") - 1
+            if key == "timestamp":
+                return ((at - starts[ep]) / fps).astype(np.float32)
+            if key == "frame_index":
+                return at - starts[ep]
+            if key == "episode_index":
+                return first_ep + ep
+            if key == "index":
+                return first_frame + at
+            if key == "task_index":
+                return task_index[ep]
+            return _joined([rows_of(episodes[e].columns[key], max(lo, starts[e]) - starts[e],
+                                    min(hi, starts[e] + lengths[e]) - starts[e]) for e in range(ep[0], ep[-1] + 1)])
 
         # Data and videos: new files, after every file there, that only the new `meta/` refers
         # to (`_files.py`); an episode is a range of rows and a time range of its files.
         data_files = self._files["data"]
         data_at = data_files.after_last(CHUNKS_SIZE)
         data = commit.staged("data.parquet")
-        self._write_table(self._data_table(columns), data)
+        row = 8 * len(INDEX_KEYS) + sum(row_bytes(episodes[0].columns[k]) for k in keys)
+        group = max(1, GROUP_BYTES // row)
+        with contextlib.ExitStack() as stack:
+            writer = None
+            for lo in range(0, total, group):
+                table = self._data_table({k: rows(k, lo, min(lo + group, total)) for k in [*keys, *INDEX_KEYS]})
+                if writer is None:
+                    writer = stack.enter_context(pq.ParquetWriter(data, table.schema, **PARQUET))
+                writer.write_table(table)
+                del table
         commit.place(data, data_files.rel(data_at))
         meta: dict[str, Any] = {
             "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),
@@ -837,8 +862,15 @@ class Dataset:
         meta_at = self._files[EPISODES].after_last(CHUNKS_SIZE)
         meta["meta/episodes/chunk_index"] = np.full(count, meta_at[0])
         meta["meta/episodes/file_index"] = np.full(count, meta_at[1])
-        for key, values in columns.items():
-            per_episode, whole = column_stats(values, starts, lengths)
+        def values(key: str, d0: int, d1: int) -> np.ndarray:
+            """Values `d0..d1` of every row of the commit's column `key`."""
+            if key in INDEX_KEYS:
+                return rows(key, 0, total)[:, None]
+            return _joined([values_of(ep.columns[key], d0, d1) for ep in episodes])
+
+        for key in [*keys, *INDEX_KEYS]:
+            width = 1 if key in INDEX_KEYS else width_of(episodes[0].columns[key])
+            per_episode, whole = sliced_stats(functools.partial(values, key), total, width, starts, lengths)
             self.stats[key] = aggregate(self.stats.get(key), whole)
             for name, value in per_episode.items():
                 meta[f"stats/{key}/{name}"] = value
@@ -874,6 +906,9 @@ class Dataset:
         for ep in episodes:  # now copied into the dataset's files
             for path in ep.videos.values():
                 path.unlink(missing_ok=True)
+            for column in ep.columns.values():
+                if isinstance(column, Spilled):
+                    column.spill.remove()
         return list(range(first_ep, first_ep + count))
 
     def _data_table(self, columns: dict[str, np.ndarray]) -> Any:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -73,16 +74,23 @@ def episode_quantiles(v: np.ndarray, starts: np.ndarray, lengths: np.ndarray, lo
 def column_stats(values: np.ndarray, starts: np.ndarray, lengths: np.ndarray) -> tuple[dict, dict]:
     """A column's statistics (`(frames,)` or `(frames, dims)`) per episode (rows `starts[e]`
     on, `lengths[e]` of them; each of shape `(episodes, dims)`, dims 1 for scalars) and over
-    all of them (each `(dims,)`). Taken a few dimensions at a time, so that the temporaries
-    (about ten float64 copies of what they cover) stay near `SLICE_BYTES` for any width."""
+    all of them (each `(dims,)`)."""
     values = np.asarray(values)
     if values.ndim == 1:
         values = values[:, None]
     frames, dims = values.shape
+    return sliced_stats(lambda d0, d1: values[:, d0:d1], frames, dims, starts, lengths)
+
+
+def sliced_stats(read: Callable[[int, int], np.ndarray], frames: int, dims: int, starts: np.ndarray,
+                 lengths: np.ndarray) -> tuple[dict, dict]:
+    """`column_stats` of the column whose dimensions `d0..d1` of every frame `read(d0, d1)`
+    gives (`(frames, d1 - d0)`). Taken a few dimensions at a time, so that the temporaries
+    (about ten float64 copies of what they cover) stay near `SLICE_BYTES` for any width."""
     step = max(1, SLICE_BYTES // max(8 * frames, 1))
     if step >= dims:
-        return _column_stats(values, starts, lengths)
-    parts = [_column_stats(values[:, d : d + step], starts, lengths) for d in range(0, dims, step)]
+        return _column_stats(read(0, dims), starts, lengths)
+    parts = [_column_stats(read(d, min(d + step, dims)), starts, lengths) for d in range(0, dims, step)]
     per_episode = {k: v if k == "count" else np.concatenate([p[0][k] for p in parts], axis=1)
                    for k, v in parts[0][0].items()}
     whole = {k: v if k == "count" else np.concatenate([p[1][k] for p in parts]) for k, v in parts[0][1].items()}

@@ -16,6 +16,7 @@ import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from ._budget import ByteQueue
 from ._dataset import Dataset, Episode
 from ._memory import release
 from ._rows import Rows
+from ._spill import width_of
 from ._video import EpisodeVideo
 
 
@@ -92,7 +94,8 @@ class Writer:
         self.queue = ByteQueue(queue_bytes)
         self._pending_limit = min(queue_bytes, PENDING_BYTES)
         self.error: BaseException | None = None
-        self._rows = Rows(num_envs)
+        self._serial = 0
+        self._rows = Rows(num_envs, lambda i: self._staged(f"env{i}-rows.bin"))
         self._t = 0  # global index of the next row
         self._start = np.zeros(num_envs, dtype=np.int64)
         self._live = np.zeros(num_envs, dtype=bool)  # recording the env's current episode
@@ -107,7 +110,6 @@ class Writer:
         self._pending_bytes = 0  # their rows: a commit comes early past `PENDING_BYTES`
         self._last_commit = time.monotonic()
         self._interval = commit_every  # until a commit: `commit_every`, or 4x the last commit's time
-        self._serial = 0
         self.thread = threading.Thread(target=self._run, name="envhub-recorder", daemon=True)
         self.thread.start()
 
@@ -178,6 +180,7 @@ class Writer:
         values["next.reward"] = s.reward
         values["next.terminated"] = s.terminated
         values["next.truncated"] = s.truncated
+        values["next.done"] = np.logical_or(s.terminated, s.truncated)
         self._rows.append(values, self._start, self._live)
         self._t += 1
         done = np.logical_or(s.terminated, s.truncated)
@@ -207,8 +210,7 @@ class Writer:
             encoders = self._encoders[i]
             if not encoders:  # the episode's first frame: its files
                 for key in self.video_keys:
-                    self._serial += 1
-                    path = self.dataset.staged(f"env{i}-{self._serial}.mp4")
+                    path = self._staged(f"env{i}.mp4")
                     encoders[key] = EpisodeVideo(path, self.fps, self.dataset.encodings[key])
             job = jobs[i % self._threads]
             for key in self.videos:
@@ -219,6 +221,11 @@ class Writer:
             _encode_frames(jobs[0])
         else:
             list(self._pool.map(_encode_frames, jobs))  # re-raises an encoder's error
+
+    def _staged(self, name: str) -> Path:
+        """A new file's path in the dataset's staging folder."""
+        self._serial += 1
+        return self.dataset.staged(f"{self._serial}-{name}")
 
     def _abandon(self, i: int) -> None:
         self._rows.forget(i)
@@ -236,16 +243,14 @@ class Writer:
             self._abandon(i)
             self.stats["episodes_beyond"] += 1
             return
-        columns = {}
-        for name in [*self.numeric, "action", "next.reward", "next.terminated", "next.truncated"]:
-            values = self._rows.episode(name, i, start, t)
-            if list(self.dataset.features[name]["shape"]) == [1]:
-                values = values.reshape(-1)
-            columns[name] = values
-        columns["next.done"] = np.logical_or(columns["next.terminated"], columns["next.truncated"])
-        self._rows.forget(i)
-        # Its rows, and its row of `meta/episodes/` (ten statistics per value of a row).
-        self._pending_bytes += sum(c.nbytes + 80 * c[:1].size for c in columns.values())
+        names = [*self.numeric, "action", "next.reward", "next.terminated", "next.truncated", "next.done"]
+        columns = self._rows.episode(names, i, start, t)
+        for name, values in columns.items():
+            if isinstance(values, np.ndarray) and list(self.dataset.features[name]["shape"]) == [1]:
+                columns[name] = values.reshape(-1)
+        # Its rows held in memory, and its row of `meta/episodes/` (ten statistics per value).
+        self._pending_bytes += sum((c.nbytes if isinstance(c, np.ndarray) else 0) + 80 * width_of(c)
+                                   for c in columns.values())
         videos, video_stats = {}, {}
         for key, video in self._encoders[i].items():
             video.finish()
