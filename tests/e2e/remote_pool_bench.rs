@@ -1,10 +1,12 @@
 //! A benchmark, not a test (ignored; it asserts nothing about time): CartPole × 1024 on a
 //! remote hub over loopback against the same envs here, in one run, lock step and EnvPool's
-//! `send`/`recv` with `batch_size` N/2, with one lane and with two lanes per hub.
+//! `send`/`recv`, with one lane and with more lanes per hub. Here `send`/`recv` takes N/2 envs
+//! a batch; on the hub it takes one lane's share (N/K with K lanes; N/2 with one), so the
+//! other lanes step and travel while one batch is handled.
 //!
 //! `cargo test --release --features envhub-worker/mujoco -p envhub-e2e -- --ignored
-//! remote_pool_bench --nocapture` (ENVHUB_BENCH_ENVS, ENVHUB_BENCH_WORKERS and
-//! ENVHUB_BENCH_SECONDS change the workload).
+//! remote_pool_bench --nocapture` (ENVHUB_BENCH_ENVS, ENVHUB_BENCH_WORKERS,
+//! ENVHUB_BENCH_SECONDS and ENVHUB_BENCH_LANES, a comma-separated list, change the workload).
 
 use envhub_e2e::TestHub;
 use envhub_e2e::remote::{RemoteHub, client};
@@ -72,7 +74,20 @@ fn remote_pool_bench() {
     let n = knob("ENVHUB_BENCH_ENVS", 1024.0) as usize;
     let workers = knob("ENVHUB_BENCH_WORKERS", 2.0) as usize;
     let seconds = knob("ENVHUB_BENCH_SECONDS", 1.0);
-    let hub = RemoteHub::start("poolbench", &[], &[]);
+    // Every lane count's session is open at once: no limit on what one client holds.
+    let unlimited = [
+        "--max-envs",
+        "0",
+        "--max-workers",
+        "0",
+        "--max-envs-per-client",
+        "0",
+        "--max-workers-per-client",
+        "0",
+        "--max-sessions-per-client",
+        "0",
+    ];
+    let hub = RemoteHub::start("poolbench", &unlimited, &[]);
     let on_hub = Placement::Hubs(vec![hub.name.clone()]);
     let config = EnvConfig {
         workers: Some(workers),
@@ -80,7 +95,16 @@ fn remote_pool_bench() {
     };
     let local = TestHub::new("pool_bench_local");
     let mut here = local.hub.make_vec("gym-cartpole", n, &config).unwrap();
-    let mut remote: Vec<(usize, VecEnv)> = [1, 2]
+    let lanes: Vec<usize> = std::env::var("ENVHUB_BENCH_LANES")
+        .unwrap_or_else(|_| "1,2".into())
+        .split(',')
+        .map(|k| {
+            k.trim()
+                .parse()
+                .expect("ENVHUB_BENCH_LANES: lane counts, as `1,2,4`")
+        })
+        .collect();
+    let mut remote: Vec<(usize, VecEnv)> = lanes
         .into_iter()
         .map(|lanes| {
             let c = client(&format!("bench{lanes}"), &[&hub]);
@@ -115,9 +139,10 @@ fn remote_pool_bench() {
                 lock_step_rate(env, seconds),
             );
             env.reset(None).unwrap();
+            let m = n / (*lanes).max(2);
             note(
-                format!("hub, {lanes} lane(s), send/recv M={}", n / 2),
-                env_pool_rate(env, n / 2, seconds),
+                format!("hub, {lanes} lane(s), send/recv M={m}"),
+                env_pool_rate(env, m, seconds),
             );
             env.reset(None).unwrap();
         }
