@@ -6,8 +6,9 @@
 //! own, which `make` creates), else `python3`. When that interpreter is a virtual environment's
 //! and the package sits in its `site-packages`, a look at the file system finds it (a worker
 //! starts a session without waiting for Python); otherwise the interpreter is asked where the
-//! package is, without importing it (`importlib.util.find_spec`, a fraction of a second). An
-//! env's `asset_path`, or an absolute `xml_file` option, needs no Python at all.
+//! package is, without importing it (`importlib.util.find_spec`, a fraction of a second). The
+//! adapter is reported unavailable without them, even for an env with an `asset_path`: a model
+//! of one's own without Gymnasium is the `custom_mjcf` adapter's.
 
 use envhub_core::{Availability, EnvError};
 use std::path::{Path, PathBuf};
@@ -15,7 +16,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 
 const HINT: &str = "`make venv` installs gymnasium 1.4 into `.venv/`; or set ENVHUB_PYTHON to a \
-                    Python that has it, or give the env an `asset_path`";
+                    Python that has it (a model file of your own runs without it: the \
+                    `custom_mjcf` framework with an `asset_path`)";
 
 /// `(reason, hint)` when the assets cannot be found.
 type Missing = (String, String);
