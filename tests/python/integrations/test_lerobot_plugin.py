@@ -251,18 +251,25 @@ LIBERO = pytest.mark.xdist_group("lerobot-libero")
 LIBERO_CONFIG = {"task": "libero_spatial", "task_ids": [0], "observation_height": 128, "observation_width": 128}
 
 
+#: Where `lerobot-eval`'s Meta-World episodes stop (`--env.episode_length`; LeRobot's own 500).
+METAWORLD_EVAL_STEPS = 60
+
+
 @pytest.fixture(scope="module")
 def metaworld_runs(lerobot_python, plugin_site, tmp_path_factory) -> dict[str, Path]:
     """Meta-World's push task: 100 fixed-action steps of 2 synchronous envs on both sides, and
-    `lerobot-eval` of 2 episodes (LeRobot's 500 steps) in a batch of 2 asynchronous envs through
-    the plugin. Not through LeRobot's own env: its 1,000 steps, each drawing its 480x480 frame
-    twice (observation and `render`), took over 25 minutes on a busy 2-core machine, more than
-    this suite's other LeRobot tests together."""
+    `lerobot-eval` of 2 episodes cut at 60 steps by `--env.episode_length` in a batch of 2
+    asynchronous envs through the plugin. Not through LeRobot's own env, which stops at
+    Meta-World's 500 steps whatever `episode_length` says: its 1,000 steps, each drawing its
+    480x480 frame twice (observation and `render`), took over 25 minutes on a busy 2-core
+    machine, more than this suite's other LeRobot tests together."""
     reference_python = reference(lerobot_python, "metaworld", METAWORLD_REFERENCE)
     return both_sides(
         lerobot_python, plugin_site, reference_python, tmp_path_factory.mktemp("metaworld"), "metaworld",
         {"task": METAWORLD_TASK}, {"n_envs": 2, "seeds": [10, 11], "steps": 100},
-        [f"--env.task={METAWORLD_TASK}", "--eval.n_episodes=2", "--eval.batch_size=2"], reference_eval=False,
+        [f"--env.task={METAWORLD_TASK}", f"--env.episode_length={METAWORLD_EVAL_STEPS}", "--eval.n_episodes=2",
+         "--eval.batch_size=2"],
+        reference_eval=False,
     )
 
 
@@ -280,7 +287,7 @@ def libero_runs(lerobot_python, plugin_site, tmp_path_factory) -> dict[str, Path
     )
 
 
-# slow: the Meta-World runs (metaworld_runs): 100 steps of 480x480 frames on each side, 1,000 in lerobot-eval
+# slow: the Meta-World runs (metaworld_runs): 100 steps of 480x480 frames on each side, 120 in lerobot-eval
 @pytest.mark.slow
 @METAWORLD
 def test_metaworld_same_episodes_as_lerobots_env(metaworld_runs):
@@ -301,14 +308,23 @@ def test_metaworld_same_episodes_as_lerobots_env(metaworld_runs):
 def test_lerobot_eval_metaworld_end_to_end(metaworld_runs):
     """The real `lerobot-eval` (as its console script runs it) evaluates a saved random-init
     ACT policy on Meta-World's push task through `--env.type=envhub`, 2 episodes in a batch of
-    2 asynchronous envs, in an interpreter with no Meta-World: `eval_info.json` has both
-    episodes and the videos were written from `render`."""
+    2 asynchronous envs cut at 60 steps by `--env.episode_length`, in an interpreter with no
+    Meta-World: `eval_info.json` has both episodes, and the videos were written from `render`,
+    a 480x480 frame per step up to each episode's end (the horizon, or success before it)."""
+    import av
+
     out = metaworld_runs["mine"] / "eval"
     info = json.loads((out / "eval_info.json").read_text())
-    assert len(list((out / "videos").rglob("*.mp4"))) == 2
     (task,) = info["per_task"]
     assert (task["task_group"], task["task_id"]) == (METAWORLD_TASK, 0)
-    assert len(task["metrics"]["successes"]) == 2
+    assert len(task["metrics"]["successes"]) == 2 and len(task["metrics"]["sum_rewards"]) == 2
+    videos = sorted((out / "videos").rglob("*.mp4"))
+    assert len(videos) == 2
+    for video, success in zip(videos, task["metrics"]["successes"]):
+        with av.open(str(video)) as container:
+            frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        assert frames[0].shape == (480, 480, 3)
+        assert (len(frames) <= METAWORLD_EVAL_STEPS) if success else (len(frames) == METAWORLD_EVAL_STEPS), len(frames)
 
 
 # slow: both sides' LIBERO runs (libero_runs): LIBERO's hard resets, 70 steps of 2 envs each
