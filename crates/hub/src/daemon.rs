@@ -87,6 +87,9 @@ struct Connection {
     hub: Arc<Hub>,
     workers: Arc<AtomicUsize>,
     children: HashMap<u32, Child>,
+    /// Workers forked by a suite's fork server (its children, not the daemon's): held by
+    /// pidfds, their exit status with the server.
+    forked: HashMap<u32, envhub_shm::PidFd>,
 }
 
 impl Connection {
@@ -95,6 +98,7 @@ impl Connection {
             hub,
             workers,
             children: HashMap::new(),
+            forked: HashMap::new(),
         }
     }
 
@@ -140,12 +144,31 @@ impl Connection {
                 start_timeout,
                 user,
             } => {
+                // A suite's worker forks from the suite's warm interpreter, which this daemon
+                // (its user's own) keeps for later sessions of any of its clients.
+                if job.python.is_some()
+                    && crate::fork_server::enabled()
+                    && let Some(forked) = crate::fork_server::launch(&job, &user, start_timeout)
+                {
+                    let (pidfd, spec) = forked?;
+                    self.forked.insert(pidfd.pid(), pidfd);
+                    self.workers.fetch_add(1, Ordering::Relaxed);
+                    return Ok(serde_json::to_value(spec).expect("specs serialize"));
+                }
                 let (child, spec) = launch_local(&job, &user, start_timeout)?;
                 self.children.insert(child.id(), child);
                 self.workers.fetch_add(1, Ordering::Relaxed);
                 Ok(serde_json::to_value(spec).expect("specs serialize"))
             }
             Request::ExitStatus { pid } => {
+                if let Some(pidfd) = self.forked.get(&pid) {
+                    if pidfd.is_alive() {
+                        return Ok(Value::Null);
+                    }
+                    self.forked.remove(&pid);
+                    self.workers.fetch_sub(1, Ordering::Relaxed);
+                    return Ok(json!("exited (its status went to the suite's fork server)"));
+                }
                 let child = self
                     .children
                     .get_mut(&pid)
@@ -176,6 +199,10 @@ impl Drop for Connection {
                 let _ = child.kill();
             }
             let _ = child.wait();
+            self.workers.fetch_sub(1, Ordering::Relaxed);
+        }
+        for (_, pidfd) in self.forked.drain() {
+            pidfd.kill();
             self.workers.fetch_sub(1, Ordering::Relaxed);
         }
     }

@@ -167,8 +167,10 @@ impl DaemonClient {
         })?;
         match fd.parent() {
             Some(parent) if parent == self.pid => Ok(fd),
+            // A suite's warm worker: forked by the daemon's fork server of that suite.
+            Some(parent) if fork_server_of(parent) == Some(self.pid) => Ok(fd),
             Some(parent) => Err(self.fail(format!(
-                "reported worker pid {pid}, whose parent is {parent}, not the daemon ({})",
+                "reported worker pid {pid}, whose parent is {parent}, not the daemon ({}) or a fork server of it",
                 self.pid
             ))),
             None => Err(self.fail(format!("reported worker pid {pid}, which has exited"))),
@@ -218,4 +220,14 @@ impl DaemonClient {
         let ok = self.call(Request::Status)?;
         Ok(ok["workers"].as_u64().unwrap_or(0) as usize)
     }
+}
+
+/// The parent of `pid` when `pid` is a suite's fork server (`envhub.worker forkserver`).
+fn fork_server_of(pid: u32) -> Option<u32> {
+    let held = envhub_shm::PidFd::open(pid).ok()?;
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+    let is_server = cmdline.split(|&b| b == 0).any(|arg| arg == b"forkserver");
+    // Read after the cmdline, while the fd holds the process: both are the same process's.
+    let parent = held.parent()?;
+    is_server.then_some(parent)
 }

@@ -6,11 +6,12 @@
 //! forkserver`, started exactly as a worker is: same interpreter, variables, bootstrap and
 //! hold on the environment) imports it once; each worker is then a `fork` of it that makes
 //! its envs and serves them. The server lives in this process's user and hub (the embedded
-//! hub of one program; a daemon starts its workers cold), so it is never shared across
-//! users, and workers keep every check of a cold start (the ready line read from a FIFO only
-//! this hub can open, the identity check of the provisioned environment). Its workers are
-//! not this process's children: they are held by pidfds, as a daemon's workers are, and
-//! their exit status stays with the server.
+//! hub of one program, or an `envhub serve` daemon, which only its own user reaches), so it
+//! is never shared across users, and workers keep every check of a cold start (the ready line
+//! read from a FIFO only this hub can open, the identity check of the provisioned
+//! environment). Its workers are not this process's children: they are held by pidfds, as a
+//! daemon's workers are, and their exit status stays with the server. A daemon's clients
+//! accept a worker whose parent is a fork server of the daemon.
 
 use crate::python_host::UserAdapters;
 use envhub_protocol::HubError;
