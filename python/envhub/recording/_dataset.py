@@ -40,6 +40,7 @@ from . import _encoding as encoding
 from ._durable import Commit, fsync_dir, fsync_file, link_or_copy
 from ._encoding import Encoding
 from ._files import GROUP_BYTES, PARQUET, Files, Part, group_rows, join_parquet, to_join
+from ._memory import release
 from ._spill import Spilled, row_bytes, rows_of, values_of, width_of
 from ._stats import NAMES, aggregate, aggregate_all, sliced_stats
 from ._video import concatenate, count_frames, pix_fmt
@@ -740,6 +741,7 @@ class Dataset:
                         i = schema.get_field_index(name)
                         table = table.set_column(i, schema.field(i), pa.array(np.full(len(table), value)).cast(schema.field(i).type))
                     writer.write_table(table)
+                    release()
         for p in parts[1:]:
             commit.remove_meta_file(files.rel(p.at)[len("meta/"):])
         commit.apply()
@@ -781,6 +783,7 @@ class Dataset:
                                                      pa.array(values).cast(table.schema.field(i).type))
                         writer.write_table(table)
                         del table
+                        release()
             if len(index) and index.min() <= start:
                 break
 
@@ -836,6 +839,7 @@ class Dataset:
                     writer = stack.enter_context(pq.ParquetWriter(data, table.schema, **PARQUET))
                 writer.write_table(table)
                 del table
+                release()
         commit.place(data, data_files.rel(data_at))
         meta: dict[str, Any] = {
             "episode_index": np.arange(first_ep, first_ep + count, dtype=np.int64),

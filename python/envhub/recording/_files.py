@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ._memory import release
+
 #: A join made between commits copies at most this many bytes (rolls and the close join a
 #: whole run, once per file).
 JOIN_BYTES = 16 * 2**20
@@ -101,7 +103,7 @@ def to_join(sizes: list[int], cap: int = JOIN_BYTES) -> int:
 
 def join_parquet(paths: list[Path], out: Path) -> None:
     """The rows of `paths`, in order, into one Parquet file (row group by row group: memory
-    bounded by one group, not the files)."""
+    bounded by one group, not the files, once the allocators give each group back)."""
     import pyarrow.parquet as pq
 
     schema = pq.read_schema(paths[0])
@@ -110,3 +112,4 @@ def join_parquet(paths: list[Path], out: Path) -> None:
             f = pq.ParquetFile(path)
             for i in range(f.num_row_groups):
                 writer.write_table(f.read_row_group(i, use_threads=False).cast(schema))
+                release()

@@ -3,8 +3,9 @@
 A commit allocates many times its rows for a moment (Arrow's tables and Parquet's buffers, the
 statistics' temporaries), and neither Arrow's allocator (mimalloc in pyarrow's wheels) nor
 glibc's hands freed memory back to the system by itself: without this, the resident set keeps
-the largest commit's peak for good. Both are asked to after every commit; each is a no-op where
-it does not apply (another allocator, another C library).
+the largest commit's peak for good, and a file written or joined a row group at a time grows
+by every group. Both are asked to after every row group a commit or a join writes and after
+every commit; each is a no-op where it does not apply (another allocator, another C library).
 """
 
 from __future__ import annotations

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: A chunk's bytes of one column, at most (one row at least).
+CHUNK_BYTES = 2**20
+
 
 class Spill:
     """The rows of one episode, appended in chunks of any number of rows."""
@@ -28,19 +31,24 @@ class Spill:
         path.touch()
 
     def append(self, columns: dict[str, np.ndarray]) -> None:
-        """Rows `length..` (each column's first axis), written column by column."""
+        """Rows `length..` (each column's first axis), in chunks of at most `CHUNK_BYTES` a
+        column, so that reading a few rows reads at most that much more."""
         rows = len(next(iter(columns.values())))
-        offsets = {}
+        widest = max(v[:1].nbytes for v in columns.values())
+        step = max(1, CHUNK_BYTES // max(widest, 1))
         with open(self.path, "ab") as f:
-            for name, values in columns.items():
-                flat = values.reshape(rows, -1)
-                self._kinds.setdefault(name, (values.dtype, flat.shape[1]))
-                offsets[name] = self._size
-                data = np.ascontiguousarray(flat.T).tobytes()
-                f.write(data)
-                self._size += len(data)
-        self._chunks.append((self.length, rows, offsets))
-        self.length += rows
+            for lo in range(0, rows, step):
+                hi = min(lo + step, rows)
+                offsets = {}
+                for name, values in columns.items():
+                    flat = values[lo:hi].reshape(hi - lo, -1)
+                    self._kinds.setdefault(name, (values.dtype, flat.shape[1]))
+                    offsets[name] = self._size
+                    data = np.ascontiguousarray(flat.T).tobytes()
+                    f.write(data)
+                    self._size += len(data)
+                self._chunks.append((self.length, hi - lo, offsets))
+                self.length += hi - lo
 
     def width(self, name: str) -> int:
         """Values per row of column `name`."""
@@ -67,7 +75,7 @@ class Spill:
             first, rows, _ = chunk
             a, b = max(lo, first), min(hi, first + rows)
             if a < b:
-                parts.append(self._read(name, chunk, 0, width).T[a - first : b - first])
+                parts.append(np.ascontiguousarray(self._read(name, chunk, 0, width).T[a - first : b - first]))
         return np.concatenate(parts) if parts else np.empty((0, width), self.dtype(name))
 
     def values(self, name: str, d0: int, d1: int) -> np.ndarray:
