@@ -2,26 +2,26 @@
 LeRobot's own env (`--env.type=libero` or `metaworld`: the suite in LeRobot's interpreter,
 stepped in Gymnasium's `AsyncVectorEnv`), same policy, seed, batch and machine, in one run:
 
-    .venv/bin/python integrations/lerobot/bench_eval.py --suite libero --batch 10 --episodes 10
+    .venv/bin/python integrations/lerobot/bench_eval.py --suite libero --batch 5 --episodes 10
     .venv/bin/python integrations/lerobot/bench_eval.py --suite metaworld --task push-v3
 
 LIBERO's horizon and camera size are LeRobot's own options (`--episode-length`, `--size`);
 the defaults keep a run within minutes on a small machine. `--workers` sets envhub's worker
 processes (`--env.workers`); `--sides envhub` runs one side alone (where the other does not
-fit in memory: LeRobot's LIBERO takes one process of about 2.4 GB per env). The policy is a random-init ACT
-saved with LeRobot's `save_pretrained` (or `--policy DIR`). Both sides write the videos
-`lerobot-eval` writes (its first 10 episodes, rendered every step). Prints one JSON object:
-each side's wall time, episodes per minute, the ratio, and whether the per-episode results of
-`eval_info.json` and the videos are equal. Uses the interpreters the tests use
-(tests/python/support/lerobot_envs.py): .venv-lerobot, and the reference venv in the
-user cache (built on first use).
+fit in memory: LeRobot's LIBERO takes one process of about 2.4 GB per env, so batch 10 needs
+about 25 GB). The policy is a random-init ACT saved with LeRobot's `save_pretrained` (or
+`--policy DIR`). Both sides write the videos `lerobot-eval` writes (its first 10 episodes,
+rendered every step). Prints one JSON object: each side's wall time, episodes per minute, the
+ratio, and whether the per-episode results of `eval_info.json` and the videos are equal.
+Uses the interpreters the tests use (tests/python/support/lerobot_envs.py): .venv-lerobot,
+and the reference venv in the user cache (built on first use).
 
 Where the time goes: every side's process tree (`lerobot-eval` and its descendants: envhub's
 hub and workers, or `AsyncVectorEnv`'s processes) is read from /proc twice a second, and each
 process's CPU seconds and the tree's peak memory are reported by role (`cpu_s`, `peak_rss_gb`).
-`--profile DIR` also samples every side's processes with py-spy (`--py-spy`, native frames
-included; slower, so a separate run from the one timed) and splits each side's CPU samples by
-whose code they are in (`profile_split.py`).
+`--profile DIR` also samples every side's processes with py-spy (the `PY_SPY` binary, else
+`py-spy` on PATH; native frames included; slower, so a separate run from the one timed) and
+splits each side's samples and CPU seconds by whose code they are in (`profile_split.py`).
 """
 
 from __future__ import annotations
