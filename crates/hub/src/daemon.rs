@@ -146,10 +146,7 @@ impl Connection {
             } => {
                 // A suite's worker forks from the suite's warm interpreter, which this daemon
                 // (its user's own) keeps for later sessions of any of its clients.
-                if job.python.is_some()
-                    && crate::fork_server::enabled()
-                    && let Some(forked) = crate::fork_server::launch(&job, &user, start_timeout)
-                {
+                if let Some(forked) = crate::fork_server::launch(&job, &user, start_timeout) {
                     let (pidfd, spec) = forked?;
                     self.forked.insert(pidfd.pid(), pidfd);
                     self.workers.fetch_add(1, Ordering::Relaxed);
@@ -167,7 +164,7 @@ impl Connection {
                     }
                     self.forked.remove(&pid);
                     self.workers.fetch_sub(1, Ordering::Relaxed);
-                    return Ok(json!("exited (its status went to the suite's fork server)"));
+                    return Ok(json!(crate::fork_server::EXITED));
                 }
                 let child = self
                     .children

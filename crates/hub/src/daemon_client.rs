@@ -226,7 +226,9 @@ impl DaemonClient {
 fn fork_server_of(pid: u32) -> Option<u32> {
     let held = envhub_shm::PidFd::open(pid).ok()?;
     let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
-    let is_server = cmdline.split(|&b| b == 0).any(|arg| arg == b"forkserver");
+    let is_server = cmdline
+        .split(|&b| b == 0)
+        .any(|arg| arg == crate::fork_server::SUBCOMMAND.as_bytes());
     // Read after the cmdline, while the fd holds the process: both are the same process's.
     let parent = held.parent()?;
     is_server.then_some(parent)

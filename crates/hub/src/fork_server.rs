@@ -46,21 +46,31 @@ impl Drop for ForkServer {
 type Servers = HashMap<String, Arc<Mutex<ForkServer>>>;
 static SERVERS: Mutex<Option<(u32, Servers)>> = Mutex::new(None);
 
+/// The worker subcommand that runs a fork server (`python -m envhub.worker forkserver`).
+pub(crate) const SUBCOMMAND: &str = "forkserver";
+
+/// How the end of a forked worker is reported: its exit status went to its server.
+pub(crate) const EXITED: &str = "exited (its status went to the suite's fork server)";
+
 /// Whether warm starts are on (`ENVHUB_WARM_WORKERS=0` turns them off).
-pub(crate) fn enabled() -> bool {
+fn enabled() -> bool {
     std::env::var(crate::env_vars::ENVHUB_WARM_WORKERS).map_or(true, |v| v.trim() != "0")
 }
 
 /// A worker for `job` forked from its environment's fork server: its pidfd and ready spec.
-/// `None` when no fork server could serve the request (it could not start, or died): the
-/// caller then starts the worker cold, which reports any real problem in full.
+/// `None` when it has no suite environment, warm starts are off, or no fork server could serve
+/// the request (it could not start, or died): the caller then starts the worker cold, which
+/// reports any real problem in full.
 pub(crate) fn launch(
     job: &WorkerJob,
     user: &UserAdapters,
     start_timeout: Duration,
 ) -> Option<Result<(PidFd, ReadySpec), HubError>> {
+    if job.python.is_none() || !enabled() {
+        return None;
+    }
     let mut command = crate::python_host::worker_command_in(job.python.as_ref(), user);
-    command.arg("forkserver").arg("--adapter").arg(&job.adapter);
+    command.arg(SUBCOMMAND).arg("--adapter").arg(&job.adapter);
     // Each worker holds the environment itself, as a cold one does (the server does not:
     // an idle server never keeps `envhub env remove` from it).
     if let Some(env) = &job.python

@@ -81,8 +81,9 @@ impl Process for WorkerProcess {
                 WorkerProcess::Daemon { pidfd, daemon } => {
                     daemon.exit_status(pidfd.pid()).ok().flatten()
                 }
-                WorkerProcess::Forked(pidfd) => (!pidfd.is_alive())
-                    .then(|| "exited (its status went to the suite's fork server)".to_string()),
+                WorkerProcess::Forked(pidfd) => {
+                    (!pidfd.is_alive()).then(|| crate::fork_server::EXITED.to_string())
+                }
             };
             if status.is_some() || std::time::Instant::now() >= deadline {
                 return status;
@@ -101,10 +102,8 @@ impl Launch for Launcher {
         match self {
             Launcher::Local => {
                 // A suite's worker forks from the suite's warm interpreter where it can.
-                if job.python.is_some()
-                    && crate::fork_server::enabled()
-                    && let Some(forked) =
-                        crate::fork_server::launch(job, &UserAdapters::default(), start_timeout)
+                if let Some(forked) =
+                    crate::fork_server::launch(job, &UserAdapters::default(), start_timeout)
                 {
                     let (pidfd, spec) = forked?;
                     return Ok((Box::new(WorkerProcess::Forked(pidfd)), spec));
