@@ -183,7 +183,7 @@ class Writer:
         values["next.done"] = np.logical_or(s.terminated, s.truncated)
         self._rows.append(values, self._start, self._live)
         self._t += 1
-        done = np.logical_or(s.terminated, s.truncated)
+        done = values["next.done"]
         # Masks over the envs, so that only envs with something to do cost a Python step.
         recording = s.valid & self._live
         for i in np.flatnonzero(recording & (self._start == t)):
