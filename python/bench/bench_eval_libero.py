@@ -1,7 +1,7 @@
 """LIBERO evaluation speed: `envhub eval` against AllenAI's `vla-eval run --no-docker`.
 
     python python/bench/bench_eval_libero.py [--tasks 2] [--episodes 10] [--shards 2]
-           [--camera 256] [--only render,bare,vla-eval,server,callable] [--profile DIR [--rate 50]]
+           [--camera 256] [--only render,bare,vla-eval,server,callable,sync] [--profile DIR [--rate 50]]
 
 LIBERO-spatial, the first `--tasks` tasks × `--episodes` episodes (episode k from the task's
 init state k), a constant-action policy (`[0, 0, 0, 0, 0, 0, -1]`: nothing succeeds, every
@@ -17,6 +17,10 @@ on each side, one run of each:
   vla-eval` against the same model server process;
 - `callable`: `envhub eval ... --policy bench_eval_libero.py:constant` (the policy a Python
   callable in envhub's process);
+- `sync` (only when named): the `callable` run with envhub's synchronous runner
+  (`ENVHUB_EVAL_READY_ENVS=0`: every round waits for every env out, where the default runner
+  asks the policy for the envs the first workers answered while the others step); with
+  `callable`, a comparison line of ready-env / synchronous episodes per minute (issue 43);
 - `render` (only when named): the CPU time of one LIBERO step with the cameras and without,
   in one process: how much of a step is the renderer on this machine;
 - `bare`: LIBERO's `OffScreenRenderEnv` stepped by hand in `--shards` processes with the
@@ -38,7 +42,9 @@ Python environment (`python_envs:` in configs/env_registry.yaml: its requirement
 `no_deps`), pinned to the versions of envhub's built `libero` environment (`envhub env
 sync libero`, whose `pip freeze` is the constraint file) plus `vla-eval==0.8.0`; LIBERO's
 config file for it lives in that venv (LIBERO_CONFIG_PATH), its assets are the PyPI asset
-packages' (linked where LIBERO looks first).
+packages' (linked where LIBERO looks first). Runs of envhub's callable alone (`--only
+callable,sync`) need neither that venv nor the model server, only envhub's `libero`
+environment.
 
 `--profile DIR` runs each harness under py-spy (`record --subprocesses`: vla-eval's shard
 processes; envhub's CLI, evaluation process and workers; not the model server) and splits
@@ -379,20 +385,23 @@ benchmarks:
 
 
 def run_envhub(policy: list[str], tasks: int, episodes: int, shards: int, camera: int, work: Path,
-               name: str) -> dict:
+               name: str, ready_envs: bool = True) -> dict:
     benchmark = "libero-spatial" if camera == 256 else f"libero-spatial-{camera}"
     out = work / name
     cmd = [envhub_binary(), *envhub_registry(camera, work), "eval", benchmark,
            "--tasks", *[str(t) for t in range(tasks)], "--episodes", str(episodes), "--num-envs", str(shards),
            *policy, "--out", str(out), "--quiet"]
-    run_checked(cmd, dict(os.environ), name)
+    # The evaluation's runner: ready-env (the default) or synchronous (envhub/evaluation/runner.py).
+    run_checked(cmd, dict(os.environ, ENVHUB_EVAL_READY_ENVS="1" if ready_envs else "0"), name)
     results = json.loads((out / "results.json").read_text())
     return {"episodes_done": results["summary"]["done"], "env_steps": results["run"]["env_steps"]}
 
 
 def compare(args: argparse.Namespace) -> list[dict]:
-    python = vla_eval_python()
     only = set(args.only.split(","))
+    # The vla-eval venv and its model server, for the runs that use them.
+    needs_vla = bool(only & {"render", "bare", "vla-eval", "server"})
+    python = vla_eval_python() if needs_vla else None
     if "render" in only:
         cmd = [str(python), str(HERE), "render", str(args.camera)]
         done = subprocess.run(cmd, capture_output=True, text=True, env=vla_env(python), check=True)
@@ -402,7 +411,7 @@ def compare(args: argparse.Namespace) -> list[dict]:
             return []
     total = args.tasks * args.episodes
     steps = total * (SETTLE + HORIZON)
-    server = Server(python)
+    server = Server(python) if needs_vla else None
     runs: dict[str, dict] = {}
     try:
         with tempfile.TemporaryDirectory(prefix="bench-eval-libero-") as tmp:
@@ -418,8 +427,12 @@ def compare(args: argparse.Namespace) -> list[dict]:
             if "callable" in only:
                 policy = ["--policy", f"{HERE}:constant"]
                 runs["callable"] = timed(lambda: run_envhub(policy, *a, work, "callable"))
+            if "sync" in only:
+                policy = ["--policy", f"{HERE}:constant"]
+                runs["sync"] = timed(lambda: run_envhub(policy, *a, work, "sync", ready_envs=False))
     finally:
-        server.stop()
+        if server is not None:
+            server.stop()
     for r in runs.values():
         r["episodes_per_min"] = round(total / r["seconds"] * 60, 2)
     base = {"bench": "libero-spatial-constant", "tasks": args.tasks, "episodes": total, "shards": args.shards,
@@ -457,6 +470,16 @@ def compare(args: argparse.Namespace) -> list[dict]:
                     for key in ("harness_s", "harness_work_s"):
                         line[f"{key[:-2]}_ratio"] = round(ours[key] / theirs[key], 3) if theirs[key] else None
                 lines.append(line)
+    if "callable" in runs and "sync" in runs:
+        # The same episodes through envhub's ready-env runner and its synchronous one.
+        line = {**base, "comparison": "envhub ready-env / synchronous",
+                "episodes_per_min": [runs["callable"]["episodes_per_min"], runs["sync"]["episodes_per_min"]],
+                "ratio": round(runs["sync"]["seconds"] / runs["callable"]["seconds"], 2)}
+        if PROFILE:
+            ours, sync = profile_split("callable"), profile_split("sync")
+            for key in ("harness_s", "harness_work_s"):
+                line[f"{key[:-2]}_ratio"] = round(ours[key] / sync[key], 3) if sync[key] else None
+        lines.append(line)
     return lines
 
 

@@ -19,12 +19,16 @@ are ready: each round receives what the session's first workers answered and ask
 for those envs while the other workers still step, so a slow worker holds back its own envs
 only; a reset, which takes the whole session, waits until the session's envs are back. An
 episode's result depends on its initial condition and the policy's answers alone: the same
-with 1 env or 16, local or remote, whatever order the envs come back in.
+with 1 env or 16, local or remote, whatever order the envs come back in. For benchmarking,
+`Runner(ready_envs=False)` or `ENVHUB_EVAL_READY_ENVS=0` (read when a `Runner` is made, so
+`envhub eval` takes it from its environment) runs the synchronous loop instead: every round
+waits for every env out, the same results.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -125,7 +129,12 @@ def _flag(info: dict[str, Any], key: str, j: int) -> bool | None:
 
 
 class Runner:
-    """Runs `bench`'s episodes with `policy`; `record(result)` gets each finished episode."""
+    """Runs `bench`'s episodes with `policy`; `record(result)` gets each finished episode.
+
+    `ready_envs`: each round takes the envs the first workers answered (True), or waits for
+    every env out (False: the synchronous runner, for benchmarks); None reads
+    `ENVHUB_EVAL_READY_ENVS` (`0` for False; True by default). The results are the same.
+    """
 
     def __init__(
         self,
@@ -142,11 +151,15 @@ class Runner:
         replan: int | None = None,
         videos: Any = None,
         dataset: Any = None,
+        ready_envs: bool | None = None,
     ) -> None:
         self.bench, self.policy, self.record = bench, policy, record
         self.num_envs, self.workers, self.hubs, self.registry = num_envs, workers, hubs, registry
         self.step_timeout, self.fail_fast, self.replan, self.videos = step_timeout, fail_fast, replan, videos
         self.dataset = dataset
+        if ready_envs is None:
+            ready_envs = os.environ.get("ENVHUB_EVAL_READY_ENVS", "1").strip() != "0"
+        self.ready_envs = ready_envs
         self.env_steps = 0
         self.tasks: dict[str, Task] = {}
         self.sessions: list[_Session] = []
@@ -215,8 +228,6 @@ class Runner:
             self._stops.shutdown(wait=True)
 
     def _make(self, specs: list[TaskSpec], n: int) -> Any:
-        import os
-
         from ..client.factory import make_vec
 
         # By default a session gets the share of the cores its envs are of `num_envs` (at least
@@ -372,11 +383,11 @@ class Runner:
         return s.queue.popleft()
 
     def _tick(self, s: _Session) -> None:
-        """Receives what the session's first workers answered (if envs are out), then starts
-        the next episodes on the envs whose episode ended, once every env is back (a reset
-        takes the whole session)."""
+        """Receives what the session's first workers answered (if envs are out; every env
+        out without `ready_envs`), then starts the next episodes on the envs whose episode
+        ended, once every env is back (a reset takes the whole session)."""
         if s.waiting:
-            self._recv(s, all_back=s.render)
+            self._recv(s, all_back=s.render or not self.ready_envs)
         ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
         if ended and s.queue and s.waiting:
             self._recv(s, all_back=True)
