@@ -330,11 +330,22 @@ impl VecEnv {
             g.truncated.extend_from_slice(trunc);
             return Ok(());
         }
-        // Results from several slots, or envs picked out of a worker's: copy them together.
+        // Results from several slots, or envs picked out of a worker's: copy them together,
+        // a run of consecutive rows of one slot at a time.
         let mut g = std::mem::take(&mut self.results.gathered);
         g.clear();
-        for &(slot, env) in rows {
-            let row = self.slot_rows(slot, env, 1)?;
+        let mut start = 0;
+        while start < rows.len() {
+            let (slot, env) = rows[start];
+            let mut n = 1;
+            while rows
+                .get(start + n)
+                .is_some_and(|&(s, e)| s == slot && e == env + n)
+            {
+                n += 1;
+            }
+            start += n;
+            let row = self.slot_rows(slot, env, n)?;
             let (Some(term), Some(trunc)) = (as_bools(row.terminated), as_bools(row.truncated))
             else {
                 return Err(DataPlaneError::Protocol(
@@ -343,9 +354,9 @@ impl VecEnv {
                 .into());
             };
             g.push_obs(row.obs);
-            g.rewards.push(row.rewards[0]);
-            g.terminated.push(term[0]);
-            g.truncated.push(trunc[0]);
+            g.rewards.extend_from_slice(row.rewards);
+            g.terminated.extend_from_slice(term);
+            g.truncated.extend_from_slice(trunc);
             g.final_mask.extend_from_slice(row.final_mask);
             g.final_obs.extend_from_slice(row.final_obs);
             g.info_cols.extend_from_slice(row.info_cols);

@@ -137,12 +137,7 @@ impl VecEnv {
         // Only the scratch slot (every lendable one held, at the memory cap) is handed out
         // while leased: its rows of this worker's envs still to be handed out would be
         // cleared. The envs wait until those are handed out.
-        if !writable.lendable()
-            && pool
-                .arrived
-                .iter()
-                .any(|a| a.slot == slot && (lo..lo + n).contains(&a.env))
-        {
+        if !writable.lendable() && pool.holds_rows(slot, lo..lo + n) {
             return Ok(());
         }
         let all = selected.iter().all(|&s| s);
@@ -168,14 +163,14 @@ impl VecEnv {
             self.poll_answers()?;
             let pool = self.env_pool.as_ref().expect("in the EnvPool mode");
             let m = pool.batch_size;
-            if pool.arrived.len() >= m {
+            if pool.arrived_envs >= m {
                 break;
             }
             let coming = pool.count(EnvState::InFlight) + pool.count(EnvState::Queued);
-            if pool.arrived.len() + coming < m {
+            if pool.arrived_envs + coming < m {
                 return Err(HubError::InvalidState(format!(
                     "`recv` returns batch_size = {m} envs, but only {} are sent or waiting to be received; send actions to more envs first (or `async_reset`)",
-                    pool.arrived.len() + coming
+                    pool.arrived_envs + coming
                 )));
             }
             if !self.workers.iter().any(|w| w.pending) {
@@ -187,18 +182,36 @@ impl VecEnv {
         }
         let pool = self.env_pool.as_mut().expect("in the EnvPool mode");
         let m = pool.batch_size;
-        let mut rows = Vec::with_capacity(m);
-        let mut infos = Vec::with_capacity(m);
-        for a in pool.arrived.drain(..m) {
-            pool.state[a.env] = EnvState::Idle;
-            rows.push((a.slot, a.env));
-            infos.push(a.info);
+        let mut rows = std::mem::take(&mut self.results.rows);
+        rows.clear();
+        let mut infos = Vec::new();
+        while rows.len() < m {
+            let a = pool.arrived.front_mut().expect("batch_size envs arrived");
+            let take = (m - rows.len()).min(a.left().len());
+            let (from, to) = (a.next, a.next + take);
+            if !a.infos.is_empty() && infos.is_empty() {
+                infos.resize(rows.len(), serde_json::Value::Null);
+            }
+            if !infos.is_empty() {
+                match a.infos.get_mut(from..to) {
+                    Some(own) => infos.extend(own.iter_mut().map(std::mem::take)),
+                    None => infos.resize(rows.len() + take, serde_json::Value::Null),
+                }
+            }
+            for &env in &a.envs[from..to] {
+                pool.state[env] = EnvState::Idle;
+                rows.push((a.slot, env));
+            }
+            a.next = to;
+            if a.left().is_empty() {
+                pool.arrived.pop_front();
+            }
         }
-        self.place_rows(&rows)?;
-        self.results.infos.clear();
-        if infos.iter().any(|i| !i.is_null()) {
-            self.results.infos = infos;
-        }
+        pool.arrived_envs -= m;
+        let placed = self.place_rows(&rows);
+        self.results.rows = rows;
+        placed?;
+        self.results.infos = infos;
         self.steps_taken += 1;
         Ok(self.batch())
     }
@@ -222,18 +235,37 @@ impl VecEnv {
             let slot = self.workers[i].slot;
             let lease = self.pool.get(slot).filter(|s| s.lendable()).cloned();
             let pool = self.env_pool.as_mut().expect("in the EnvPool mode");
-            for (k, &env) in self.results.env_ids.iter().enumerate() {
-                if failed.contains(&env) {
-                    pool.state[env] = EnvState::Idle;
-                    continue;
-                }
-                let info = self.results.infos.get(k).cloned().unwrap_or_default();
+            let mut infos = std::mem::take(&mut self.results.infos);
+            let mut envs = self.results.env_ids.clone();
+            if !failed.is_empty() {
+                let mut k = 0;
+                envs.retain(|env| {
+                    let keep = !failed.contains(env);
+                    if !keep {
+                        pool.state[*env] = EnvState::Idle;
+                        if k < infos.len() {
+                            infos.remove(k);
+                        }
+                    } else {
+                        k += 1;
+                    }
+                    keep
+                });
+            }
+            if infos.iter().all(serde_json::Value::is_null) {
+                infos.clear();
+            }
+            for &env in &envs {
                 pool.state[env] = EnvState::Ready;
+            }
+            if !envs.is_empty() {
+                pool.arrived_envs += envs.len();
                 pool.arrived.push_back(Arrived {
-                    env,
                     slot,
-                    info,
-                    _lease: lease.clone(),
+                    envs,
+                    infos,
+                    next: 0,
+                    _lease: lease,
                 });
             }
             if let Err(e) = taken {
@@ -262,7 +294,7 @@ impl VecEnv {
         }
         let pool = self.env_pool.as_mut().expect("checked above");
         pool.state.fill(EnvState::Idle);
-        pool.arrived.clear();
+        pool.clear_arrived();
         Ok(())
     }
 }

@@ -16,14 +16,27 @@ pub(crate) enum EnvState {
     Ready,
 }
 
-/// An env whose results arrived: the slot its row is in, and its info.
+/// One worker answer's envs whose results arrived and are not all handed out yet: the slot
+/// their rows are in, their infos, and how many of them were handed out. Kept per answer,
+/// not per env, so taking an answer costs the same for 1 env as for 1,000.
 pub(crate) struct Arrived {
-    pub(crate) env: usize,
     pub(crate) slot: u32,
-    pub(crate) info: serde_json::Value,
-    /// Keeps the slot from being written again until the row is handed out: a worker's
+    /// The envs, in row order.
+    pub(crate) envs: Vec<usize>,
+    /// One info per env, or empty when the answer carried none.
+    pub(crate) infos: Vec<serde_json::Value>,
+    /// The first env not handed out yet.
+    pub(crate) next: usize,
+    /// Keeps the slot from being written again until the rows are handed out: a worker's
     /// request clears the reward and flags of its envs it does not step.
     pub(crate) _lease: Option<envhub_shm::SlotLease>,
+}
+
+impl Arrived {
+    /// The envs not handed out yet.
+    pub(crate) fn left(&self) -> &[usize] {
+        &self.envs[self.next..]
+    }
 }
 
 /// The EnvPool mode's state: each env's place, queued actions, and arrived results.
@@ -32,8 +45,10 @@ pub(crate) struct EnvPoolState {
     pub(crate) state: Vec<EnvState>,
     /// One action row per env, valid where the env is queued.
     pub(crate) actions: Vec<u8>,
-    /// Envs whose results arrived, in the order they arrived.
+    /// Answers whose results arrived, in the order they arrived.
     pub(crate) arrived: VecDeque<Arrived>,
+    /// How many envs `arrived` holds that were not handed out.
+    pub(crate) arrived_envs: usize,
 }
 
 impl EnvPoolState {
@@ -43,12 +58,26 @@ impl EnvPoolState {
             state: vec![EnvState::Idle; num_envs],
             actions: vec![0; num_envs * action_bytes],
             arrived: VecDeque::new(),
+            arrived_envs: 0,
         }
     }
 
     /// Whether any env is queued, in flight or not handed out.
     pub(crate) fn busy(&self) -> bool {
         self.state.iter().any(|&s| s != EnvState::Idle)
+    }
+
+    /// Whether any row of `slot` in `envs` was not handed out yet.
+    pub(crate) fn holds_rows(&self, slot: u32, envs: std::ops::Range<usize>) -> bool {
+        self.arrived
+            .iter()
+            .any(|a| a.slot == slot && a.left().iter().any(|e| envs.contains(e)))
+    }
+
+    /// Drops every arrived result.
+    pub(crate) fn clear_arrived(&mut self) {
+        self.arrived.clear();
+        self.arrived_envs = 0;
     }
 
     pub(crate) fn count(&self, s: EnvState) -> usize {
