@@ -529,7 +529,7 @@ impl State {
                 "a session lives as long as its opener's token `envhub/client/<identity>`: open sessions from an envhub client",
             ));
         }
-        if !client_token_remains(&self.zenoh, &keys::client_token(&request.client)) {
+        if !client_token_appears(&self.zenoh, &keys::client_token(&request.client)) {
             return Err(self.refuse(
                 format!(
                     "the client's liveliness token `{}` is not on the network",
@@ -645,6 +645,24 @@ fn client_token_remains(zenoh: &zenoh::Session, key: &str) -> bool {
         return false;
     };
     replies.recv().is_ok_and(|r| r.result().is_ok())
+}
+
+/// [`client_token_remains`] with patience, for an open: through a router, a client's token
+/// reaches the hub a moment after the client declared it, and its first open can come
+/// sooner (a lab client on a loaded machine was refused so). Asks again until the token is
+/// seen or `TOKEN_PATIENCE` has passed; the open's thread waits, not Zenoh's.
+fn client_token_appears(zenoh: &zenoh::Session, key: &str) -> bool {
+    const TOKEN_PATIENCE: Duration = Duration::from_millis(1500);
+    let deadline = std::time::Instant::now() + TOKEN_PATIENCE;
+    loop {
+        if client_token_remains(zenoh, key) {
+            return true;
+        }
+        if std::time::Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 /// Whether a kwarg's name says it names a file or folder (`xml_file`, `model_path`,
