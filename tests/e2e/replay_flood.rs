@@ -2,10 +2,12 @@
 //! session's requests to it) puts the victim's latest sealed request again and again, with no
 //! key needed: each copy is authentic. The hub drops copies by their sequence number before
 //! any work (a repeat of the answered request is answered at most every 250 ms), so the
-//! victim's step rate under the flood stays within 20 % of its rate without it (a ratio in
-//! one run: medians of blocks before, during and after the flood, the flood's against the
-//! lower of the others). Another client holds as many sessions of its own meanwhile as its
-//! identity may.
+//! victim keeps at least half its step rate under the flood (a ratio in one run: blocks of
+//! steps with the flood on and off in turn, the median of the blocks under the flood against
+//! the median of the others, so the machine's own drift falls on both). On two cores the
+//! flooder's and the hub's own CPU for 2,000 puts a second cost the victim 7-20 %; a hub that
+//! did each replay's work took it from ~2,000 to 1-7 steps/s. Another client holds as many
+//! sessions of its own meanwhile as its identity may.
 
 use envhub_e2e::remote::{RemoteHub, net_to};
 use envhub_hub::{EnvConfig, Hub, Placement, Registry};
@@ -18,30 +20,29 @@ use zenoh::Wait;
 /// A message seen: its key and bytes.
 type Message = (String, Vec<u8>);
 
-/// Steps per measured block, and blocks per phase.
+/// Steps per measured block, and blocks with the flood on (as many with it off).
 const BLOCK: usize = 300;
-const BLOCKS: usize = 5;
-/// Replays the attacker puts per second.
+const BLOCKS: usize = 7;
+/// Replays the attacker puts per second while it floods.
 const FLOOD_PER_S: u64 = 2000;
 
-/// Steps/s of `BLOCKS` blocks of `BLOCK` steps; their median.
-fn rate(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
-    let mut rates: Vec<f64> = (0..BLOCKS)
-        .map(|_| {
-            let t = Instant::now();
-            for _ in 0..BLOCK {
-                let actions = env.sample_actions(rng);
-                env.step(&actions).expect("the victim's step");
-            }
-            BLOCK as f64 / t.elapsed().as_secs_f64()
-        })
-        .collect();
+/// Steps/s of one block of `BLOCK` steps.
+fn block_rate(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rng) -> f64 {
+    let t = Instant::now();
+    for _ in 0..BLOCK {
+        let actions = env.sample_actions(rng);
+        env.step(&actions).expect("the victim's step");
+    }
+    BLOCK as f64 / t.elapsed().as_secs_f64()
+}
+
+fn median(mut rates: Vec<f64>) -> f64 {
     rates.sort_by(f64::total_cmp);
-    rates[BLOCKS / 2]
+    rates[rates.len() / 2]
 }
 
 #[test]
-fn a_replay_flood_and_a_squatting_peer_leave_another_client_s_rate_within_20_percent() {
+fn a_replay_flood_and_a_squatting_peer_leave_another_client_at_least_half_its_rate() {
     let a = RemoteHub::start("flooded", &[], &[]);
     let on_a = Placement::Hubs(vec![a.name.clone()]);
     let victim_hub = Hub::new(Registry::builtin()).with_network(net_to(&[&a]));
@@ -63,7 +64,6 @@ fn a_replay_flood_and_a_squatting_peer_leave_another_client_s_rate_within_20_per
             Err(_) => break,
         }
     }
-    let before = rate(&mut victim, &mut rng);
     // The flooder: a Zenoh client linked to the hub, re-putting the latest request it saw.
     let mut config = net_to(&[&a]).zenoh_config(false).unwrap();
     config.insert_json5("mode", "\"client\"").unwrap();
@@ -82,48 +82,62 @@ fn a_replay_flood_and_a_squatting_peer_leave_another_client_s_rate_within_20_per
             .wait()
             .unwrap()
     };
-    let flooding = Arc::new(AtomicBool::new(true));
+    let running = Arc::new(AtomicBool::new(true));
+    let flooding = Arc::new(AtomicBool::new(false));
     let replayed = Arc::new(AtomicU64::new(0));
     let flood = {
-        let (flooding, replayed, latest, flooder) = (
+        let (running, flooding, replayed, latest, flooder) = (
+            running.clone(),
             flooding.clone(),
             replayed.clone(),
             latest.clone(),
             flooder.clone(),
         );
         std::thread::spawn(move || {
-            let start = Instant::now();
-            while flooding.load(Ordering::Relaxed) {
+            // Paced from the start of each stretch of flooding, so the flood is the hub's
+            // load and not the test machine's.
+            let mut stretch: Option<(Instant, u64)> = None;
+            while running.load(Ordering::Relaxed) {
                 let copy = latest.lock().unwrap().clone();
-                if let Some((key, bytes)) = copy {
-                    let _ = flooder.put(key, bytes).wait();
-                    let n = replayed.fetch_add(1, Ordering::Relaxed) + 1;
-                    // Paced, so the flood is the hub's load and not the test machine's.
-                    let due = Duration::from_micros(n * 1_000_000 / FLOOD_PER_S);
-                    if let Some(wait) = due.checked_sub(start.elapsed()) {
-                        std::thread::sleep(wait);
+                match copy {
+                    Some((key, bytes)) if flooding.load(Ordering::Relaxed) => {
+                        let (start, sent) = *stretch.get_or_insert((Instant::now(), 0));
+                        let _ = flooder.put(key, bytes).wait();
+                        replayed.fetch_add(1, Ordering::Relaxed);
+                        stretch = Some((start, sent + 1));
+                        let due = Duration::from_micros((sent + 1) * 1_000_000 / FLOOD_PER_S);
+                        if let Some(wait) = due.checked_sub(start.elapsed()) {
+                            std::thread::sleep(wait);
+                        }
                     }
-                } else {
-                    std::thread::sleep(Duration::from_millis(1));
+                    _ => {
+                        stretch = None;
+                        std::thread::sleep(Duration::from_millis(1));
+                    }
                 }
             }
         })
     };
-    // The flood starts with the victim's next request.
-    let replayed_before = replayed.load(Ordering::Relaxed);
-    let during = rate(&mut victim, &mut rng);
+    // The spy sees the victim's requests from here on in both kinds of block; only the
+    // replays differ. A first block warms the path.
+    block_rate(&mut victim, &mut rng);
+    let (mut quiet, mut flooded) = (Vec::new(), Vec::new());
+    for k in 0..2 * BLOCKS {
+        let on = k % 2 == 1;
+        flooding.store(on, Ordering::Relaxed);
+        let rate = block_rate(&mut victim, &mut rng);
+        if on { &mut flooded } else { &mut quiet }.push(rate);
+    }
     flooding.store(false, Ordering::Relaxed);
+    running.store(false, Ordering::Relaxed);
     flood.join().unwrap();
-    let replays = replayed.load(Ordering::Relaxed) - replayed_before;
-    let after = rate(&mut victim, &mut rng);
+    let replays = replayed.load(Ordering::Relaxed);
     victim.close();
     drop(squatted);
-    // The machine's own drift over the run (other load on it) shows in `before` against
-    // `after`: the flood is judged against the lower of the two.
-    let baseline = before.min(after);
+    let (baseline, during) = (median(quiet), median(flooded));
     eprintln!(
-        "victim steps/s: {before:.0} before, {during:.0} under {replays} replays ({FLOOD_PER_S}/s) \
-         and a squatter holding sessions, {after:.0} after; ratio {:.2}",
+        "victim steps/s: {baseline:.0} without the flood, {during:.0} under it ({replays} replays \
+         at {FLOOD_PER_S}/s in {BLOCKS} blocks) with a squatter holding sessions; ratio {:.2}",
         during / baseline
     );
     assert!(
@@ -131,7 +145,7 @@ fn a_replay_flood_and_a_squatting_peer_leave_another_client_s_rate_within_20_per
         "the flooder saw no request to replay ({replays} replays): the attack did not happen"
     );
     assert!(
-        during >= 0.8 * baseline,
+        during >= 0.5 * baseline,
         "the victim's rate fell from {baseline:.0} to {during:.0} steps/s under the flood"
     );
 }
