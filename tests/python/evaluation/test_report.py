@@ -232,14 +232,15 @@ def test_a_benchmark_scored_by_return_leads_with_it(tmp_path) -> None:
 
 
 BROWSER_SCRIPT = r"""
-import json, shutil, sys
+import json, shutil, sys, time
 from playwright.sync_api import sync_playwright
 
 page_url, shot = sys.argv[1], sys.argv[2]
 out = {}
 with sync_playwright() as p:
     # Chromium's start is not what this test checks, and on a busy machine it can outlast
-    # Playwright's 30 s default or crash (CI saw both): a longer wait and two more tries.
+    # Playwright's 30 s default or crash (CI saw both): a longer wait and two more tries, 10 s
+    # apart. (`make py-test` runs this test alone, after the others.)
     for attempt in range(3):
         try:
             browser = p.chromium.launch(
@@ -249,6 +250,7 @@ with sync_playwright() as p:
             print(f"chromium launch {attempt + 1} failed: {str(e)[:500]}", file=sys.stderr)
             if attempt == 2:
                 raise
+            time.sleep(10)
     page = browser.new_page(viewport={"width": 1400, "height": 1000})
     page.set_default_timeout(120_000)
     errors = []
