@@ -184,15 +184,17 @@ impl VecEnv {
         let m = pool.batch_size;
         let mut rows = std::mem::take(&mut self.results.rows);
         rows.clear();
-        let mut infos = Vec::new();
+        // Infos only once an answer carried some: the envs before it get nulls.
+        let (mut infos, mut with_infos) = (Vec::new(), false);
         while rows.len() < m {
             let a = pool.arrived.front_mut().expect("batch_size envs arrived");
             let take = (m - rows.len()).min(a.left().len());
             let (from, to) = (a.next, a.next + take);
-            if !a.infos.is_empty() && infos.is_empty() {
+            if !a.infos.is_empty() && !with_infos {
                 infos.resize(rows.len(), serde_json::Value::Null);
+                with_infos = true;
             }
-            if !infos.is_empty() {
+            if with_infos {
                 match a.infos.get_mut(from..to) {
                     Some(own) => infos.extend(own.iter_mut().map(std::mem::take)),
                     None => infos.resize(rows.len() + take, serde_json::Value::Null),
@@ -238,19 +240,17 @@ impl VecEnv {
             let mut infos = std::mem::take(&mut self.results.infos);
             let mut envs = self.results.env_ids.clone();
             if !failed.is_empty() {
-                let mut k = 0;
-                envs.retain(|env| {
-                    let keep = !failed.contains(env);
-                    if !keep {
-                        pool.state[*env] = EnvState::Idle;
-                        if k < infos.len() {
-                            infos.remove(k);
-                        }
-                    } else {
-                        k += 1;
-                    }
-                    keep
-                });
+                // Failed envs are idle again, and neither they nor their infos are handed out.
+                for &env in envs.iter().filter(|e| failed.contains(e)) {
+                    pool.state[env] = EnvState::Idle;
+                }
+                if !infos.is_empty() {
+                    infos = (envs.iter().zip(infos))
+                        .filter(|(env, _)| !failed.contains(env))
+                        .map(|(_, info)| info)
+                        .collect();
+                }
+                envs.retain(|env| !failed.contains(env));
             }
             if infos.iter().all(serde_json::Value::is_null) {
                 infos.clear();

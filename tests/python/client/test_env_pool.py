@@ -44,7 +44,7 @@ SLOW_RESET = textwrap.dedent(
             self.t += 1
             self.x = self.x * 0.9 + float(np.sum(action)) + self.np_random.normal(size=3) * 0.01
             terminated = bool(self.np_random.uniform() < 0.1)
-            return self.x.copy(), float(self.x[0]), terminated, self.t >= 12, {"t": self.t}
+            return self.x.copy(), float(self.x[0]), terminated, self.t >= 12, {"t": self.t, "tag": f"step {self.t}"}
 
 
     class SlowResetAdapter(envhub.EnvAdapter):
@@ -103,9 +103,11 @@ def _action(space: gymnasium.Space, env: int, t: int) -> np.ndarray:
 
 
 def _record(obs, rewards, terminated, truncated, info, k: int) -> tuple:
-    # An env's own info (the slow-reset env's step count) travels with its row.
+    # An env's own infos (the slow-reset env's step count, a typed column, and its tag, which
+    # travels as JSON) travel with its row.
     t = int(info["t"][k]) if "t" in info and info["_t"][k] else None
-    return (np.asarray(obs[k]).tobytes(), float(rewards[k]), bool(terminated[k]), bool(truncated[k]), t)
+    tag = str(info["tag"][k]) if "tag" in info and info["_tag"][k] else None
+    return (np.asarray(obs[k]).tobytes(), float(rewards[k]), bool(terminated[k]), bool(truncated[k]), t, tag)
 
 
 def _lock_step(make, steps: int, seed: int) -> list[list[tuple]]:
@@ -113,7 +115,7 @@ def _lock_step(make, steps: int, seed: int) -> list[list[tuple]]:
     try:
         n = envs.num_envs
         obs, _ = envs.reset(seed=seed)
-        out = [[(np.asarray(obs[e]).tobytes(), 0.0, False, False, None)] for e in range(n)]
+        out = [[(np.asarray(obs[e]).tobytes(), 0.0, False, False, None, None)] for e in range(n)]
         space = envs.single_action_space
         for t in range(steps):
             actions = np.stack([_action(space, e, t) for e in range(n)])
@@ -142,7 +144,7 @@ def _env_pool(make, m: int, steps: int, seed: int) -> list[list[tuple]]:
             groups.add(tuple(ids.tolist()))
             for k, e in enumerate(ids):
                 if not out[e]:
-                    out[e].append((np.asarray(obs[k]).tobytes(), 0.0, False, False, None))  # the reset
+                    out[e].append((np.asarray(obs[k]).tobytes(), 0.0, False, False, None, None))  # the reset
                 else:
                     out[e].append(_record(obs, rew, term, trunc, info, k))
             actions = np.stack([_action(space, int(e), len(out[e]) - 1) for e in ids])
@@ -183,7 +185,7 @@ def test_python_hosted_env_with_varying_reset_cost(slow_registry):
     steps = 30
     # M = 3 over workers of 2 envs: a worker's answer is split between two `recv`s.
     sync = _lock_step(make, steps, 11)
-    assert any(row[4] is not None for rows in sync for row in rows), "no env info arrived"
+    assert any(row[4] is not None and row[5] is not None for rows in sync for row in rows), "no env info arrived"
     _assert_same(sync, _env_pool(make, 3, steps, 11), steps)
 
 
