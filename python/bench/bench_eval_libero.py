@@ -424,12 +424,11 @@ def compare(args: argparse.Namespace) -> list[dict]:
             if "server" in only:
                 policy = ["--server", server.url, "--server-protocol", "vla-eval"]
                 runs["server"] = timed(lambda: run_envhub(policy, *a, work, "server"), server)
+            constant = ["--policy", f"{HERE}:constant"]
             if "callable" in only:
-                policy = ["--policy", f"{HERE}:constant"]
-                runs["callable"] = timed(lambda: run_envhub(policy, *a, work, "callable"))
+                runs["callable"] = timed(lambda: run_envhub(constant, *a, work, "callable"))
             if "sync" in only:
-                policy = ["--policy", f"{HERE}:constant"]
-                runs["sync"] = timed(lambda: run_envhub(policy, *a, work, "sync", ready_envs=False))
+                runs["sync"] = timed(lambda: run_envhub(constant, *a, work, "sync", ready_envs=False))
     finally:
         if server is not None:
             server.stop()

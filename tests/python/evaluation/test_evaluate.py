@@ -24,6 +24,7 @@ import pytest
 from eval_policies import (
     policies,  # noqa: F401 - a fixture
     run_cli,
+    table,
 )
 from harness import import_envhub
 
@@ -43,9 +44,6 @@ PENDULUM = {
     "settle": {"steps": 3, "action": [0.5]},
     "success": "none",
 }
-
-def table(results):
-    return [(e["task"], e["index"], e["init"], e["success"], e["return"], e["length"], e["error"]) for e in results["episodes"]]
 
 
 # The catalog -----------------------------------------------------------------------------------

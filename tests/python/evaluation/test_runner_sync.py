@@ -5,7 +5,7 @@ workers' answers, and the results table is the same (4 envs over 2 workers, Pend
 
 from __future__ import annotations
 
-from eval_policies import policies  # noqa: F401 - a fixture
+from eval_policies import policies, table  # noqa: F401 - policies is a fixture
 from harness import import_envhub
 
 envhub = import_envhub()
@@ -22,13 +22,6 @@ PENDULUM = {
     "settle": {"steps": 3, "action": [0.5]},
     "success": "none",
 }
-
-
-def table(results):
-    return [
-        (e["task"], e["index"], e["init"], e["success"], e["return"], e["length"], e["error"])
-        for e in results["episodes"]
-    ]
 
 
 def test_the_synchronous_runner_gives_the_ready_env_runners_results(tmp_path, policies, monkeypatch):

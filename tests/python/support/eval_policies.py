@@ -1,5 +1,6 @@
 """The evaluation tests' policies: a file of deterministic policy functions (`policies`, a
-fixture: its path), and the evaluation's command line run in this interpreter."""
+fixture: its path), the evaluation's command line run in this interpreter, and a run's
+results table to compare runs by."""
 
 from __future__ import annotations
 
@@ -38,3 +39,11 @@ def run_cli(*args, cwd=None):
     return subprocess.run(
         [sys.executable, "-m", "envhub.evaluation", *args], capture_output=True, text=True, timeout=300, cwd=cwd
     )
+
+
+def table(results):
+    """A run's episodes as comparable rows: what an evaluation promises to repeat."""
+    return [
+        (e["task"], e["index"], e["init"], e["success"], e["return"], e["length"], e["error"])
+        for e in results["episodes"]
+    ]
