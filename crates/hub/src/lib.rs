@@ -44,7 +44,7 @@ pub use envhub_net::local;
 pub use envhub_net::{
     DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_ENVS, DEFAULT_MAX_REQUEST_BYTES,
     DEFAULT_MAX_SESSIONS_PER_CLIENT, DEFAULT_MAX_STEP_TIMEOUT, ENVHUB_CONNECT, ENVHUB_MULTICAST,
-    NetConfig, Network, ServePolicy, UNSEALED, client_share,
+    NetConfig, Network, RESENT, ServePolicy, UNSEALED, client_share,
 };
 pub use envhub_protocol::{Frame, HubError, HubInfo, Route};
 pub use envhub_session::{Batch, Env, InterruptCheck, LOCAL, SessionOptions, Step, VecEnv};

@@ -25,7 +25,7 @@ pub use config::{
     open_hub,
 };
 pub use exposure::LOOPBACK_LISTENER;
-pub use link::UNSEALED;
+pub use link::{RESENT, UNSEALED};
 pub use opener::ZenohSlices;
 pub use policy::{
     DEFAULT_IDLE_TIMEOUT, DEFAULT_MAX_ENVS, DEFAULT_MAX_REQUEST_BYTES,

@@ -28,6 +28,9 @@ pub(crate) const RESEND: Duration = Duration::from_secs(1);
 /// Answers this process dropped because they were not sealed with their session's key.
 pub static UNSEALED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
+/// Requests this process sent again because no answer came within [`RESEND`].
+pub static RESENT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
 /// A remote hub's slice of a session.
 pub(crate) struct RemoteConn {
     pub hub: String,
@@ -181,6 +184,7 @@ impl RemoteConn {
     pub fn resend_if_silent(&mut self) -> Result<(), HubError> {
         if !self.last_request.is_empty() && self.last_sent.elapsed() >= RESEND {
             tracing::debug!(hub = %self.hub, session = %self.session, seq = self.seq, "no answer yet: sending again");
+            RESENT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             self.put()?;
         }
         Ok(())

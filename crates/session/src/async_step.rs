@@ -156,6 +156,14 @@ impl VecEnv {
             if self.poll_all(true)? {
                 return Ok(());
             }
+            // A remote request or answer lost on the way is asked for again, as a lock-step
+            // wait does; a failure to send is the link's loss.
+            for i in 0..self.workers.len() {
+                if let Err(e) = self.workers[i].resend_if_silent() {
+                    self.recover(i, e)?;
+                    return Ok(());
+                }
+            }
             if (self.interrupt)() {
                 return Err(self.give_up(HubError::Interrupted));
             }

@@ -379,11 +379,21 @@ impl WorkerLink {
             if Instant::now() >= deadline {
                 return Err(self.hung(timeout));
             }
-            let Conn::Remote(r) = &mut self.conn else {
-                unreachable!("a remote link")
-            };
-            r.resend_if_silent()?;
-            r.wait(TICK);
+            self.resend_if_silent()?;
+            if let Conn::Remote(r) = &self.conn {
+                r.wait(TICK);
+            }
+        }
+    }
+
+    /// Sends a remote slice's request in flight again if it has gone unanswered for a while
+    /// (a request or answer lost with a Zenoh link that dropped and came back): every wait
+    /// on a remote link calls it each tick, or one lost message hangs the session until the
+    /// step timeout. A local worker's channel loses nothing; for it this does nothing.
+    pub fn resend_if_silent(&mut self) -> Result<(), HubError> {
+        match &mut self.conn {
+            Conn::Remote(r) if self.pending => r.resend_if_silent(),
+            _ => Ok(()),
         }
     }
 
