@@ -225,6 +225,10 @@ pub(crate) struct Session {
     /// Worker pids, in env order (on its hub's machine for a remote slice).
     #[pyo3(get)]
     worker_pids: Vec<u32>,
+    /// Each worker's envs as `(first, end)`, in env order: envs of one worker are sent,
+    /// reset and received together.
+    #[pyo3(get)]
+    worker_envs: Vec<(usize, usize)>,
     /// Where the envs run: `(hub, first env, end)` runs, `local` for this machine.
     #[pyo3(get)]
     placement: Vec<(String, usize, usize)>,
@@ -380,6 +384,11 @@ pub(crate) fn make_session(
         num_envs: v.num_envs(),
         num_workers: v.num_workers(),
         worker_pids: v.worker_pids(),
+        worker_envs: v
+            .worker_envs()
+            .into_iter()
+            .map(|r| (r.start, r.end))
+            .collect(),
         placement: v
             .placement()
             .into_iter()
@@ -876,6 +885,22 @@ impl Session {
         self.check_pid(py)?;
         let bytes = self.action_bytes(py, actions)?;
         py.detach(|| self.lock().vec.send(&bytes, &env_ids))
+            .map_err(|e| self.error(py, e, None))
+    }
+
+    /// Resets the envs in `env_ids` (env `env_ids[k]` with `seeds[k]`, the options for all)
+    /// without waiting; `recv` returns their first observations like stepped envs'.
+    #[pyo3(signature = (env_ids, seeds, options_json=None))]
+    fn send_reset(
+        &self,
+        py: Python<'_>,
+        env_ids: Vec<usize>,
+        seeds: Vec<Option<u64>>,
+        options_json: Option<&str>,
+    ) -> PyResult<()> {
+        self.check_pid(py)?;
+        let options = parse_options(py, options_json)?;
+        py.detach(|| self.lock().vec.send_reset(&env_ids, &seeds, &options))
             .map_err(|e| self.error(py, e, None))
     }
 

@@ -185,3 +185,108 @@ fn several_workers_fill_one_block_viewed_in_place() {
         "each worker's one env is a block of one"
     );
 }
+
+/// `send_reset` resets some envs alone while the others step: every env's trajectory (its
+/// reset, its steps with its own actions, its second reset with a new seed and its steps)
+/// equals a lock-step run that resets the same envs with `reset_with` and a mask. Reset rows
+/// come back with reward 0 and no done flag.
+#[test]
+fn envs_reset_alone_while_others_step_follow_the_lock_step_trajectories() {
+    use crate::env_pool::{action, record};
+    let t = TestHub::new("send_reset");
+    let (n, first, second) = (4, 10, 10);
+    let reseed = [Some(100), Some(101), None, None];
+    let mask = [true, true, false, false];
+    let make = || t.hub.make_vec("gym-cartpole", n, &config(2)).unwrap();
+    let (ob, ab) = {
+        let env = make();
+        (
+            env.observation_space().byte_len(),
+            env.action_space().byte_len(),
+        )
+    };
+    // Lock step: `first` steps, envs 0 and 1 reset with new seeds, `second` steps.
+    let mut sync = make();
+    let mut want: Vec<Vec<Vec<u8>>> = vec![Vec::new(); n];
+    let mut steps = [0usize; 4];
+    let b = sync.reset(Some(3)).unwrap();
+    (0..n).for_each(|e| want[e].push(record(&b, e, ob)));
+    let mut actions = vec![0u8; n * ab];
+    for round in 0..first + second {
+        if round == first {
+            let b = sync
+                .reset_with(&reseed, Some(&mask), &Default::default())
+                .unwrap();
+            (0..2).for_each(|e| want[e].push(record(&b, e, ob)));
+            steps[..2].fill(0);
+        }
+        for e in 0..n {
+            action(&sync, e, steps[e], &mut actions[e * ab..(e + 1) * ab]);
+            steps[e] += 1;
+        }
+        let b = sync.step(&actions).unwrap();
+        (0..n).for_each(|e| want[e].push(record(&b, e, ob)));
+    }
+    sync.close();
+    // send/recv: envs 0 and 1 (worker 0) reset alone while envs 2 and 3 (worker 1) step.
+    let mut env = make();
+    let mut got: Vec<Vec<Vec<u8>>> = vec![Vec::new(); n];
+    let mut steps = [0usize; 4];
+    let b = env.reset(Some(3)).unwrap();
+    (0..n).for_each(|e| got[e].push(record(&b, e, ob)));
+    let receive = |env: &mut envhub_hub::VecEnv, got: &mut Vec<Vec<Vec<u8>>>, count: usize| {
+        let mut seen = 0;
+        while seen < count {
+            let b = env.recv().unwrap();
+            for (k, &e) in b.env_ids.iter().enumerate() {
+                got[e].push(record(&b, k, ob));
+            }
+            seen += b.env_ids.len();
+        }
+    };
+    let send = |env: &mut envhub_hub::VecEnv, ids: &[usize], steps: &mut [usize; 4]| {
+        let mut block = vec![0u8; ids.len() * ab];
+        for (k, &e) in ids.iter().enumerate() {
+            action(env, e, steps[e], &mut block[k * ab..(k + 1) * ab]);
+            steps[e] += 1;
+        }
+        env.send(&block, ids).unwrap();
+    };
+    for _ in 0..first {
+        send(&mut env, &[0, 1, 2, 3], &mut steps);
+        receive(&mut env, &mut got, n);
+    }
+    env.send_reset(&[0, 1], &reseed[..2], &Default::default())
+        .unwrap();
+    steps[..2].fill(0);
+    send(&mut env, &[2, 3], &mut steps);
+    receive(&mut env, &mut got, n);
+    for (e, rows) in got.iter().enumerate().take(2) {
+        let reset_row = rows.last().unwrap();
+        assert_eq!(
+            &reset_row[ob..],
+            &[0u8; 10][..],
+            "env {e}'s reset row: reward 0, not done"
+        );
+    }
+    for _ in 0..second - 1 {
+        send(&mut env, &[0, 1, 2, 3], &mut steps);
+        receive(&mut env, &mut got, n);
+    }
+    send(&mut env, &[0, 1], &mut steps);
+    receive(&mut env, &mut got, 2);
+    for e in 0..n {
+        assert_eq!(got[e].len(), want[e].len(), "env {e}'s results");
+        for (k, (a, b)) in want[e].iter().zip(&got[e]).enumerate() {
+            assert_eq!(a, b, "env {e} differs at its result {k}");
+        }
+    }
+    // Misuse is refused with the reason: an env whose worker is out, seeds that do not match.
+    send(&mut env, &[0, 1], &mut steps);
+    let busy = env
+        .send_reset(&[1], &[None], &Default::default())
+        .unwrap_err();
+    assert!(busy.to_string().contains("still stepping"), "{busy}");
+    let seeds = env.send_reset(&[2], &[], &Default::default()).unwrap_err();
+    assert!(seeds.to_string().contains("0 seeds for 1 envs"), "{seeds}");
+}

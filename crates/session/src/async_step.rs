@@ -26,37 +26,13 @@ impl VecEnv {
             Phase::Created => return self.check_steppable(),
             Phase::Running => {}
         }
-        if let Some(&bad) = env_ids.iter().find(|&&e| e >= self.num_envs) {
-            return Err(HubError::InvalidAction {
-                reason: format!("env id {bad} is out of range"),
-                hint: format!("env ids go from 0 to {}", self.num_envs - 1),
-            });
-        }
-        let mut seen = vec![false; self.num_envs];
-        for &e in env_ids {
-            if std::mem::replace(&mut seen[e], true) {
-                return Err(HubError::InvalidAction {
-                    reason: format!("env id {e} appears twice"),
-                    hint: "send one action per env".into(),
-                });
-            }
-        }
+        self.check_env_ids(env_ids, "send one action per env")?;
         self.validate_actions(actions, env_ids)?;
         self.check_not_failed(env_ids)?;
         if self.env_pool.is_some() {
             return self.env_pool_send(actions, env_ids);
         }
-        for w in &self.workers {
-            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
-            if (w.pending || w.response.is_some())
-                && let Some(e) = env_ids.iter().find(|e| range.contains(e))
-            {
-                return Err(HubError::InvalidState(format!(
-                    "env {e} is still stepping: its worker (envs {}..{}) has results that were not received; call `recv` first",
-                    range.start, range.end
-                )));
-            }
-        }
+        self.check_workers_free(env_ids)?;
         let ab = self.action_space.byte_len();
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
@@ -74,6 +50,102 @@ impl VecEnv {
                 w.send_step(slot, &block, Some(&selected))?;
                 let envs = (0..n).filter(|&k| selected[k]).map(|k| lo + k);
                 w.sent(slot, envs);
+            }
+        }
+        Ok(())
+    }
+
+    /// Resets the envs in `env_ids` (env `env_ids[k]` with `seeds[k]`, `options` for all of
+    /// them) without waiting, as [`VecEnv::send`] steps them: [`VecEnv::recv`] returns their
+    /// first observations and reset infos like stepped envs' results (rewards 0, not done).
+    /// An env's trajectory is the same as after a lock-step reset of it with the same seed
+    /// and options: a worker resets the selected envs of its request only. Like `send`, an
+    /// env whose worker has results in flight or not yet received is refused (the session's
+    /// other envs go on stepping meanwhile). Not in the EnvPool mode, and not before the
+    /// session's first [`VecEnv::reset`].
+    pub fn send_reset(
+        &mut self,
+        env_ids: &[usize],
+        seeds: &[Option<u64>],
+        options: &envhub_core::ResetOptions,
+    ) -> Result<(), HubError> {
+        match self.phase {
+            Phase::Closed => return self.check_open(),
+            Phase::Created => return self.check_steppable(),
+            Phase::Running => {}
+        }
+        if self.env_pool.is_some() {
+            return Err(HubError::InvalidState(
+                "`send_reset` is for `send`/`recv` without `batch_size`; in the EnvPool mode, reset every env with `async_reset`".into(),
+            ));
+        }
+        self.check_env_ids(env_ids, "reset each env once")?;
+        if seeds.len() != env_ids.len() {
+            return Err(HubError::InvalidAction {
+                reason: format!("{} seeds for {} envs", seeds.len(), env_ids.len()),
+                hint: "pass one seed (or None) per env id".into(),
+            });
+        }
+        self.check_workers_free(env_ids)?;
+        let options_json = if options.is_empty() {
+            String::new()
+        } else {
+            serde_json::to_string(options).expect("options serialize")
+        };
+        let slot = self.pool.writable()?.index();
+        for w in &mut self.workers {
+            let (lo, n) = (w.job.env_offset, w.job.worker_envs);
+            let mut selected = vec![false; n];
+            let mut block = vec![None; n];
+            for (&env, &seed) in env_ids.iter().zip(seeds) {
+                if (lo..lo + n).contains(&env) {
+                    selected[env - lo] = true;
+                    block[env - lo] = seed;
+                }
+            }
+            if selected.contains(&true) {
+                w.send_reset(slot, &block, Some(&selected), &options_json)?;
+                w.sent(slot, (0..n).filter(|&k| selected[k]).map(|k| lo + k));
+            }
+        }
+        for &e in env_ids {
+            self.must_reset[e] = false;
+        }
+        Ok(())
+    }
+
+    /// Refuses env ids out of range or named twice.
+    fn check_env_ids(&self, env_ids: &[usize], once: &str) -> Result<(), HubError> {
+        if let Some(&bad) = env_ids.iter().find(|&&e| e >= self.num_envs) {
+            return Err(HubError::InvalidAction {
+                reason: format!("env id {bad} is out of range"),
+                hint: format!("env ids go from 0 to {}", self.num_envs - 1),
+            });
+        }
+        let mut seen = vec![false; self.num_envs];
+        for &e in env_ids {
+            if std::mem::replace(&mut seen[e], true) {
+                return Err(HubError::InvalidAction {
+                    reason: format!("env id {e} appears twice"),
+                    hint: once.into(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses envs whose worker takes no request now: it has results in flight or not
+    /// received.
+    fn check_workers_free(&self, env_ids: &[usize]) -> Result<(), HubError> {
+        for w in &self.workers {
+            let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
+            if (w.pending || w.response.is_some())
+                && let Some(e) = env_ids.iter().find(|e| range.contains(e))
+            {
+                return Err(HubError::InvalidState(format!(
+                    "env {e} is still stepping: its worker (envs {}..{}) has results that were not received; call `recv` first",
+                    range.start, range.end
+                )));
             }
         }
         Ok(())

@@ -278,6 +278,14 @@ impl VecEnv {
         self.workers.len()
     }
 
+    /// The envs each worker (or remote link) hosts, in env order: a request goes to one
+    /// worker, so envs of one range are sent, reset and received together.
+    pub fn worker_envs(&self) -> Vec<std::ops::Range<usize>> {
+        (self.workers.iter())
+            .map(|w| w.job.env_offset..w.job.env_offset + w.job.worker_envs)
+            .collect()
+    }
+
     /// Pids of the worker processes, in env order.
     pub fn worker_pids(&self) -> Vec<u32> {
         self.workers.iter().map(WorkerLink::pid).collect()

@@ -275,6 +275,26 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._session.send(a, ids.astype(np.int64).tolist())
         self._sent[ids] = True
 
+    def send_reset(
+        self, env_ids: Any, *, seed: list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> None:
+        """Resets the envs in `env_ids` without waiting (env `env_ids[k]` seeded with
+        `seed[k]`; `options` for all of them), while the session's other envs go on
+        stepping; `recv` returns their first observations and reset infos as it returns
+        stepped envs (rewards 0, not done). An env's episode is the same as after
+        `reset(seed=..., options={..., "reset_mask": mask})` of it. Without `batch_size`
+        only (`send`'s worker rule holds: an env whose worker has results out is refused)."""
+        ids = np.asarray(env_ids).reshape(-1)
+        if ids.dtype.kind not in "iu":
+            raise InvalidActionError(f"env_ids must be integers, got {ids.dtype}")
+        seeds = [None] * len(ids) if seed is None else [check_seed(s) for s in seed]
+        if len(seeds) != len(ids):
+            raise InvalidConfigError(f"got {len(seeds)} seeds for {len(ids)} envs; pass one per env id")
+        if options and "reset_mask" in options:
+            raise InvalidConfigError("send_reset resets the envs it names; leave `reset_mask` out")
+        self._session.send_reset(ids.astype(np.int64).tolist(), seeds, to_json(options) if options else None)
+        self._sent[ids] = True
+
     def recv(self) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Waits for the first workers to finish and returns the results of the envs they
         stepped; with `batch_size`, exactly that many envs, the first to finish.
@@ -391,6 +411,12 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
     def worker_pids(self) -> list[int]:
         """Pids of the worker processes, in env order."""
         return list(self._session.worker_pids)
+
+    @property
+    def worker_envs(self) -> list[tuple[int, int]]:
+        """Each worker's envs as `(first, end)`, in env order: one request goes to a worker,
+        so `send` and `send_reset` take an env only when its worker has nothing out."""
+        return [(int(a), int(b)) for a, b in self._session.worker_envs]
 
     @property
     def max_episode_steps(self) -> int | None:

@@ -17,12 +17,15 @@ gathers every slot whose turn it is, whatever its task. Only envs with an episod
 (`send` to those ids), so an env never runs past its episode. The runner takes the envs that
 are ready: each round receives what the session's first workers answered and asks the policy
 for those envs while the other workers still step, so a slow worker holds back its own envs
-only; a reset, which takes the whole session, waits until the session's envs are back. An
+only; an env whose episode ended is reset alone (`send_reset`) as soon as its worker is back,
+while the other workers step (a suite's reset costs tens of steps), and `recv` returns its
+first observation like a step's. (A session whose videos come from `render()` waits for
+every env instead: one `render()` shows the whole session.) An
 episode's result depends on its initial condition and the policy's answers alone: the same
 with 1 env or 16, local or remote, whatever order the envs come back in. For benchmarking,
 `Runner(ready_envs=False)` or `ENVHUB_EVAL_READY_ENVS=0` (read when a `Runner` is made, so
 `envhub eval` takes it from its environment) runs the synchronous loop instead: every round
-waits for every env out, the same results.
+waits for every env out, and ended envs reset together once all are back; the same results.
 """
 
 from __future__ import annotations
@@ -87,11 +90,27 @@ class _Session:
         self.finished = 0  # episodes that ended without an error
         self.broken = broken  # sessions of these episodes that broke before this one
         self.waiting: set[int] = set()  # envs sent whose results have not been received
+        # Env i's worker: one request goes to a worker, so an env goes out only when the
+        # other envs of its worker are back.
+        self.worker_of = [0] * len(ids)
+        for w, (lo, hi) in enumerate(getattr(envs, "worker_envs", [(0, len(ids))])):
+            self.worker_of[lo:hi] = [w] * (hi - lo)
+        # Envs whose next episode is assigned and whose reset waits for their worker, and
+        # those whose reset is out (`send_reset`): job, initial condition, start time.
+        self.deferred: dict[int, Job] = {}
+        self.resetting: dict[int, tuple[Job, dict[str, Any], float]] = {}
         self.first = True
         # Videos of envs with no image observation: frames from `render()`, once per step of
         # the session (every env rendered), kept per env until the runner takes them.
         self.render = getattr(envs, "render_mode", None) == "rgb_array" and self.observer.video is None
         self.rendered: Any = None
+
+    def busy_workers(self) -> set[int]:
+        return {self.worker_of[i] for i in self.waiting}
+
+    def active(self) -> bool:
+        """Whether an episode runs or is about to (its reset waits or is out)."""
+        return bool(self.deferred or self.resetting) or any(x.episode is not None for x in self.slots)
 
 
 def _row(obs: Any, j: int) -> Any:
@@ -213,7 +232,7 @@ class Runner:
                         requeue = self._broken(s, e)
                         if requeue is not None:
                             pending.appendleft(requeue)
-                    if s not in self.sessions or not any(x.episode is not None for x in s.slots):
+                    if s not in self.sessions or not s.active():
                         if s in self.sessions:
                             self._close(s)
                         free = sorted(free + s.ids)
@@ -307,6 +326,11 @@ class Runner:
         for i, slot in enumerate(s.slots):
             if slot.running:
                 self._finish(s, i, error=f"{type(e).__name__}: {e}")
+        # Episodes assigned whose reset had not come back never started: they run again.
+        unstarted = [job for job, _, _ in s.resetting.values()] + list(s.deferred.values())
+        s.queue.extendleft(reversed(unstarted))
+        s.resetting.clear()
+        s.deferred.clear()
         self._close(s)
         broken = 0 if s.finished else s.broken + 1
         if not s.queue:
@@ -331,13 +355,9 @@ class Runner:
         n = len(s.slots)
         inits = {i: self.bench.episode_init(k) for i, (_, k) in assign.items()}
         seeds: list[int | None] = [None] * n
-        groups: dict[str, list[int]] = {}
+        groups = self._reset_groups(s, assign, inits)
         for i, init in inits.items():
             seeds[i] = init.get("seed")
-            options = {k: v for k, v in init.items() if k != "seed"}
-            if s.tasks[i] != assign[i][0].id:  # switch the env's task
-                options.update(self.bench.reset_options(assign[i][0]))
-            groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
         t0 = time.perf_counter()
         for key, group in groups.items():
             options = json.loads(key)
@@ -358,18 +378,68 @@ class Runner:
                 s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
         if s.render:
             s.rendered = s.envs.render()
-        for i, (spec, k) in assign.items():
-            s.tasks[i] = spec.id
-            task = self.tasks.setdefault(spec.id, self.bench.task(spec))
-            slot = s.slots[i]
-            slot.episode = Episode(task, k, inits[i])
-            try:
-                self.policy.start(s.ids[i], slot.episode)
-            except Exception as e:
-                self._finish(s, i, error=f"policy start failed: {type(e).__name__}: {e}")
+        for i, job in assign.items():
+            self._start(s, i, job, inits[i])
+
+    def _reset_groups(
+        self, s: _Session, assign: dict[int, Job], inits: dict[int, dict[str, Any]]
+    ) -> dict[str, list[int]]:
+        """The envs of `assign` by their reset options (JSON): the episode's initial
+        condition and, for an env that switches tasks, the task's options."""
+        groups: dict[str, list[int]] = {}
+        for i, init in inits.items():
+            options = {k: v for k, v in init.items() if k != "seed"}
+            if s.tasks[i] != assign[i][0].id:  # switch the env's task
+                options.update(self.bench.reset_options(assign[i][0]))
+            groups.setdefault(json.dumps(options, sort_keys=True), []).append(i)
+        return groups
+
+    def _start(self, s: _Session, i: int, job: Job, init: dict[str, Any]) -> None:
+        """Env `i`, reset, starts episode `job` (its slot holds the first observation)."""
+        spec, k = job
+        s.tasks[i] = spec.id
+        task = self.tasks.setdefault(spec.id, self.bench.task(spec))
+        slot = s.slots[i]
+        slot.episode = Episode(task, k, init)
+        try:
+            self.policy.start(s.ids[i], slot.episode)
+        except Exception as e:
+            self._finish(s, i, error=f"policy start failed: {type(e).__name__}: {e}")
+            return
+        if slot.settle_left == 0:
+            self._frame(s, i)
+
+    def _send_resets(self, s: _Session) -> None:
+        """Sends the resets of deferred envs whose worker has nothing out, one reset per
+        worker and set of options; the rest wait for their worker."""
+        if not s.deferred:
+            return
+        out = s.busy_workers()
+        ready = {i: job for i, job in s.deferred.items() if s.worker_of[i] not in out}
+        inits = {i: self.bench.episode_init(k) for i, (_, k) in ready.items()}
+        busy: set[int] = set()
+        for key, group in self._reset_groups(s, ready, inits).items():
+            ids = [i for i in group if s.worker_of[i] not in busy]
+            if not ids:
                 continue
-            if slot.settle_left == 0:
-                self._frame(s, i)
+            options = json.loads(key)
+            s.envs.send_reset(ids, seed=[inits[i].get("seed") for i in ids], options=options or None)
+            t0 = time.perf_counter()
+            for i in ids:
+                s.resetting[i] = (s.deferred.pop(i), inits[i], t0)
+                s.waiting.add(i)
+            busy.update(s.worker_of[i] for i in ids)
+
+    def _reset_arrived(self, s: _Session, i: int, obs: Any, info: dict[str, Any], j: int) -> None:
+        """Env `i`'s reset (sent alone) came back as row `j`: its episode starts."""
+        job, init, t0 = s.resetting.pop(i)
+        texts, has = info.get("language"), info.get("_language")
+        # A language-conditioned suite says the task's instruction in its reset info.
+        if texts is not None and (has is None or has[j]) and isinstance(texts[j], str):
+            if job[0].id not in self.tasks:
+                self.tasks[job[0].id] = self.bench.task(job[0], texts[j])
+        s.slots[i] = _Slot(obs=obs, t0=t0, settle_left=self.bench.settle_steps)
+        self._start(s, i, job, init)
 
     def _next_job(self, s: _Session, i: int) -> Job:
         """The next episode for env `i`: in a session of every task, the next one of the task
@@ -385,11 +455,13 @@ class Runner:
     def _tick(self, s: _Session) -> None:
         """Receives what the session's first workers answered (if envs are out; every env
         out without `ready_envs`), then starts the next episodes on the envs whose episode
-        ended, once every env is back (a reset takes the whole session)."""
+        ended: with `ready_envs`, each reset goes out as soon as its worker is back, while
+        the other workers step (`send_reset`); else once every env is back, as one reset."""
         if s.waiting:
             self._recv(s, all_back=s.render or not self.ready_envs)
+        alone = self.ready_envs and not s.render
         ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
-        if ended and s.queue and s.waiting:
+        if ended and s.queue and s.waiting and not alone:
             self._recv(s, all_back=True)
             ended = [i for i, slot in enumerate(s.slots) if slot.episode is not None and slot.ended]
         for i in ended:
@@ -399,7 +471,10 @@ class Runner:
             if not s.queue:
                 break
             assign[i] = self._next_job(s, i)
-        if assign:
+        if alone:
+            s.deferred.update(assign)
+            self._send_resets(s)
+        elif assign:
             self._reset(s, assign)
 
     # Policy and steps ---------------------------------------------------------------------
@@ -454,7 +529,12 @@ class Runner:
 
     def _send_all(self) -> None:
         for s in list(self.sessions):
-            ids = [i for i, slot in enumerate(s.slots) if slot.running and i not in s.waiting]
+            busy = s.busy_workers()
+            ids = [
+                i
+                for i, slot in enumerate(s.slots)
+                if slot.running and i not in s.waiting and s.worker_of[i] not in busy
+            ]
             if not ids:
                 continue
             actions = np.empty((len(ids), *s.space.shape), dtype=s.space.dtype)
@@ -476,9 +556,12 @@ class Runner:
         while s.waiting:
             obs, rewards, terminated, truncated, info = s.envs.recv()
             ids = info["env_id"].tolist()
-            self.env_steps += len(ids)
+            self.env_steps += sum(i not in s.resetting for i in ids)
             for j, i in enumerate(ids):
                 s.waiting.discard(i)
+                if i in s.resetting:
+                    self._reset_arrived(s, i, _row(obs, j), info, j)
+                    continue
                 step = (s, i, _row(obs, j), float(rewards[j]), bool(terminated[j]), bool(truncated[j]), info, j)
                 if s.render:
                     later.append((*step[:2], _copy(step[2]), *step[3:6], _info_row(info, j), 0))
