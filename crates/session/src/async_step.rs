@@ -8,7 +8,7 @@
 //! picked out of a worker's (a `send` to envs 0 and 2 of a worker hosting 0..3) are gathered.
 
 use crate::batch::Batch;
-use crate::vec_env::{Phase, VecEnv};
+use crate::vec_env::{Phase, VecEnv, reset_options_json};
 use envhub_protocol::HubError;
 use std::time::Instant;
 
@@ -87,11 +87,7 @@ impl VecEnv {
             });
         }
         self.check_workers_free(env_ids)?;
-        let options_json = if options.is_empty() {
-            String::new()
-        } else {
-            serde_json::to_string(options).expect("options serialize")
-        };
+        let options_json = reset_options_json(options);
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let (lo, n) = (w.job.env_offset, w.job.worker_envs);

@@ -420,11 +420,7 @@ impl VecEnv {
                 hint: "pass one seed (or None) and one mask flag per env".into(),
             });
         }
-        let options_json = if options.is_empty() {
-            String::new()
-        } else {
-            serde_json::to_string(options).expect("options serialize")
-        };
+        let options_json = reset_options_json(options);
         let slot = self.pool.writable()?.index();
         for w in &mut self.workers {
             let range = w.job.env_offset..w.job.env_offset + w.job.worker_envs;
@@ -998,5 +994,14 @@ fn same_spaces(id: &str, links: &[WorkerLink]) -> Result<(Space, Space), HubErro
 fn close_all(links: Vec<WorkerLink>) {
     for mut link in links {
         link.close();
+    }
+}
+
+/// Reset options as a request carries them: empty when there are none.
+pub(crate) fn reset_options_json(options: &envhub_core::ResetOptions) -> String {
+    if options.is_empty() {
+        String::new()
+    } else {
+        serde_json::to_string(options).expect("options serialize")
     }
 }

@@ -54,7 +54,7 @@ def test_envs_reset_alone_follow_the_masked_reset_trajectories():
             for e in ids:
                 steps[e] += 1
 
-        def receive(count: int, resets: set[int] = frozenset()) -> None:
+        def receive(count: int, resets: frozenset[int] = frozenset()) -> None:
             while count:
                 obs, rew, term, trunc, info = env.recv()
                 for k, e in enumerate(info["env_id"].tolist()):
@@ -71,7 +71,7 @@ def test_envs_reset_alone_follow_the_masked_reset_trajectories():
         env.send_reset([0, 1], seed=reseed)
         steps[:2] = [0, 0]
         send([2, 3])
-        receive(n, resets={0, 1})
+        receive(n, resets=frozenset({0, 1}))
         for _ in range(second - 1):
             send([0, 1, 2, 3])
             receive(n)
