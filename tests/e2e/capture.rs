@@ -6,7 +6,7 @@
 
 use envhub_e2e::remote::{RemoteHub, known_hubs};
 use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry};
-use envhub_protocol::seal::{Direction, KEY_LEN, SessionKey};
+use envhub_protocol::seal::{Cipher, Direction, KEY_LEN, SessionKey};
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -105,11 +105,14 @@ fn candidate_keys(capture: &[u8]) -> impl Iterator<Item = [u8; KEY_LEN]> + '_ {
     raw.chain(hex)
 }
 
-/// The first candidate key in `capture` that opens `sealed` (a message of `direction`).
+/// The first candidate key in `capture` that opens `sealed` (a message of `direction`), as a
+/// key of either cipher.
 fn key_in(capture: &[u8], sealed: &[u8], direction: Direction) -> Option<[u8; KEY_LEN]> {
     candidate_keys(capture).find(|k| {
-        let mut m = sealed.to_vec();
-        SessionKey::new(k).open(direction, &mut m).is_ok()
+        Cipher::ALL.into_iter().any(|cipher| {
+            let mut m = sealed.to_vec();
+            SessionKey::new(cipher, k).open(direction, &mut m).is_ok()
+        })
     })
 }
 
@@ -119,7 +122,7 @@ fn a_capture_of_every_byte_of_a_link_without_tls_cannot_decrypt_the_session() {
     let shown = [7u8; KEY_LEN];
     let mut sealed_by_shown = 1u64.to_le_bytes().to_vec();
     sealed_by_shown.extend_from_slice(b"an observation");
-    SessionKey::new(&shown).seal(Direction::Response, &mut sealed_by_shown);
+    SessionKey::new(Cipher::fastest_here(), &shown).seal(Direction::Response, &mut sealed_by_shown);
     let leaky = format!(r#"{{"key":"{}"}}"#, "07".repeat(KEY_LEN));
     assert_eq!(
         key_in(leaky.as_bytes(), &sealed_by_shown, Direction::Response),
@@ -206,6 +209,12 @@ fn a_capture_of_every_byte_of_a_link_without_tls_cannot_decrypt_the_session() {
     assert!(
         in_capture(b"\"exchange\"") && in_capture(b"\"hello\""),
         "the open request and reply are not in the capture"
+    );
+    // The hub took the client's offer's first cipher (both ends run on this CPU).
+    let picked = format!("\"cipher\":\"{}\"", Cipher::fastest_here().name());
+    assert!(
+        in_capture(picked.as_bytes()),
+        "the open reply does not pick {picked}"
     );
     // Every candidate key of the capture against the first answer and the first request.
     let mut sealed = vec![(answers[0], Direction::Response)];

@@ -10,6 +10,7 @@ use envhub_e2e::remote::{RemoteHub, known_hubs, net_to};
 use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry};
 use envhub_protocol::OpenMessage;
 use envhub_protocol::handshake::{Identity, client_hello};
+use envhub_protocol::seal::Cipher;
 use rand::SeedableRng;
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdout, Command, Stdio};
@@ -186,7 +187,8 @@ fn attacker_process() {
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
         .as_millis() as u64;
-    let (hello, _pending) = client_hello(&Identity::generate().unwrap(), &hub, now).unwrap();
+    let (hello, _pending) =
+        client_hello(&Identity::generate().unwrap(), &hub, now, &Cipher::ALL).unwrap();
     let message = OpenMessage {
         request: serde_json::from_value(request).unwrap(),
         hello,

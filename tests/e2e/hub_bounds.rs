@@ -316,7 +316,13 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
             .duration_since(std::time::UNIX_EPOCH)
             .unwrap()
             .as_millis() as u64;
-        let (hello, _) = envhub_protocol::handshake::client_hello(&identity, &a.name, now).unwrap();
+        let (hello, _) = envhub_protocol::handshake::client_hello(
+            &identity,
+            &a.name,
+            now,
+            &envhub_protocol::seal::Cipher::ALL,
+        )
+        .unwrap();
         format!(
             r#"{{"request":{{"id":"gym-cartpole","config":{{"num_envs":1,"extra":{{"k":{kwarg}}}}},"client":"{client}","restart_on_crash":false,"step_timeout_ms":1000}},"hello":{}}}"#,
             serde_json::to_string(&hello).unwrap()

@@ -41,8 +41,10 @@ fn cartpole_reply(
     observation_space: serde_json::Value,
 ) -> (serde_json::Value, SessionKey) {
     let message = envhub_protocol::untrusted::read_open_request(request).unwrap();
-    let exchange = handshake::check_client_hello("liar", &message.hello, now_ms()).unwrap();
-    let (hello, key) = handshake::hub_answer(identity, "liar", "s1-1", request, &exchange).unwrap();
+    let (exchange, cipher) =
+        handshake::check_client_hello("liar", &message.hello, now_ms()).unwrap();
+    let (hello, key) =
+        handshake::hub_answer(identity, "liar", "s1-1", request, &exchange, cipher).unwrap();
     let reply = envhub_e2e::intruder::cartpole_open_reply(
         "s1-1",
         observation_space,

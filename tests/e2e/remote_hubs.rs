@@ -641,3 +641,65 @@ fn with_restart_on_crash_a_lost_hub_s_envs_move_to_the_hubs_that_remain() {
     }
     eprintln!("rb live again {:?} after it restarted", start.elapsed());
 }
+
+/// `envhub run` on a remote hub, as its own process, with `cipher` offered alone
+/// (`ENVHUB_SESSION_CIPHER`; `None`: the default offer): (exit code, stdout, stderr).
+fn run_remote(hub: &RemoteHub, cipher: Option<&str>) -> (i32, String, String) {
+    let mut cmd = std::process::Command::new(envhub_e2e::binary("envhub"));
+    cmd.args(["--connect", &hub.endpoint, "run", "gym-cartpole", "--hub"])
+        .arg(&hub.name)
+        .args([
+            "--num-envs",
+            "4",
+            "--workers",
+            "1",
+            "--steps",
+            "400",
+            "--seed",
+            "3",
+            "--json",
+        ])
+        .env(envhub_hub::ENVHUB_MULTICAST, "0")
+        .env_remove(envhub_hub::ENVHUB_CONNECT)
+        .env("ENVHUB_KNOWN_HUBS", envhub_e2e::remote::known_hubs())
+        .env_remove(envhub_hub::env_vars::ENVHUB_SESSION_CIPHER)
+        .stdin(std::process::Stdio::null());
+    if let Some(c) = cipher {
+        cmd.env(envhub_hub::env_vars::ENVHUB_SESSION_CIPHER, c);
+    }
+    let out = cmd.output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn sessions_sealed_with_either_cipher_run_the_same_rollout_and_a_bad_name_is_refused() {
+    let a = RemoteHub::start("ciphers", &[], &[]);
+    let mut rollouts = Vec::new();
+    for cipher in [None, Some("aes-256-gcm"), Some("chacha20-poly1305")] {
+        let (code, out, err) = run_remote(&a, cipher);
+        assert_eq!(code, 0, "{cipher:?}: {err}");
+        let v: serde_json::Value = serde_json::from_str(out.trim()).expect("--json output");
+        assert_eq!(v["steps"], 400, "{cipher:?}: {v}");
+        rollouts.push((cipher, v["episodes"].clone(), v["mean_return"].clone()));
+    }
+    // The same seeds give the same episodes whatever seals them.
+    for r in &rollouts[1..] {
+        assert_eq!(
+            (&r.1, &r.2),
+            (&rollouts[0].1, &rollouts[0].2),
+            "{rollouts:?}"
+        );
+    }
+    let (code, _, err) = run_remote(&a, Some("rot13"));
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("ENVHUB_SESSION_CIPHER")
+            && err.contains("rot13")
+            && err.contains("aes-256-gcm, chacha20-poly1305"),
+        "{err}"
+    );
+}

@@ -6,7 +6,9 @@
 //!
 //! `cargo test --release --features envhub-worker/mujoco -p envhub-e2e -- --ignored
 //! remote_pool_bench --nocapture` (ENVHUB_BENCH_ENVS, ENVHUB_BENCH_WORKERS,
-//! ENVHUB_BENCH_SECONDS and ENVHUB_BENCH_LANES, a comma-separated list, change the workload).
+//! ENVHUB_BENCH_SECONDS and ENVHUB_BENCH_LANES, a comma-separated list, change the workload;
+//! ENVHUB_BENCH_ZENOH_CONFIG gives the hub and the clients a Zenoh config file, to compare
+//! transports).
 
 use envhub_e2e::TestHub;
 use envhub_e2e::remote::{RemoteHub, client};
@@ -87,7 +89,13 @@ fn remote_pool_bench() {
         "--max-sessions-per-client",
         "0",
     ];
-    let hub = RemoteHub::start("poolbench", &unlimited, &[]);
+    // A Zenoh config file for both ends (e.g. another transport), to compare links.
+    let zenoh_config = std::env::var("ENVHUB_BENCH_ZENOH_CONFIG").ok();
+    let mut hub_args: Vec<&str> = unlimited.to_vec();
+    if let Some(path) = &zenoh_config {
+        hub_args.extend(["--zenoh-config", path.as_str()]);
+    }
+    let hub = RemoteHub::start("poolbench", &hub_args, &[]);
     let on_hub = Placement::Hubs(vec![hub.name.clone()]);
     let config = EnvConfig {
         workers: Some(workers),
@@ -107,7 +115,12 @@ fn remote_pool_bench() {
     let mut remote: Vec<(usize, VecEnv)> = lanes
         .into_iter()
         .map(|lanes| {
-            let c = client(&format!("bench{lanes}"), &[&hub]);
+            let mut c = client(&format!("bench{lanes}"), &[&hub]);
+            if let Some(path) = &zenoh_config {
+                let mut net = envhub_e2e::remote::net_to(&[&hub]);
+                net.config = Some(path.into());
+                c = c.with_network(net);
+            }
             let options = SessionOptions {
                 remote_lanes: lanes,
                 ..c.options().clone()

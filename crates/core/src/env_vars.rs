@@ -77,6 +77,11 @@ pub const ENVHUB_DESCRIBE_TIMEOUT: &str = "ENVHUB_DESCRIBE_TIMEOUT";
 /// machines with cores to spare.
 pub const ENVHUB_BRIDGE_SPIN_US: &str = "ENVHUB_BRIDGE_SPIN_US";
 
+/// The one cipher a client offers for its remote sessions, `aes-256-gcm` or
+/// `chacha20-poly1305` (default: both, the faster on this CPU first; the hub picks). For
+/// comparing them, or a CPU whose AES instructions are present but slow.
+pub const ENVHUB_SESSION_CIPHER: &str = "ENVHUB_SESSION_CIPHER";
+
 /// The folder of the Python environments built for suites (`python_envs:` in a registry),
 /// one venv each (default: `$XDG_CACHE_HOME/envhub/pyenvs`, else `~/.cache/envhub/pyenvs`).
 pub const ENVHUB_PYENV_DIR: &str = "ENVHUB_PYENV_DIR";

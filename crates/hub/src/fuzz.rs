@@ -370,7 +370,7 @@ mod targets {
     #[test]
     fn fuzz_sealed() {
         use envhub_protocol::seal::{Direction, SessionKey};
-        let key = SessionKey::new(&[5; 32]);
+        let key = SessionKey::new(envhub_protocol::seal::Cipher::ChaCha20Poly1305, &[5; 32]);
         let mut sealed = 7u64.to_le_bytes().to_vec();
         sealed.extend_from_slice(&[0u8; 48]);
         key.seal(Direction::Request, &mut sealed);

@@ -12,6 +12,7 @@ use crate::launcher::Launcher;
 use crate::python_host::UserAdapters;
 use envhub_net::{NetConfig, ServePolicy, Sessions};
 use envhub_protocol::handshake::{Identity, SeenHellos, check_client_hello, hub_answer};
+use envhub_protocol::seal::Cipher;
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use envhub_session::{SessionOptions, VecEnv};
 use serde_json::{Value, json};
@@ -428,13 +429,13 @@ impl State {
                     .map_err(|why| self.unreadable_open(why))?;
                 // Who asks, and that it is not a replay, before anything else is looked at.
                 let now = unix_ms();
-                let exchange = check_client_hello(&self.name, &message.hello, now)
-                    .and_then(|exchange| {
+                let (exchange, cipher) = check_client_hello(&self.name, &message.hello, now)
+                    .and_then(|(exchange, cipher)| {
                         self.hellos
                             .lock()
                             .unwrap_or_else(|e| e.into_inner())
                             .note(&exchange, now)
-                            .map(|()| exchange)
+                            .map(|()| (exchange, cipher))
                     })
                     .map_err(|why| {
                         self.refuse(
@@ -445,6 +446,7 @@ impl State {
                 let hello = Hello {
                     identity: &message.hello.identity,
                     exchange: &exchange,
+                    cipher,
                     request: &bytes,
                 };
                 Ok(serde_json::to_value(self.open(message.request, hello)?)
@@ -591,6 +593,7 @@ impl State {
             &session,
             hello.request,
             hello.exchange,
+            hello.cipher,
         )
         .map_err(|e| HubError::Internal(format!("the key exchange failed: {e}")))?;
         envhub_net::start(
@@ -623,6 +626,8 @@ impl State {
 struct Hello<'a> {
     identity: &'a str,
     exchange: &'a [u8; 32],
+    /// What the hub picked from the client's offer (`None`: it offered none).
+    cipher: Option<Cipher>,
     request: &'a [u8],
 }
 

@@ -898,6 +898,7 @@ mod tests {
                                 requests: None,
                                 request_sizes: 0..=0,
                                 key: Arc::new(SessionKey::new(
+                                    envhub_protocol::seal::Cipher::Aes256Gcm,
                                     &[0; envhub_protocol::seal::KEY_LEN],
                                 )),
                                 answered: Arc::default(),

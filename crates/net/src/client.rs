@@ -11,7 +11,7 @@
 
 use crate::config::{self, NetConfig};
 use envhub_protocol::handshake;
-use envhub_protocol::seal::SessionKey;
+use envhub_protocol::seal::{Cipher, SessionKey};
 use envhub_protocol::{HubError, HubInfo, OpenReply, OpenRequest, keys};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
@@ -97,6 +97,28 @@ impl Seen {
                 ),
                 hint: "only one hub of a name runs on a network: stop the other, or find the peer that holds a token in its name".into(),
             }),
+        }
+    }
+}
+
+/// The ciphers a session's open offers, preferred first: the one `ENVHUB_SESSION_CIPHER`
+/// names, else both with the faster on this CPU first.
+fn cipher_offer() -> Result<Vec<Cipher>, HubError> {
+    use envhub_core::env_vars::ENVHUB_SESSION_CIPHER;
+    match std::env::var(ENVHUB_SESSION_CIPHER) {
+        Ok(name) => Cipher::from_name(name.trim())
+            .map(|c| vec![c])
+            .ok_or_else(|| HubError::InvalidConfig {
+                what: ENVHUB_SESSION_CIPHER,
+                reason: format!(
+                    "{name:?} is no cipher; valid: {}",
+                    Cipher::ALL.map(Cipher::name).join(", ")
+                ),
+            }),
+        Err(_) => {
+            let first = Cipher::fastest_here();
+            let rest = Cipher::ALL.into_iter().filter(|&c| c != first);
+            Ok(std::iter::once(first).chain(rest).collect())
         }
     }
 }
@@ -367,8 +389,9 @@ impl Network {
         request: &OpenRequest,
         start_timeout: Duration,
     ) -> Result<(OpenReply, SessionKey), HubError> {
-        let (hello, pending) = handshake::client_hello(&self.identity, hub, unix_ms())
-            .map_err(|e| HubError::Internal(format!("cannot start a key exchange: {e}")))?;
+        let (hello, pending) =
+            handshake::client_hello(&self.identity, hub, unix_ms(), &cipher_offer()?)
+                .map_err(|e| HubError::Internal(format!("cannot start a key exchange: {e}")))?;
         let payload = serde_json::to_vec(&serde_json::json!({"request": request, "hello": hello}))
             .expect("requests serialize");
         // A hub reads no longer request: say so here, naming the hub and the limit.

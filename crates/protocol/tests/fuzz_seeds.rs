@@ -245,8 +245,13 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
         step_timeout_ms: 30_000,
     };
     let identity = envhub_protocol::handshake::Identity::generate().expect("an identity");
-    let (hello, _) = envhub_protocol::handshake::client_hello(&identity, "box1", 1_800_000_000_000)
-        .expect("a hello");
+    let (hello, _) = envhub_protocol::handshake::client_hello(
+        &identity,
+        "box1",
+        1_800_000_000_000,
+        &envhub_protocol::seal::Cipher::ALL,
+    )
+    .expect("a hello");
     add(
         "open_request",
         "cartpole",
@@ -262,6 +267,7 @@ fn seeds() -> Vec<(&'static str, String, Vec<u8>)> {
                 exchange: "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff".into(),
                 identity: "ffeeddccbbaa99887766554433221100ffeeddccbbaa99887766554433221100".into(),
                 proof: "ab".repeat(64),
+                cipher: Some("aes-256-gcm".into()),
             },
         };
         add("open_reply", name, picked(json(&reply)));
