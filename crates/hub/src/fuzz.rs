@@ -369,18 +369,26 @@ mod targets {
     /// without a panic, and nothing the fuzzer writes passes for the key's.
     #[test]
     fn fuzz_sealed() {
-        use envhub_protocol::seal::{Direction, SessionKey};
-        let key = SessionKey::new(envhub_protocol::seal::Cipher::ChaCha20Poly1305, &[5; 32]);
-        let mut sealed = 7u64.to_le_bytes().to_vec();
-        sealed.extend_from_slice(&[0u8; 48]);
-        key.seal(Direction::Request, &mut sealed);
-        fuzz("sealed", vec![sealed.clone()], |bytes| {
-            for direction in [Direction::Request, Direction::Response] {
-                let mut m = bytes.to_vec();
-                if key.open(direction, &mut m).is_ok()
-                    && !(direction == Direction::Request && bytes == &sealed[..])
-                {
-                    return Err("bytes the fuzzer made opened with the session's key".into());
+        use envhub_protocol::seal::{Cipher, Direction, SessionKey};
+        let keys = Cipher::ALL.map(|c| SessionKey::new(c, &[5; 32]));
+        let seeds: Vec<Vec<u8>> = keys
+            .iter()
+            .map(|key| {
+                let mut sealed = 7u64.to_le_bytes().to_vec();
+                sealed.extend_from_slice(&[0u8; 48]);
+                key.seal(Direction::Request, &mut sealed);
+                sealed
+            })
+            .collect();
+        fuzz("sealed", seeds.clone(), |bytes| {
+            for (key, sealed) in keys.iter().zip(&seeds) {
+                for direction in [Direction::Request, Direction::Response] {
+                    let mut m = bytes.to_vec();
+                    if key.open(direction, &mut m).is_ok()
+                        && !(direction == Direction::Request && bytes == &sealed[..])
+                    {
+                        return Err("bytes the fuzzer made opened with the session's key".into());
+                    }
                 }
             }
             Ok(())
