@@ -255,6 +255,21 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         self._received.clear()
         self._sent[:] = True
 
+    def _checked_env_ids(self, env_ids: Any) -> np.ndarray:
+        """`env_ids` as a flat integer array of distinct envs of this session, or an error
+        naming what is wrong and the valid range."""
+        ids = np.asarray(env_ids).reshape(-1)
+        if ids.dtype.kind not in "iu":
+            raise InvalidActionError(f"env_ids must be integers, got {ids.dtype}")
+        outside = ids[(ids < 0) | (ids >= self.num_envs)]
+        if len(outside):
+            raise InvalidActionError(
+                f"env_ids {outside[:8].tolist()} are not envs of this session; valid: 0 to {self.num_envs - 1}"
+            )
+        if len(np.unique(ids)) != len(ids):
+            raise InvalidActionError("env_ids must not repeat an env")
+        return ids
+
     def send(self, actions: Any, env_id: Any = None, *, env_ids: Any = None) -> None:
         """Sends one action to each env in `env_id` (EnvPool's name; `env_ids` is the same)
         without waiting; all envs if `None`. With `batch_size`, pass the envs `recv` returned
@@ -263,14 +278,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
             env_ids = env_id
         elif env_id is not None:
             raise InvalidActionError("pass `env_id` or `env_ids`, not both")
-        if env_ids is None:
-            ids = np.arange(self.num_envs)
-        else:
-            ids = np.asarray(env_ids).reshape(-1)
-            if ids.dtype.kind not in "iu":
-                raise InvalidActionError(f"env_ids must be integers, got {ids.dtype}")
-            if len(np.unique(ids)) != len(ids):
-                raise InvalidActionError("env_ids must not repeat an env")
+        ids = np.arange(self.num_envs) if env_ids is None else self._checked_env_ids(env_ids)
         a = self._codec.actions(actions, count=len(ids))
         self._session.send(a, ids.astype(np.int64).tolist())
         self._sent[ids] = True
@@ -284,9 +292,7 @@ class VectorEnv(gymnasium.vector.VectorEnv[Any, Any, np.ndarray]):
         stepped envs (rewards 0, not done). An env's episode is the same as after
         `reset(seed=..., options={..., "reset_mask": mask})` of it. Without `batch_size`
         only (`send`'s worker rule holds: an env whose worker has results out is refused)."""
-        ids = np.asarray(env_ids).reshape(-1)
-        if ids.dtype.kind not in "iu":
-            raise InvalidActionError(f"env_ids must be integers, got {ids.dtype}")
+        ids = self._checked_env_ids(env_ids)
         seeds = [None] * len(ids) if seed is None else [check_seed(s) for s in seed]
         if len(seeds) != len(ids):
             raise InvalidConfigError(f"got {len(seeds)} seeds for {len(ids)} envs; pass one per env id")

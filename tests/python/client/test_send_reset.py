@@ -86,6 +86,14 @@ def test_envs_reset_alone_follow_the_masked_reset_trajectories():
             env.send_reset([2, 3], seed=[1])
         with pytest.raises(envhub.InvalidConfigError, match="reset_mask"):
             env.send_reset([2], options={"reset_mask": mask})
+        # Ids that are no env of the session (negative, past the end), or repeated: named,
+        # with the valid range, by send and send_reset alike.
+        for bad in ([-1], [2, 4], [2, 2]):
+            why = "must not repeat" if bad == [2, 2] else rf"\[{bad[-1]}\] are not envs of this session; valid: 0 to 3"
+            with pytest.raises(envhub.InvalidActionError, match=why):
+                env.send_reset(bad)
+            with pytest.raises(envhub.InvalidActionError, match=why):
+                env.send(np.zeros((len(bad), 1), dtype=np.float32), bad)
     finally:
         env.close()
     for e in range(n):
