@@ -8,17 +8,17 @@
 //! Ed25519 key kept in its user's private folder) and a signature over the transcript: the
 //! hub's name, the session id, a digest of the open request as it arrived, both exchange keys
 //! and its identity ([`HubHello`]). Both ends derive the session key with HKDF-SHA256 from the
-//! X25519 shared secret, salted with the transcript.
+//! X25519 shared secret, salted with the transcript. A peer that records every byte of the
+//! link has the two public keys but neither private one; a peer that changes a byte of the
+//! request or the reply makes the client's check of the hub's signature fail; a hub's identity
+//! is pinned by its clients (trust on first use, `envhub-net`'s `known_hubs`).
 //!
 //! The client offers the ciphers it seals with, fastest on its CPU first; the hub takes the
 //! client's first unless that is AES-256-GCM, which it lacks the instructions for, and ChaCha
 //! is offered too ([`choose_cipher`]). Its choice is in the transcript and in the key's
 //! derivation, and the offer is in the request the transcript covers, so a peer that strips
 //! or changes either makes the open fail, and one key never serves two ciphers. A client that
-//! offers nothing (envhub before the offer) gets ChaCha20-Poly1305 and the transcript of then. A peer that records every byte of the
-//! link has the two public keys but neither private one; a peer that changes a byte of the
-//! request or the reply makes the client's check of the hub's signature fail; a hub's identity
-//! is pinned by its clients (trust on first use, `envhub-net`'s `known_hubs`).
+//! offers nothing (envhub before the offer) gets ChaCha20-Poly1305 and the transcript of then.
 //!
 //! `ring` does all of it (it is the AEAD's crate already): `agreement` (X25519, whose private
 //! keys it keeps ephemeral — hence a separate Ed25519 key for the hub's static identity, as
