@@ -368,14 +368,8 @@ class Runner:
                 mask = np.zeros(n, dtype=np.bool_)
                 mask[group] = True
                 obs, info = s.envs.reset(seed=seeds, options={**options, "reset_mask": mask})
-            texts, has = info.get("language"), info.get("_language")
             for i in group:
-                spec = assign[i][0]
-                # A language-conditioned suite says the task's instruction in its reset info.
-                if texts is not None and (has is None or has[i]) and isinstance(texts[i], str):
-                    if spec.id not in self.tasks:
-                        self.tasks[spec.id] = self.bench.task(spec, texts[i])
-                s.slots[i] = _Slot(obs=_row(obs, i), t0=t0, settle_left=self.bench.settle_steps)
+                self._reset_landed(s, i, assign[i], _row(obs, i), info, i, t0)
         if s.render:
             s.rendered = s.envs.render()
         for i, job in assign.items():
@@ -433,13 +427,21 @@ class Runner:
     def _reset_arrived(self, s: _Session, i: int, obs: Any, info: dict[str, Any], j: int) -> None:
         """Env `i`'s reset (sent alone) came back as row `j`: its episode starts."""
         job, init, t0 = s.resetting.pop(i)
+        self._reset_landed(s, i, job, obs, info, j, t0)
+        self._start(s, i, job, init)
+
+    def _reset_landed(
+        self, s: _Session, i: int, job: Job, obs: Any, info: dict[str, Any], j: int, t0: float
+    ) -> None:
+        """Env `i`, reset for `job` at `t0`, came back as row `j` of `info`: its slot holds
+        the first observation `obs`."""
+        spec = job[0]
         texts, has = info.get("language"), info.get("_language")
         # A language-conditioned suite says the task's instruction in its reset info.
         if texts is not None and (has is None or has[j]) and isinstance(texts[j], str):
-            if job[0].id not in self.tasks:
-                self.tasks[job[0].id] = self.bench.task(job[0], texts[j])
+            if spec.id not in self.tasks:
+                self.tasks[spec.id] = self.bench.task(spec, texts[j])
         s.slots[i] = _Slot(obs=obs, t0=t0, settle_left=self.bench.settle_steps)
-        self._start(s, i, job, init)
 
     def _next_job(self, s: _Session, i: int) -> Job:
         """The next episode for env `i`: in a session of every task, the next one of the task
