@@ -34,7 +34,8 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="envhub eval",
         description="Run a policy over a benchmark of the catalog with the benchmark's own protocol. "
-        "`envhub eval compare RUN_A RUN_B` compares two runs (--help there).",
+        "`envhub eval compare RUN_A RUN_B` compares two runs, `envhub eval merge OUT SHARD...` joins the shards "
+        "of a run (--help there).",
     )
     p.add_argument("benchmark", nargs="?", help="a benchmark of the catalog (--list shows them)")
     p.add_argument("--list", action="store_true", help="list the catalog's benchmarks and exit")
@@ -76,7 +77,78 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--record", metavar="DIR", help="record every episode as a LeRobot v3 dataset in DIR (appended to)")
     p.add_argument("--record-fps", type=int, help="the dataset's fps (default: the env's render_fps)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    g = p.add_argument_group("more than one machine (docs/guide/eval.md)")
+    g.add_argument("--shard", metavar="I/N", help="run only shard I (0 to N-1) of N: a fixed slice of the episodes")
+    g.add_argument("--shards", type=int, metavar="N", help="with --ray or --slurm-script: the number of shards")
+    g.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run the shards as Ray tasks (the cluster at ADDRESS, RAY_ADDRESS's, or a local one) and merge them")
+    g.add_argument("--ray-retries", type=int, default=3, metavar="K", help="with --ray: times a lost shard runs again (default 3)")
+    g.add_argument("--cpus-per-shard", type=float, default=1.0, metavar="C", help="with --ray: CPUs Ray reserves per shard")
+    g.add_argument("--slurm-script", metavar="FILE",
+                   help="write an sbatch job array script (task I runs shard I, task 0 submits the merge) and exit")
+    g.add_argument("--slurm-option", action="append", default=[], metavar="OPT",
+                   help="with --slurm-script: an #SBATCH line (--partition=gpu, --time=4:00:00); repeatable")
     return p
+
+
+def merge_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="envhub eval merge",
+        description="Join the folders of an evaluation's shards (`envhub eval --shard I/N`) into one results table, "
+        "report and statistics: the table one machine would have written.",
+    )
+    p.add_argument("out", metavar="OUT", help="the merged folder (new, or an earlier merge's)")
+    p.add_argument("shards", metavar="SHARD", nargs="+", help="every shard's --out folder, each once")
+    p.add_argument("--report", action="store_true", help="write OUT/report.html")
+    return p
+
+
+def merge_main(argv: list[str]) -> int:
+    from .merge import merge
+    from .results import markdown
+
+    args = merge_parser().parse_args(argv)
+    try:
+        results = merge(args.out, args.shards, report=args.report)
+    except (BenchmarkError, FileExistsError) as e:
+        print(f"envhub eval merge: error: {e}", file=sys.stderr)
+        return 2
+    sys.stdout.write(markdown(results))
+    print(f"\nresults: {results['run']['out']}/results.json (merged from {len(args.shards)} shards)", file=sys.stderr)
+    return 1 if results["summary"]["errors"] else 0
+
+
+def _distributed(args: argparse.Namespace, argv: list[str], registry: Any) -> int:
+    """--slurm-script and --ray: the shards' command line, written or run."""
+    from .distribute import shard_argv
+    from .evaluate import resolve
+    from .results import markdown
+
+    if args.shard is not None:
+        raise BenchmarkError("--shard runs one shard; --ray and --slurm-script run them all (give --shards N)")
+    if args.shards is None:
+        raise BenchmarkError("--ray and --slurm-script need --shards N (how many slices the episodes are cut in)")
+    if args.seeds is not None or args.record is not None:
+        raise BenchmarkError("--seeds and --record run on one machine only (not with --ray or --slurm-script)")
+    own = shard_argv(argv)
+    if args.slurm_script is not None:
+        from .slurm import slurm_script, write_slurm_script
+
+        write_slurm_script(args.slurm_script, slurm_script(args.benchmark, own, args.out, args.shards, args.slurm_option))
+        return 0
+    if args.video:
+        raise BenchmarkError("--video is not supported with --ray (a shard's videos stay on its node); use --slurm-script "
+                             "with a shared --out, or --shard on each machine")
+    from .ray_shards import run_on_ray
+
+    bench, _ = resolve(args.benchmark, args.tasks, args.episodes, registry)
+    results = run_on_ray(
+        own, args.out, args.shards, bench=bench, address=args.ray or None, retries=args.ray_retries,
+        cpus_per_shard=args.cpus_per_shard, resume=args.resume, report=args.report, progress=not args.quiet,
+    )
+    sys.stdout.write(markdown(results))
+    print(f"\nresults: {results['run']['out']}/results.json (merged from {args.shards} shards)", file=sys.stderr)
+    return 1 if results["summary"]["errors"] else 0
 
 
 #: The signals that stop an evaluation cleanly (SIGKILL cannot be caught: its workers and
@@ -166,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["compare"]:
         return compare_main(argv[1:])
+    if argv[:1] == ["merge"]:
+        return merge_main(argv[1:])
     args = parser().parse_args(argv)
     registry = args.registry
     for s in STOP_SIGNALS:
@@ -185,6 +259,12 @@ def main(argv: list[str] | None = None) -> int:
         if args.out is None:
             print("envhub eval: error: give --out DIR (the folder the results are written to)", file=sys.stderr)
             return 2
+        if args.ray is not None or args.slurm_script is not None:
+            return _distributed(args, argv, registry)
+        if args.shard is not None and args.seeds is not None:
+            raise BenchmarkError("--shard runs a slice of one protocol's episodes: not with --seeds")
+        if args.shards is not None:
+            raise BenchmarkError("--shards N goes with --ray or --slurm-script (one shard: --shard I/N)")
         hubs = args.hubs if args.hubs in (None, "all", "local") else args.hubs.split(",")
         if args.seeds is not None:
             from .evaluate import evaluate_seeds, seeds_markdown
@@ -220,6 +300,7 @@ def main(argv: list[str] | None = None) -> int:
             step_timeout=args.step_timeout,
             policy_timeout=args.policy_timeout or None,
             progress=not args.quiet,
+            **({"shard": args.shard} if args.shard is not None else {}),
         )
     except (BenchmarkError, FileExistsError, ResumeError, RegistryError, PolicyLoadError) as e:
         print(f"envhub eval: error: {e}", file=sys.stderr)

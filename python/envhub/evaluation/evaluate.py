@@ -18,6 +18,7 @@ from .catalog import Catalog
 from .policy import Policy, PolicyLoadError
 from .results import EpisodeLog, FolderLock, Progress, markdown, summarize, write_outputs
 from .runner import Runner
+from .shards import Shard, episode_keys, parse_shard
 
 __all__ = ["evaluate", "evaluate_seeds", "resolve", "make_policy", "seeds_markdown"]
 
@@ -186,6 +187,8 @@ def evaluate(
     step_timeout: float | None = None,
     policy_timeout: float | None = DEFAULT_TIMEOUT,
     progress: bool = True,
+    shard: Any = None,
+    on_episode: Any = None,
 ) -> dict[str, Any]:
     """Runs `policy` over `benchmark` (a catalog name, or a declaration dict) and returns the
     results dict (docs/guide/eval.md); `out` gets `episodes.jsonl` as episodes finish, then
@@ -195,12 +198,16 @@ def evaluate(
     agent`), a `Policy`, or `module:function`; `server`: a policy server's URL instead.
     `resume`: episodes already in `out` are not run again (errored ones are).
     `policy_timeout`: seconds each policy call may take before its batch's episodes fail
-    (None: unbounded)."""
+    (None: unbounded). `shard`: a `Shard` (or `"I/N"`): only its slice of the episodes runs
+    (`envhub eval merge` joins the shards' folders). `on_episode`: called with each episode's
+    record once it is durable."""
     if num_envs < 1:
         raise BenchmarkError(f"num_envs must be at least 1, not {num_envs}")
     if replan is not None and replan < 1:
         raise BenchmarkError(f"replan must be at least 1, not {replan}")
     bench, catalog = resolve(benchmark, tasks, episodes, registry)
+    if isinstance(shard, str):
+        shard = parse_shard(shard)
     folder = os.fspath(out) if out is not None else tempfile.mkdtemp(prefix=f"envhub-eval-{bench.name}-")
     lock = FolderLock(folder)  # before anything starts: a second run into the folder is refused
     try:
@@ -209,7 +216,8 @@ def evaluate(
             policy_env=policy_env, per_task=per_task, server=server, server_protocol=server_protocol,
             replan=replan, fail_fast=fail_fast, video=video, video_failures_only=video_failures_only,
             video_fps=video_fps, record=record, record_fps=record_fps, report=report,
-            step_timeout=step_timeout, policy_timeout=policy_timeout, progress=progress,
+            step_timeout=step_timeout, policy_timeout=policy_timeout, progress=progress, shard=shard,
+            on_episode=on_episode,
         )
     finally:
         lock.release()
@@ -240,6 +248,8 @@ def _evaluate(
     step_timeout: float | None,
     policy_timeout: float | None,
     progress: bool,
+    shard: Shard | None,
+    on_episode: Any,
 ) -> dict[str, Any]:
     pol = make_policy(
         policy, policy_env=policy_env or (bench.python_env if isinstance(policy, str) and server is None else None),
@@ -258,7 +268,7 @@ def _evaluate(
             except LayoutError as e:  # what the server asks for, refused: a usage error
                 raise BenchmarkError(str(e)) from None
         description = pol.describe()
-        task_plan = [{"id": t.id, "entry": t.entry, "text": t.text, "index": t.index} for t in bench.tasks]
+        task_plan = [{"id": t.id, "entry": t.entry, "text": t.text, "index": t.index, **({"axis": t.axis} if t.axis else {})} for t in bench.tasks]
         header = {
             "schema": "envhub.eval/1",
             "benchmark": bench.name,
@@ -266,9 +276,11 @@ def _evaluate(
             "tasks": [t["id"] for t in task_plan],
             "policy": description,
         }
+        if shard is not None:
+            header["shard"] = shard.as_dict()
         log = EpisodeLog(folder, header, resume)
-        total = len(bench.tasks) * bench.episodes_per_task
-        keys = {f"{t.id}#{k}" for t in bench.tasks for k in range(bench.episodes_per_task)}
+        mine = episode_keys(bench) if shard is None else shard.keys(bench)
+        total, keys = len(mine), set(mine)
         skip = log.done() & keys
         meter = Progress(total, len(skip), bench.rule, quiet=not progress)
         videos = None
@@ -285,6 +297,8 @@ def _evaluate(
 
         def log_result(result: dict[str, Any]) -> None:
             log.add(result)
+            if on_episode is not None:
+                on_episode(result)
             if result.get("error") is not None:
                 meter.error(f"{result['task']}#{result['index']}", str(result["error"]))
             meter.episode(result.get("success"))
@@ -295,7 +309,7 @@ def _evaluate(
         )
         started, t0 = _now(), time.monotonic()
         try:
-            runner.run(skip)
+            runner.run(skip | (set(episode_keys(bench)) - keys))  # another shard's episodes are skipped
         finally:
             meter.close()
             log.close()
@@ -339,6 +353,8 @@ def _evaluate(
             "per_task": per_task_rows,
             "episodes": records,
         }
+        if shard is not None:
+            results["shard"] = shard.as_dict()
         write_outputs(folder, results)
         if report:
             from .report import write_report
