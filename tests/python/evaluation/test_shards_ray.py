@@ -1,0 +1,156 @@
+"""`envhub eval --ray ADDRESS --shards N` on a local Ray cluster (`ray start --head`, its own
+worker processes): one shard per Ray task, merged to the one-machine table; a Ray worker
+killed mid-shard costs only that shard's unfinished episodes, which run again in another
+worker. Skipped without Ray (an error under ENVHUB_PY_REQUIRED, where `make` installs it)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+import pytest
+from harness import import_envhub
+
+import_envhub()
+
+try:
+    import ray  # noqa: F401
+except ImportError:
+    if os.environ.get("ENVHUB_PY_REQUIRED"):
+        raise
+    pytest.skip("Ray is not installed (requirements-dev.txt has it: make py-install)", allow_module_level=True)
+
+pytestmark = pytest.mark.xdist_group("ray")  # one Ray cluster at a time on a small machine
+
+# Swimmer's episodes run their 1000 steps; a policy call of 2 ms makes a shard last seconds,
+# long enough to kill its worker between two episodes.
+POLICY = """\
+import time
+import numpy as np
+
+DIMS = {"mujoco-hopper": 3, "mujoco-swimmer": 2}
+
+def act(observations, tasks):
+    time.sleep(0.002)
+    return [np.tanh(np.asarray(o[: DIMS[t.entry]], dtype=np.float32)) for o, t in zip(observations, tasks)]
+"""
+RUN = ["mujoco", "--tasks", "mujoco-hopper", "mujoco-swimmer", "--episodes", "3", "--quiet"]
+BIN = os.path.join(os.path.dirname(sys.executable), "ray")
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A head node on loopback with 3 CPUs: up to 3 shards at once, each in a worker process."""
+    port = free_port()
+    temp = tempfile.mkdtemp(prefix="ray-", dir="/tmp")  # Ray's socket paths must stay short
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    start = subprocess.run(
+        [BIN, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=3",
+         "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={temp}",
+         "--object-store-memory=100000000", f"--ray-client-server-port={free_port()}"],
+        capture_output=True, text=True, timeout=180, env=env,
+    )
+    assert start.returncode == 0, start.stdout[-2000:] + start.stderr[-2000:]
+    try:
+        yield f"127.0.0.1:{port}"
+    finally:
+        subprocess.run([BIN, "stop", "--force"], capture_output=True, timeout=120, env=env)
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def cli(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "envhub.evaluation", *args], capture_output=True, text=True,
+                          timeout=900, **kw)
+
+
+def rows(folder) -> list[dict]:
+    with open(os.path.join(folder, "results.csv"), newline="") as f:
+        return [{k: v for k, v in r.items() if k != "seconds"} for r in csv.DictReader(f)]
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ray")
+    (root / "policy.py").write_text(POLICY)
+    done = cli(*RUN, "--policy", f"{root / 'policy.py'}:act", "--out", str(root / "whole"))
+    assert done.returncode == 0, done.stderr[-3000:]
+    return root
+
+
+def test_ray_shards_merge_to_the_one_machine_table(cluster, whole, tmp_path):
+    out = tmp_path / "run"
+    done = cli(*RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster, "--shards", "3", "--out", str(out))
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert rows(out) == rows(whole / "whole")
+    merged = json.loads((out / "results.json").read_text())
+    assert [s["shard"] for s in merged["run"]["shards"]] == ["0/3", "1/3", "2/3"]
+    assert all(s["attempts"] == 1 for s in merged["run"]["shards"])
+    # The shards' folders stay, and merge again by hand to the same table.
+    again = cli("merge", str(tmp_path / "again"), *(str(out / "shards" / f"shard-{i}") for i in range(3)))
+    assert again.returncode == 0 and rows(tmp_path / "again") == rows(whole / "whole")
+
+
+def _shard_evaluation(shard: str) -> tuple[int, int] | None:
+    """(pid, parent pid) of the evaluation process running `--shard shard`, if one runs."""
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                argv = f.read().split(b"\0")
+            with open(f"/proc/{pid}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+        if b"envhub.evaluation" in argv and shard.encode() in argv:
+            return int(pid), ppid
+    return None
+
+
+def test_a_killed_ray_worker_costs_only_its_unfinished_episodes(cluster, whole, tmp_path):
+    out = tmp_path / "run"
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "envhub.evaluation", *RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster,
+         "--shards", "2", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        # Shard 1 is swimmer's three episodes: kill its Ray worker once its first is kept.
+        log = out / "shards" / "shard-1" / "episodes.jsonl"
+        deadline = time.monotonic() + 300
+        while not (log.exists() and log.read_text().count("\n") >= 1):
+            assert driver.poll() is None, driver.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
+            time.sleep(0.05)
+        found = _shard_evaluation("1/2")
+        assert found is not None, "no evaluation process of shard 1/2"
+        os.kill(found[1], signal.SIGKILL)  # the Ray worker process that runs the shard's task
+        stdout, stderr = driver.communicate(timeout=600)
+    finally:
+        if driver.poll() is None:
+            driver.kill()
+            driver.wait()
+    assert driver.returncode == 0, stderr[-3000:]
+    assert "shard 1/2 lost" in stderr and "finished ones are kept" in stderr
+    assert rows(out) == rows(whole / "whole")
+    merged = json.loads((out / "results.json").read_text())
+    shard1 = merged["run"]["shards"][1]
+    assert shard1["attempts"] == 2
+    # The second attempt ran fewer steps than the shard's episodes hold: what was kept did not run again.
+    lengths = sum(e["length"] for e in merged["episodes"] if e["task"].endswith("swimmer"))
+    assert shard1["env_steps"] < lengths, (shard1, lengths)
+    assert _shard_evaluation("1/2") is None  # nothing of the killed attempt is left running
