@@ -35,7 +35,7 @@ def parser() -> argparse.ArgumentParser:
         prog="envhub eval",
         description="Run a policy over a benchmark of the catalog with the benchmark's own protocol. "
         "`envhub eval compare RUN_A RUN_B` compares two runs, `envhub eval merge OUT SHARD...` joins the shards "
-        "of a run (--help there).",
+        "of a run, `envhub eval status OUT` shows a sharded run's progress (--help there).",
     )
     p.add_argument("benchmark", nargs="?", help="a benchmark of the catalog (--list shows them)")
     p.add_argument("--list", action="store_true", help="list the catalog's benchmarks and exit")
@@ -104,7 +104,7 @@ def merge_parser() -> argparse.ArgumentParser:
 
 
 def merge_main(argv: list[str]) -> int:
-    from .merge import merge
+    from .merge import merge, shards_markdown
     from .results import markdown
 
     args = merge_parser().parse_args(argv)
@@ -114,6 +114,7 @@ def merge_main(argv: list[str]) -> int:
         print(f"envhub eval merge: error: {e}", file=sys.stderr)
         return 2
     sys.stdout.write(markdown(results))
+    sys.stderr.write("\n" + shards_markdown(results))
     print(f"\nresults: {results['run']['out']}/results.json (merged from {len(args.shards)} shards)", file=sys.stderr)
     return 1 if results["summary"]["errors"] else 0
 
@@ -146,7 +147,10 @@ def _distributed(args: argparse.Namespace, argv: list[str], registry: Any) -> in
         own, args.out, args.shards, bench=bench, address=args.ray or None, retries=args.ray_retries,
         cpus_per_shard=args.cpus_per_shard, resume=args.resume, report=args.report, progress=not args.quiet,
     )
+    from .merge import shards_markdown
+
     sys.stdout.write(markdown(results))
+    sys.stderr.write("\n" + shards_markdown(results))
     print(f"\nresults: {results['run']['out']}/results.json (merged from {args.shards} shards)", file=sys.stderr)
     return 1 if results["summary"]["errors"] else 0
 
@@ -240,6 +244,10 @@ def main(argv: list[str] | None = None) -> int:
         return compare_main(argv[1:])
     if argv[:1] == ["merge"]:
         return merge_main(argv[1:])
+    if argv[:1] == ["status"]:
+        from .watch import status_main
+
+        return status_main(argv[1:])
     args = parser().parse_args(argv)
     registry = args.registry
     for s in STOP_SIGNALS:

@@ -11,7 +11,7 @@ from typing import Any, Sequence
 from .results import LOG, RUN, FolderLock, _write_json, summarize, write_outputs
 from .shards import RESULTS, ShardError, check_shards, merged_records, read_shard
 
-__all__ = ["merge", "shard_rows"]
+__all__ = ["merge", "shard_rows", "shards_markdown"]
 
 
 def _merged_before(folder: str) -> bool:
@@ -121,6 +121,17 @@ def merge(out: str | os.PathLike[str], folders: Sequence[str | os.PathLike[str]]
         return results
     finally:
         lock.release()
+
+
+def shards_markdown(results: dict[str, Any]) -> str:
+    """Each shard's host, episodes, attempts and time, as markdown."""
+    lines = ["| shard | host | episodes | attempts | seconds | episodes/min |", "|---|---|---:|---:|---:|---:|"]
+    for s in results["run"].get("shards") or []:
+        secs = s.get("seconds")
+        rate = f"{s['episodes'] / secs * 60:.1f}" if secs else "–"
+        lines.append(f"| {s['shard']} | {s.get('host') or '?'} | {s['episodes']} | {s.get('attempts', 1)} | "
+                     f"{'–' if secs is None else f'{secs:.1f}'} | {rate} |")
+    return "\n".join(lines) + "\n"
 
 
 def _span(started: str | None, finished: str | None) -> float | None:

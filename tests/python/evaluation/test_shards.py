@@ -112,6 +112,7 @@ def test_three_shards_merge_to_the_one_machine_table(runs):
     shards = merged["run"]["shards"]
     assert [s["shard"] for s in shards] == ["0/3", "1/3", "2/3"] and sum(s["episodes"] for s in shards) == 6
     assert all(s["seconds"] is not None and s["host"] for s in shards)
+    assert "| shard | host | episodes |" in done.stderr and "| 2/3 |" in done.stderr
     assert (root / "merged" / "report.html").exists()
 
 
@@ -205,12 +206,19 @@ def test_slurm_script_run_by_hand_gives_the_one_machine_table(runs, tmp_path):
     env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "SBATCH_ARGS": str(tmp_path / "sbatch.args"),
            "SLURM_ARRAY_JOB_ID": "4242"}
     for i in range(3):
+        if i == 1:  # one shard finished, two not started
+            status = json.loads(cli("status", str(out), "--json").stdout)
+            assert (status["done"], status["total"], status["finished"]) == (2, 6, False), status
+            assert "1 finished, 2 not started" in cli("status", str(out)).stdout
         task = subprocess.run(["bash", str(script)], env={**env, "SLURM_ARRAY_TASK_ID": str(i)},
                               capture_output=True, text=True, timeout=600)
         assert task.returncode == 0, task.stderr[-3000:]
     submitted = (tmp_path / "sbatch.args").read_text().splitlines()
     assert "--dependency=afterany:4242" in submitted
     wrap = submitted[submitted.index("--wrap") + 1]
+    # The run's progress from the shards' folders: every episode done, every shard finished.
+    status = cli("status", str(out))
+    assert status.returncode == 0 and status.stdout.startswith("[6/6] | ") and "3 shards: 3 finished" in status.stdout
     merged = subprocess.run(["sh", "-c", wrap], env=env, capture_output=True, text=True, timeout=300)
     assert merged.returncode == 0, merged.stderr
     assert rows(out) == rows(root / "whole") and tasks_csv(out) == tasks_csv(root / "whole")
