@@ -4,7 +4,10 @@ by field before anything starts.
 A benchmark names what runs (one catalog entry per task, `entries:`, or one multi-task entry
 and its tasks, `entry:` + `tasks:`) and the protocol each episode follows: how its initial
 condition is chosen (`init`), settling steps, the horizon, the success rule, what the policy
-is shown. Every mistake is an error that names the valid choices, closest first.
+is shown. A perturbation benchmark (LIBERO-PRO, LIBERO-Plus) adds `axes:`: each axis (one of
+`axes.AXES`) runs the tasks under the entry options that perturb them, and its tasks carry
+the axis (ids `<benchmark>/<axis>/<task>`). Every mistake is an error that names the valid
+choices, closest first.
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ FIELDS = {
     "action": "{sign: [i, ..]}: action dims sent as -1/+1 by their sign (a gripper)",
     "kwargs": "options the envs are made with",
     "python_env": "the catalog Python environment the policy runs in (optional)",
+    "axes": "with `entry`: {axis: {options: {..}, tasks: ..}}: the tasks again under each perturbation axis (the entry "
+    "options that perturb them; `tasks` as above, default the benchmark's)",
     "servers": "per server protocol (vla-eval, openpi), what its own harness sends (docs/guide/eval-report.md)",
     "source": "the registry file that declared it (set by the catalog)",
 }
@@ -71,6 +76,8 @@ class TaskSpec:
     text: str
     index: int
     name: Any = None
+    #: The perturbation axis the task runs under (`axes:`), else None.
+    axis: str | None = None
 
 
 @dataclass
@@ -96,27 +103,37 @@ class Benchmark:
     raw: dict[str, Any] = field(default_factory=dict)
     #: The reset option that switches an env to a task: one session runs every task.
     task_reset_option: str | None = None
+    #: A perturbation benchmark's axes as checked: `{axis: {options: {..}, tasks: [..]}}`.
+    axes: dict[str, dict[str, Any]] | None = None
 
     def task(self, spec: TaskSpec, text: str | None = None) -> Task:
         return Task(benchmark=self.name, id=spec.id, entry=spec.entry, text=text or spec.text, index=spec.index)
 
     def select(self, tasks: list[str] | None, episodes: int | None) -> Benchmark:
         """This benchmark narrowed to `tasks` (ids, or their last part: `0`, `reach-v3`) and
-        `episodes` per task."""
+        `episodes` per task. With axes, an axis (`position`) picks its tasks, `<axis>/<task>`
+        one task, and a task's last part (`0`) that task on every axis."""
         import copy
 
         out = copy.copy(self)
         if tasks:
-            by: dict[str, TaskSpec] = {}
+            ids = {t.id: t for t in self.tasks}
+            by: dict[str, list[TaskSpec]] = {}
             for t in self.tasks:
-                by[t.id] = t
-                by.setdefault(t.id.rsplit("/", 1)[-1], t)
-            picked = []
+                last = t.id.rsplit("/", 1)[-1]
+                for key in [last] if t.axis is None else [f"{t.axis}/{last}", t.axis, last]:
+                    by.setdefault(key, []).append(t)
+            picked: list[TaskSpec] = []
             for name in tasks:
-                if name not in by:
-                    raise closest(name, [t.id for t in self.tasks], f"task of `{self.name}`")
-                if by[name] not in picked:
-                    picked.append(by[name])
+                if name in ids:
+                    chosen = [ids[name]]
+                elif name in by:
+                    # Without axes a last part names one task (the first, as ids are unique).
+                    chosen = by[name] if by[name][0].axis else by[name][:1]
+                else:
+                    valid = [t.id for t in self.tasks] + sorted({t.axis for t in self.tasks if t.axis})
+                    raise closest(name, valid, f"task of `{self.name}`")
+                picked += [t for t in chosen if t not in picked]
             out.tasks = picked
         if episodes is not None:
             if episodes < 1:
@@ -211,6 +228,7 @@ class Benchmark:
             "action": self.action,
             "kwargs": self.kwargs,
             "python_env": self.python_env,
+            **({"axes": self.axes} if self.axes else {}),
         }
 
 
@@ -288,12 +306,51 @@ def _init(value: Any, where: str) -> dict[str, Any]:
     return {"seed_start": _int("init.seed_start", arg, where, low=0)}
 
 
+def _task_names(tasks: Any, where: str, field: str = "tasks") -> list[int | str]:
+    """A `tasks` value as its list of task indexes or names."""
+    if isinstance(tasks, int) and not isinstance(tasks, bool):
+        names: list[int | str] = list(range(_int(field, tasks, where)))
+    elif isinstance(tasks, list) and tasks and all(isinstance(t, (int, str)) and not isinstance(t, bool) for t in tasks):
+        names = list(tasks)
+    else:
+        raise BenchmarkError(
+            f"{where}: `{field}` must be a task count or a list of task indexes or names, not {tasks!r}"
+        )
+    if len(set(map(str, names))) != len(names):
+        raise BenchmarkError(f"{where}: `{field}` lists a task twice")
+    return names
+
+
+def _axes(value: Any, tasks: Any, where: str) -> dict[str, dict[str, Any]]:
+    """`axes:` checked: every axis one of `axes.AXES`, with the entry options that perturb
+    its tasks (`options`) and its tasks (`tasks`, else the benchmark's)."""
+    from .axes import AXES
+
+    value = _mapping("axes", value, where)
+    if not value:
+        raise BenchmarkError(f"{where}: `axes` is empty; name at least one of: {', '.join(AXES)}")
+    out: dict[str, dict[str, Any]] = {}
+    for axis, decl in value.items():
+        if axis not in AXES:
+            raise closest(str(axis), list(AXES), f"perturbation axis in {where}")
+        decl = _mapping(f"axes.{axis}", decl if decl is not None else {}, where)
+        _keys(decl, ["options", "tasks"], f"{where} `axes.{axis}`")
+        options = dict(_mapping(f"axes.{axis}.options", decl.get("options") or {}, where))
+        own = decl.get("tasks", tasks)
+        if own is None:
+            raise BenchmarkError(f"{where}: axis `{axis}` has no tasks; give `tasks` (the benchmark's or the axis's)")
+        out[str(axis)] = {"options": options, "tasks": _task_names(own, where, f"axes.{axis}.tasks")}
+    return out
+
+
 def _tasks(name: str, decl: dict[str, Any], where: str) -> list[TaskSpec]:
     if ("entries" in decl) == ("entry" in decl):
         raise BenchmarkError(f"{where}: give either `entries` (one entry per task) or `entry` (with `tasks`)")
     if "entries" in decl:
-        if "tasks" in decl or "task_option" in decl or "task_reset_option" in decl:
-            raise BenchmarkError(f"{where}: `tasks`/`task_option`/`task_reset_option` go with `entry`, not with `entries`")
+        if "tasks" in decl or "task_option" in decl or "task_reset_option" in decl or "axes" in decl:
+            raise BenchmarkError(
+                f"{where}: `tasks`/`task_option`/`task_reset_option`/`axes` go with `entry`, not with `entries`"
+            )
         entries = _str_list("entries", decl["entries"], where)
         if not entries:
             raise BenchmarkError(f"{where}: `entries` is empty")
@@ -305,16 +362,21 @@ def _tasks(name: str, decl: dict[str, Any], where: str) -> list[TaskSpec]:
     if not isinstance(option, str) or not option:
         raise BenchmarkError(f"{where}: `task_option` must be an option name, not {option!r}")
     tasks = decl.get("tasks")
+    if "axes" in decl:
+        if "task_reset_option" in decl:
+            raise BenchmarkError(
+                f"{where}: `axes` and `task_reset_option` do not go together (each axis's tasks are made with its options)"
+            )
+        specs: list[TaskSpec] = []
+        for axis, spec in _axes(decl["axes"], tasks, where).items():
+            for t in spec["tasks"]:
+                options = {**spec["options"], option: t}
+                spec_id = f"{name}/{axis}/{t}"
+                specs.append(TaskSpec(spec_id, entry, options, str(t), len(specs), name=t, axis=axis))
+        return specs
     if tasks is None:
         return [TaskSpec(id=name, entry=entry, options={}, text=entry, index=0)]
-    if isinstance(tasks, int) and not isinstance(tasks, bool):
-        names: list[int | str] = list(range(_int("tasks", tasks, where)))
-    elif isinstance(tasks, list) and tasks and all(isinstance(t, (int, str)) and not isinstance(t, bool) for t in tasks):
-        names = list(tasks)
-    else:
-        raise BenchmarkError(f"{where}: `tasks` must be a task count or a list of task indexes or names, not {tasks!r}")
-    if len(set(map(str, names))) != len(names):
-        raise BenchmarkError(f"{where}: `tasks` lists a task twice")
+    names = _task_names(tasks, where)
     return [
         TaskSpec(id=f"{name}/{t}", entry=entry, options={option: t}, text=str(t), index=i, name=t)
         for i, t in enumerate(names)
@@ -424,4 +486,5 @@ def parse(name: str, decl: Any, entries: set[str] | None = None) -> Benchmark:
         source=str(decl.get("source", "")),
         raw=dict(decl),
         task_reset_option=reset_option,
+        axes=_axes(decl["axes"], decl.get("tasks"), where) if "axes" in decl else None,
     )
