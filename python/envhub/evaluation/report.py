@@ -1,8 +1,9 @@
 """The evaluation's HTML report: one self-contained file (inline CSS and JavaScript, nothing
 fetched from the network) that a person opens in a browser.
 
-It shows the overall success rate with its standard error, the per-task table, the
-protocol, versions, policy and run the results came from, and every episode as a row whose
+It shows the overall success rate with its standard error, the per-task table (and, for a
+perturbation benchmark, the per-axis table: each axis's rate and its difference from the
+unperturbed `original` axis), the protocol, versions, policy and run the results came from, and every episode as a row whose
 video plays in place. Both tables sort by clicking a column's header; the episodes filter
 to failures or one task. Rows are rendered here, in Python, so the tables read without
 JavaScript too; the script only sorts and filters them.
@@ -20,6 +21,9 @@ import math
 import os
 from pathlib import Path
 from typing import Any
+
+from .axes import AXES
+from .axes import rows as axis_rows
 
 # Above this many videos, players load nothing until played (each would otherwise read its
 # file's header when the page opens).
@@ -152,6 +156,7 @@ def _page(results: dict[str, Any], videos: _Videos) -> str:
             f'<p class="desc">{_e(results.get("description", ""))}</p>',
             _headline(summary, rule, results),
             "</header><main>",
+            _axis_table(results, rule),
             _task_table(results, rule),
             '<section class="cards">',
             _card("Protocol", results.get("protocol") or {}),
@@ -236,6 +241,50 @@ def _task_table(results: dict[str, Any], rule: Any) -> str:
     )
     return (
         '<section><h2>Per task</h2><table id="tasks" class="sortable">'
+        f"{head}<tbody>{''.join(rows)}</tbody></table></section>"
+    )
+
+
+def _axis_table(results: dict[str, Any], rule: Any) -> str:
+    """The per-axis table of a perturbation benchmark (`axes.rows`); empty otherwise."""
+    rows = []
+    for row in axis_rows(results):
+        rate = row.get("success_rate")
+        bar = (
+            f'<div class="bar"><span style="width:{100 * rate:.1f}%"></span></div>'
+            if rate is not None and rule != "none"
+            else ""
+        )
+        delta = row.get("vs_original")
+        rows.append(
+            "<tr>"
+            f'<td data-key="{_key(row.get("axis"))}" class="mono" title="{_e(AXES.get(str(row.get("axis")), ""))}">'
+            f"{_e(row.get('axis'))}</td>"
+            f'<td data-key="{_key(row.get("tasks"))}" class="num">{_num(row.get("tasks"))}</td>'
+            f'<td data-key="{_key(row.get("episodes"))}" class="num">{_num(row.get("episodes"))}</td>'
+            f'<td data-key="{_key(row.get("successes"))}" class="num">{_num(row.get("successes"))}</td>'
+            f'<td data-key="{_key(row.get("errors"))}" class="num">{_num(row.get("errors"))}</td>'
+            f'<td data-key="{_key(rate)}" class="rate">{bar}<b>{_pct(rate)}</b> '
+            f"<small>{_se(row.get('stderr'))}</small><br><small>{_ci(row.get('ci95'))}</small></td>"
+            f'<td data-key="{_key(delta)}" class="num">'
+            f"{'—' if delta is None else f'{100 * delta:+.1f} pts'}</td>"
+            "</tr>"
+        )
+    if not rows:
+        return ""
+    head = _head(
+        [
+            ("Axis", "text"),
+            ("Tasks", "num"),
+            ("Episodes", "num"),
+            ("Successes", "num"),
+            ("Errors", "num"),
+            ("Success rate", "num"),
+            ("vs original", "num"),
+        ]
+    )
+    return (
+        '<section><h2>Per perturbation axis</h2><table id="axes" class="sortable">'
         f"{head}<tbody>{''.join(rows)}</tbody></table></section>"
     )
 

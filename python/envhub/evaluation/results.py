@@ -197,6 +197,18 @@ def markdown(results: dict[str, Any]) -> str:
                 f"| {r['task']} | {r['episodes']} | {num(r['success_rate'], '.3f')} | {interval(r.get('ci95'))} "
                 f"| {num(r['stderr'], '.3f')} | {r['errors']} | {num(r['mean_return'], '.3f')} |"
             )
+    from .axes import rows as axis_rows
+
+    by_axis = axis_rows(results)
+    if by_axis:  # a perturbation benchmark: the same figures per axis, and each axis against `original`
+        lines += ["", "| axis | tasks | episodes | success | 95% CI (Wilson) | ± s.e. | vs original | errors |"]
+        lines.append("|---|---:|---:|---:|---:|---:|---:|---:|")
+        for r in by_axis:
+            delta = r.get("vs_original")
+            lines.append(
+                f"| {r['axis']} | {r['tasks']} | {r['episodes']} | {num(r['success_rate'], '.3f')} | {interval(r.get('ci95'))} "
+                f"| {num(r['stderr'], '.3f')} | {'–' if delta is None else format(delta, '+.3f')} | {r['errors']} |"
+            )
     return "\n".join(lines) + "\n"
 
 
