@@ -162,8 +162,9 @@ def _page(results: dict[str, Any], videos: _Videos) -> str:
             _card("Protocol", results.get("protocol") or {}),
             _card("Policy", results.get("policy") or {}),
             _card("Versions", _versions(results.get("versions") or {})),
-            _card("Run", results.get("run") or {}),
+            _card("Run", {k: v for k, v in (results.get("run") or {}).items() if k not in ("shards", "merged_from")}),
             "</section>",
+            _shard_table(results),
             _episode_table(episodes, results, videos, with_video),
             "</main>",
             f"<footer>Written by envhub {_e((results.get('versions') or {}).get('envhub', ''))}. "
@@ -286,6 +287,34 @@ def _axis_table(results: dict[str, Any], rule: Any) -> str:
     return (
         '<section><h2>Per perturbation axis</h2><table id="axes" class="sortable">'
         f"{head}<tbody>{''.join(rows)}</tbody></table></section>"
+    )
+
+
+def _shard_table(results: dict[str, Any]) -> str:
+    """A merged run's shards (`envhub eval merge`, `--ray`): host, episodes, attempts, time."""
+    shards = (results.get("run") or {}).get("shards") or []
+    if not shards:
+        return ""
+    rows = []
+    for sh in shards:
+        secs = sh.get("seconds")
+        rate = sh["episodes"] / secs * 60 if secs else None
+        rows.append(
+            "<tr>"
+            f'<td data-key="{_key(sh.get("shard"))}" class="mono">{_e(sh.get("shard"))}</td>'
+            f'<td data-key="{_key(sh.get("host"))}" class="mono">{_e(sh.get("host"))}</td>'
+            f'<td data-key="{_key(sh.get("episodes"))}" class="num">{_num(sh.get("episodes"))}</td>'
+            f'<td data-key="{_key(sh.get("attempts"))}" class="num">{_num(sh.get("attempts"))}</td>'
+            f'<td data-key="{_key(secs)}" class="num">{_num(secs, 1)}</td>'
+            f'<td data-key="{_key(rate)}" class="num">{_num(rate, 1)}</td>'
+            f'<td data-key="{_key(sh.get("started"))}" class="mono">{_e(sh.get("started"))}</td>'
+            "</tr>"
+        )
+    head = _head([("Shard", "text"), ("Host", "text"), ("Episodes", "num"), ("Attempts", "num"), ("Seconds", "num"),
+                  ("Episodes/min", "num"), ("Started", "text")])
+    return (
+        f'<section><h2>Shards <small class="muted">{len(shards)} merged</small></h2>'
+        f'<table id="shards" class="sortable">{head}<tbody>{"".join(rows)}</tbody></table></section>'
     )
 
 

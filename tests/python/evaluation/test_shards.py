@@ -113,7 +113,8 @@ def test_three_shards_merge_to_the_one_machine_table(runs):
     assert [s["shard"] for s in shards] == ["0/3", "1/3", "2/3"] and sum(s["episodes"] for s in shards) == 6
     assert all(s["seconds"] is not None and s["host"] for s in shards)
     assert "| shard | host | episodes |" in done.stderr and "| 2/3 |" in done.stderr
-    assert (root / "merged" / "report.html").exists()
+    page = (root / "merged" / "report.html").read_text()
+    assert '<table id="shards"' in page and '>2/3</td>' in page
 
 
 def test_a_shard_runs_its_slice_only_and_resumes_within_it(runs):
