@@ -1,10 +1,12 @@
 //! A hub shared among client keys, attacked by a client in a process of its own (this test
-//! binary run again): it takes as much of the hub as its key may, opens a session under the
-//! victim's token with its own key, and re-puts the victim's latest sealed request as fast as
-//! it can (no key needed: each copy is authentic). The victim's open succeeds beside it and
-//! its steps go on; the hub answers the flood with at most a repeat per 250 ms; when the
-//! attacker is killed its sessions end with it, and its share is another key's again.
-//! Outcomes and counts are asserted, never the clock.
+//! binary run again): alone on the hub, it takes all of it (its share holds only while
+//! another key waits, so what it opens past half is lent), opens a session under the victim's
+//! token with its own key, and re-puts the victim's latest sealed request as fast as it can
+//! (no key needed: each copy is authentic). The victim's open succeeds (the session lent to
+//! the attacker closes for it, and tells the attacker why) and its steps go on; the hub
+//! answers the flood with at most a repeat per 250 ms; when the attacker is killed its
+//! sessions end with it, and its share is another key's again. Outcomes and counts are
+//! asserted, never the clock.
 
 use envhub_e2e::remote::{RemoteHub, known_hubs, net_to};
 use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry};
@@ -51,12 +53,13 @@ impl Attacker {
         (Attacker { child, out }, said)
     }
 
-    /// Tells it to stop flooding; what it counted.
-    fn stop_flood(&mut self) -> String {
+    /// Tells it to stop flooding; what it counted, and what its lent session said.
+    fn stop_flood(&mut self) -> (String, String) {
         writeln!(self.child.stdin.as_mut().unwrap(), "stop").unwrap();
-        let mut line = String::new();
-        self.out.read_line(&mut line).unwrap();
-        line
+        let (mut counted, mut lent) = (String::new(), String::new());
+        self.out.read_line(&mut counted).unwrap();
+        self.out.read_line(&mut lent).unwrap();
+        (counted, lent)
     }
 }
 
@@ -76,7 +79,7 @@ fn count(line: &str, name: &str) -> f64 {
 }
 
 #[test]
-fn one_key_takes_its_share_and_a_flooding_or_vanished_client_starves_no_one() {
+fn a_lone_key_borrows_the_hub_and_a_flooding_or_vanished_client_starves_no_one() {
     // Two workers: each key's share is one.
     let a = RemoteHub::start("fair", &["--max-workers", "2"], &[]);
     let on_a = Placement::Hubs(vec![a.name.clone()]);
@@ -89,8 +92,8 @@ fn one_key_takes_its_share_and_a_flooding_or_vanished_client_starves_no_one() {
     let (mut attacker, said) = Attacker::start(&a, &victim_id);
     assert!(said.contains("ready"), "the attacker said {said:?}");
     assert!(
-        said.contains("held 1 ") && said.contains("share of 1"),
-        "one key holds its share and no more: {said:?}"
+        said.contains("held 2 ") && said.contains("limit of 2"),
+        "a key alone takes the whole hub, past its share of 1: {said:?}"
     );
     assert!(
         said.contains("forged open refused") && said.contains("not named by the identity"),
@@ -98,7 +101,7 @@ fn one_key_takes_its_share_and_a_flooding_or_vanished_client_starves_no_one() {
     );
     let mut victim = victim_hub
         .make_vec_on("gym-cartpole", 1, &EnvConfig::default(), &on_a)
-        .expect("the victim's open succeeds beside a key that took all it may");
+        .expect("the victim's open succeeds: the session lent to the attacker closes for it");
     victim.reset(Some(0)).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     for _ in 0..STEPS {
@@ -107,8 +110,12 @@ fn one_key_takes_its_share_and_a_flooding_or_vanished_client_starves_no_one() {
             .step(&actions)
             .expect("the victim's step under the flood");
     }
-    let counted = attacker.stop_flood();
-    eprintln!("victim: reset and {STEPS} steps; attacker: {counted}");
+    let (counted, lent) = attacker.stop_flood();
+    eprintln!("victim: reset and {STEPS} steps; attacker: {counted}; {lent}");
+    assert!(
+        lent.contains("lent past this client's share") && lent.contains("another client asked"),
+        "the attacker's lent session was given back, and it is told why: {lent:?}"
+    );
     let (replays, answers, secs) = (
         count(&counted, "replays"),
         count(&counted, "answers"),
@@ -278,6 +285,13 @@ fn attacker_process() {
         replays.load(Ordering::Relaxed),
         answers.load(Ordering::Relaxed)
     );
+    // Its newest session was lent past its share: closed for the victim, and it says so.
+    let lent = match held.last_mut().map(|env| env.reset(Some(0))) {
+        Some(Err(e)) => e.to_string().replace('\n', " "),
+        Some(Ok(_)) => "the lent session still runs".to_string(),
+        None => "no session".to_string(),
+    };
+    println!("lent session: {lent}");
     // Holds its sessions until it is killed (or its stdin closes).
     let _ = stdin.read_line(&mut line);
     drop(held);

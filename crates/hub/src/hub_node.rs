@@ -20,6 +20,10 @@ use std::sync::Arc;
 use std::time::Duration;
 use zenoh::Wait;
 
+/// How long an open waits for sessions lent to other clients past their share to close and
+/// give it room (a session ends within a tick of its thread and its workers' exit).
+const RECLAIM_WAIT: Duration = Duration::from_secs(10);
+
 /// A hub joined to Zenoh. Dropping it leaves (the token goes, sessions end).
 pub struct HubNode {
     name: String,
@@ -571,10 +575,17 @@ impl State {
         options.restart_on_crash = request.restart_on_crash;
         options.step_timeout = step_timeout;
         // Reserve the envs and workers before anything starts, so two clients cannot both
-        // pass the limits.
+        // pass the limits; sessions lent to other clients past their share may be closing
+        // to make room for this one.
         let reservation = self
             .sessions
-            .reserve(hello.identity, num_envs, workers, &self.policy)
+            .reserve_waiting(
+                hello.identity,
+                num_envs,
+                workers,
+                &self.policy,
+                RECLAIM_WAIT,
+            )
             .map_err(|(reason, hint)| self.refuse(reason, &hint))?;
         let vec = VecEnv::start(&request.id, route.clone(), options, &Launcher::local())?;
         let spec = envhub_shm::ReadySpec {

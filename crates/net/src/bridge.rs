@@ -47,7 +47,17 @@ struct Entry {
     /// What it let into its queue lately (replays of newer requests are not queued either).
     gate: Arc<Mutex<Gate>>,
     stop: Arc<AtomicBool>,
+    /// Opened past its client's share while no other client waited: lent, and closed again
+    /// when another client asks for room within its own share.
+    lent: bool,
+    /// Opened after every session of a lower number (the newest lent ones go first).
+    serial: u64,
+    /// Closed to give its room back to another client (its client is told so).
+    reclaimed: Arc<AtomicBool>,
 }
+
+/// Numbers sessions in the order they open.
+static SERIAL: AtomicU64 = AtomicU64::new(0);
 
 /// Messages a hub dropped without answering them: not sealed with their session's key,
 /// replays, the wrong size, for no open session, or past a full queue.
@@ -67,6 +77,8 @@ struct Closed {
     last_seq: u64,
     /// The "closed" answer sent, kept for a repeat of its request.
     answer: Option<(u64, zenoh::bytes::ZBytes)>,
+    /// It was lent past its client's share and given back to another client.
+    reclaimed: bool,
 }
 
 /// Ended sessions remembered, to answer their clients that they are closed.
@@ -82,6 +94,34 @@ pub struct Sessions {
     gone: Mutex<std::collections::VecDeque<String>>,
     /// What sessions still starting have reserved.
     starting: Mutex<Starting>,
+    /// Clients refused for room within their share lately, and until when they count as
+    /// waiting: while one waits, no other client is lent past its share.
+    waiting: Mutex<HashMap<String, Instant>>,
+}
+
+/// How long a client refused for room within its share counts as waiting for it.
+const WAITING_FOR: Duration = Duration::from_secs(10);
+
+/// Why an admission was refused: the reason, the hint, and whether room is coming (sessions
+/// lent to other clients are closing to give it back: ask again in a moment).
+#[derive(Debug)]
+pub struct Refusal {
+    /// What limit the request would pass.
+    pub reason: String,
+    /// What would fit, and the flag that sets the limit.
+    pub hint: String,
+    /// Sessions lent past other clients' shares are being closed for this client.
+    pub room_coming: bool,
+}
+
+impl From<(String, String)> for Refusal {
+    fn from((reason, hint): (String, String)) -> Self {
+        Refusal {
+            reason,
+            hint,
+            room_coming: false,
+        }
+    }
 }
 
 /// Envs, workers and sessions (by client identity) set aside by sessions still starting.
@@ -114,6 +154,8 @@ pub struct Reservation<'a> {
     client: String,
     envs: usize,
     workers: usize,
+    /// Past the client's share (no other client waited): the session is lent.
+    lent: bool,
 }
 
 impl Drop for Reservation<'_> {
@@ -161,25 +203,36 @@ impl Sessions {
     /// Sets aside `envs` and `workers` for a session of the client of identity `client` (its
     /// key: names a client cannot pick for another) if the limits allow; else why not and what
     /// would fit.
+    ///
+    /// A client's share (`max_*_per_client`) holds only while another client waits for room:
+    /// a client alone may go past it, and what it opens past it is lent. A client refused for
+    /// room within its share waits (for [`WAITING_FOR`]): the newest sessions lent to clients
+    /// still past their share are closed to make room for it (the refusal then says that room
+    /// is coming: ask again), and no client is lent more meanwhile.
     pub fn reserve(
         &self,
         client: &str,
         envs: usize,
         workers: usize,
         policy: &ServePolicy,
-    ) -> Result<Reservation<'_>, (String, String)> {
+    ) -> Result<Reservation<'_>, Refusal> {
         // `starting` is held while the open sessions are counted: a session that moves from
         // starting to open meanwhile (its entry added, then its reservation given back, which
         // waits for this lock) is counted once or twice, never zero times.
         let mut starting = self.starting();
-        let (mut all, mut of_client) = (Held::default(), Held::default());
-        for s in self.lock().values() {
+        let mut entries = self.lock();
+        let (mut all, mut of_client, mut closing) =
+            (Held::default(), Held::default(), Held::default());
+        for s in entries.values() {
             let held = Held {
                 sessions: 1,
                 envs: s.envs,
                 workers: s.workers,
             };
             all.add(held);
+            if s.stop.load(Ordering::Relaxed) {
+                closing.add(held);
+            }
             if s.identity == client {
                 of_client.add(held);
             }
@@ -197,37 +250,8 @@ impl Sessions {
             scope,
             flag,
         };
-        cap(
-            policy.max_envs,
-            used_envs,
-            envs,
-            "envs",
-            Scope::Hub,
-            "max-envs",
-        )
-        .check()?;
-        cap(
-            policy.max_workers,
-            used_workers,
-            workers,
-            "workers",
-            Scope::Hub,
-            "max-workers",
-        )
-        .check()?;
-        if let Some(max) = policy.max_sessions_per_client
-            && of_client.sessions >= max
-        {
-            return Err((
-                format!(
-                    "this client holds {} sessions here, its limit is {max}",
-                    of_client.sessions
-                ),
-                "close sessions it no longer uses; the hub's owner sets the limit with `envhub serve --max-sessions-per-client N`".to_string(),
-            ));
-        }
-        // One client's share: the rest is kept for other clients, whoever came first.
-        cap(
+        // One client's share: past it, a session is only lent.
+        let share = cap(
             policy.max_envs_per_client,
             of_client.envs,
             envs,
@@ -235,16 +259,97 @@ impl Sessions {
             Scope::Client,
             "max-envs-per-client",
         )
-        .check()?;
-        cap(
-            policy.max_workers_per_client,
-            of_client.workers,
-            workers,
-            "workers",
-            Scope::Client,
-            "max-workers-per-client",
+        .check()
+        .and_then(|()| {
+            cap(
+                policy.max_workers_per_client,
+                of_client.workers,
+                workers,
+                "workers",
+                Scope::Client,
+                "max-workers-per-client",
+            )
+            .check()
+        });
+        let hub = cap(
+            policy.max_envs,
+            used_envs,
+            envs,
+            "envs",
+            Scope::Hub,
+            "max-envs",
         )
-        .check()?;
+        .check()
+        .and_then(|()| {
+            cap(
+                policy.max_workers,
+                used_workers,
+                workers,
+                "workers",
+                Scope::Hub,
+                "max-workers",
+            )
+            .check()
+        });
+        if let Err(refused) = hub {
+            let mut refusal = Refusal::from(refused);
+            if share.is_ok() {
+                // Within its share: it waits, and what other clients were lent comes back.
+                self.wait(client);
+                let over = |max: Option<usize>, used: usize, closing: usize, asked: usize| {
+                    max.map_or(0, |m| {
+                        (used.saturating_sub(closing) + asked).saturating_sub(m)
+                    })
+                };
+                let need = Held {
+                    sessions: 0,
+                    envs: over(policy.max_envs, used_envs, closing.envs, envs),
+                    workers: over(policy.max_workers, used_workers, closing.workers, workers),
+                };
+                refusal.room_coming = if need.envs == 0 && need.workers == 0 {
+                    closing.sessions > 0
+                } else {
+                    reclaim(&mut entries, &starting, client, need, policy)
+                };
+                if refusal.room_coming {
+                    refusal.reason.push_str(
+                        "; sessions lent to other clients past their share are closing to make room",
+                    );
+                }
+            }
+            return Err(refusal);
+        }
+        if let Some(max) = policy.max_sessions_per_client
+            && of_client.sessions >= max
+        {
+            return Err(Refusal::from((
+                format!(
+                    "this client holds {} sessions here, its limit is {max}",
+                    of_client.sessions
+                ),
+                "close sessions it no longer uses; the hub's owner sets the limit with `envhub serve --max-sessions-per-client N`".to_string(),
+            )));
+        }
+        let lent = share.is_err();
+        let mut waiting = self.waiting.lock().unwrap_or_else(|e| e.into_inner());
+        if let Err((mut reason, hint)) = share {
+            let now = Instant::now();
+            if waiting.iter().any(|(c, until)| c != client && *until > now) {
+                reason.push_str(", and another client waits for room");
+                return Err(Refusal::from((reason, hint)));
+            }
+        }
+        waiting.remove(client);
+        drop(waiting);
+        drop(entries);
+        if lent {
+            tracing::info!(
+                client,
+                envs,
+                workers,
+                "a session lent past its client's share (no other client waits)"
+            );
+        }
         starting.envs += envs;
         starting.workers += workers;
         starting
@@ -261,7 +366,42 @@ impl Sessions {
             client: client.to_string(),
             envs,
             workers,
+            lent,
         })
+    }
+
+    /// [`Sessions::reserve`], asking again for up to `wait` while room is coming (sessions lent
+    /// to other clients closing for this one).
+    pub fn reserve_waiting(
+        &self,
+        client: &str,
+        envs: usize,
+        workers: usize,
+        policy: &ServePolicy,
+        wait: Duration,
+    ) -> Result<Reservation<'_>, (String, String)> {
+        let deadline = Instant::now() + wait;
+        loop {
+            match self.reserve(client, envs, workers, policy) {
+                Ok(reservation) => return Ok(reservation),
+                Err(r) if r.room_coming && Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(r) => return Err((r.reason, r.hint)),
+            }
+        }
+    }
+
+    /// Notes that `client` waits for room within its share.
+    fn wait(&self, client: &str) {
+        /// Clients remembered as waiting (keys are free to make: the set is bounded).
+        const WAITERS: usize = 4096;
+        let now = Instant::now();
+        let mut waiting = self.waiting.lock().unwrap_or_else(|e| e.into_inner());
+        waiting.retain(|_, until| *until > now);
+        if waiting.len() < WAITERS || waiting.contains_key(client) {
+            waiting.insert(client.to_string(), now + WAITING_FOR);
+        }
     }
 
     /// Ends the sessions of a client whose token went away.
@@ -291,6 +431,64 @@ impl Sessions {
             s.requests = None;
         }
     }
+}
+
+/// Closes the newest sessions lent to clients other than `client` that are still past their
+/// share, enough of them to free `need`; whether it could (else it closes none).
+fn reclaim(
+    entries: &mut HashMap<String, Entry>,
+    starting: &Starting,
+    client: &str,
+    need: Held,
+    policy: &ServePolicy,
+) -> bool {
+    // What each client holds now (sessions closing already are not counted).
+    let mut holds: HashMap<&str, Held> = HashMap::new();
+    for s in entries.values().filter(|s| !s.stop.load(Ordering::Relaxed)) {
+        holds.entry(&s.identity).or_default().add(Held {
+            sessions: 1,
+            envs: s.envs,
+            workers: s.workers,
+        });
+    }
+    for (c, held) in &starting.by_client {
+        holds.entry(c).or_default().add(*held);
+    }
+    let past = |h: &Held| {
+        policy.max_envs_per_client.is_some_and(|m| h.envs > m)
+            || policy.max_workers_per_client.is_some_and(|m| h.workers > m)
+    };
+    let mut lent: Vec<(&String, &Entry)> = entries
+        .iter()
+        .filter(|(_, s)| s.lent && s.identity != client && !s.stop.load(Ordering::Relaxed))
+        .collect();
+    lent.sort_by_key(|(_, s)| std::cmp::Reverse(s.serial));
+    let (mut freed, mut picked) = (Held::default(), Vec::new());
+    for (id, s) in lent {
+        if freed.envs >= need.envs && freed.workers >= need.workers {
+            break;
+        }
+        let held = holds.get_mut(s.identity.as_str()).expect("counted above");
+        if !past(held) {
+            continue;
+        }
+        held.envs -= s.envs;
+        held.workers -= s.workers;
+        freed.envs += s.envs;
+        freed.workers += s.workers;
+        picked.push(id.clone());
+    }
+    if freed.envs < need.envs || freed.workers < need.workers {
+        return false;
+    }
+    for id in picked {
+        let s = entries.get_mut(&id).expect("picked from the entries");
+        tracing::info!(session = %id, identity = %s.identity, for_client = client, "closing a session lent past its client's share: another client asks for the room");
+        s.reclaimed.store(true, Ordering::Relaxed);
+        s.stop.store(true, Ordering::Relaxed);
+        s.requests = None;
+    }
+    true
 }
 
 /// Bytes from the OS random source.
@@ -366,6 +564,7 @@ pub fn start(
         .unwrap_or_else(|e| e.into_inner())
         .contains(&keys::client_token(client.token));
     let stop = Arc::new(AtomicBool::new(client_gone));
+    let reclaimed = Arc::new(AtomicBool::new(false));
     entries.insert(
         id.clone(),
         Entry {
@@ -379,6 +578,9 @@ pub fn start(
             answered: answered.clone(),
             gate: Arc::default(),
             stop: stop.clone(),
+            lent: reservation.lent,
+            serial: SERIAL.fetch_add(1, Ordering::Relaxed),
+            reclaimed: reclaimed.clone(),
         },
     );
     drop(entries);
@@ -401,6 +603,7 @@ pub fn start(
                     request_sizes,
                     last_seq,
                     answer: None,
+                    reclaimed: reclaimed.load(Ordering::Relaxed),
                 });
             }
             sessions.lock().remove(&thread_id);
@@ -516,7 +719,16 @@ fn answer_closed(sessions: &Sessions, zenoh: &zenoh::Session, hub: &str, id: &st
         Some((s, _)) if seq < *s => return dropped("out of sequence (a replay)", id),
         _ if seq <= session.last_seq => return dropped("out of sequence (a replay)", id),
         _ => {
-            let text = format!("hub `{hub}` has no open session `{id}` (closed)");
+            let text = if session.reclaimed {
+                format!(
+                    "hub `{hub}` closed session `{id}`: it was lent past this client's share of \
+                     the hub while no other client asked, and another client asked for the room\n\
+                     hint: open at most the client's share (`envhub hubs` shows the hub's limits; \
+                     half of them by default), or place envs on other hubs"
+                )
+            } else {
+                format!("hub `{hub}` has no open session `{id}` (closed)")
+            };
             let mut answer =
                 batch_codec::encode_response(seq, status::ERROR, 0, &[], text.as_bytes());
             session.key.seal(Direction::Response, &mut answer);
@@ -888,24 +1100,9 @@ mod tests {
                         passed.fetch_add(1, Ordering::Relaxed);
                         // Registered as `start` does: the entry, then the reservation given back.
                         let id = format!("{t}-{k}");
-                        sessions.lock().insert(
-                            id.clone(),
-                            Entry {
-                                client: String::new(),
-                                identity: String::new(),
-                                envs: 1,
-                                workers: 1,
-                                requests: None,
-                                request_sizes: 0..=0,
-                                key: Arc::new(SessionKey::new(
-                                    envhub_protocol::seal::Cipher::Aes256Gcm,
-                                    &[0; envhub_protocol::seal::KEY_LEN],
-                                )),
-                                answered: Arc::default(),
-                                gate: Arc::default(),
-                                stop: Arc::new(AtomicBool::new(false)),
-                            },
-                        );
+                        sessions
+                            .lock()
+                            .insert(id.clone(), entry("", 1, 1, reservation.lent));
                         drop(reservation);
                         if sessions.totals().0 > MAX {
                             over.store(true, Ordering::Relaxed);
@@ -949,7 +1146,7 @@ mod tests {
         };
         let a1 = sessions.reserve("a", 1, 1, &policy).expect("first");
         let _a2 = sessions.reserve("a", 1, 1, &policy).expect("second");
-        let (reason, hint) = sessions
+        let Refusal { reason, hint, .. } = sessions
             .reserve("a", 1, 1, &policy)
             .err()
             .expect("third refused");
@@ -964,10 +1161,56 @@ mod tests {
             .expect("a reservation given back frees its place");
     }
 
-    /// One key that came first and asks for everything gets its share; another key still
-    /// finds room, and the hub-wide limit still holds for both together.
+    /// An entry as `start` registers it (no Zenoh, no workers).
+    fn entry(identity: &str, envs: usize, workers: usize, lent: bool) -> Entry {
+        Entry {
+            client: String::new(),
+            identity: identity.to_string(),
+            envs,
+            workers,
+            requests: None,
+            request_sizes: 0..=0,
+            key: Arc::new(SessionKey::new(
+                envhub_protocol::seal::Cipher::Aes256Gcm,
+                &[0; envhub_protocol::seal::KEY_LEN],
+            )),
+            answered: Arc::default(),
+            gate: Arc::default(),
+            stop: Arc::new(AtomicBool::new(false)),
+            lent,
+            serial: SERIAL.fetch_add(1, Ordering::Relaxed),
+            reclaimed: Arc::default(),
+        }
+    }
+
+    /// Opens session `id` on reservation `r` as `start` does: its entry, then `r` given back.
+    fn open(sessions: &Sessions, id: &str, r: Reservation<'_>) {
+        let e = entry(&r.client, r.envs, r.workers, r.lent);
+        sessions.lock().insert(id.to_string(), e);
+    }
+
+    /// The sessions being closed, by id; their threads end (they leave the entries).
+    fn closing(sessions: &Sessions) -> Vec<String> {
+        let mut entries = sessions.lock();
+        let mut ids: Vec<String> = entries
+            .iter()
+            .filter(|(_, s)| s.stop.load(Ordering::Relaxed))
+            .map(|(id, _)| id.clone())
+            .collect();
+        ids.sort();
+        for id in &ids {
+            assert!(entries[id].reclaimed.load(Ordering::Relaxed), "{id}");
+            entries.remove(id);
+        }
+        ids
+    }
+
+    /// A key alone may take the whole hub; what it opens past its share is lent. Another key
+    /// asking for room within its share gets the newest lent sessions closed for it (only as
+    /// many as it needs, never one within the first key's share), and while it waits no key
+    /// is lent more; past its own share it reclaims nothing.
     #[test]
-    fn one_client_takes_at_most_its_share_and_another_finds_room() {
+    fn a_lone_client_borrows_past_its_share_and_gives_it_back_to_another() {
         let sessions = Sessions::default();
         let policy = ServePolicy {
             max_workers: Some(8),
@@ -976,36 +1219,88 @@ mod tests {
             max_envs_per_client: client_share(Some(64)),
             ..ServePolicy::unlimited()
         };
-        let mut held = Vec::new();
-        for _ in 0..8 {
-            match sessions.reserve("squatter", 1, 1, &policy) {
-                Ok(r) => held.push(r),
-                Err((reason, hint)) => {
-                    assert!(reason.contains("share of 4"), "{reason}");
-                    assert!(hint.contains("--max-workers-per-client"), "{hint}");
-                    break;
-                }
-            }
+        for k in 0..8 {
+            let r = sessions
+                .reserve("first", 1, 1, &policy)
+                .expect("a lone client may take the whole hub");
+            assert_eq!(r.lent, k >= 4, "session {k}: lent only past the share of 4");
+            open(&sessions, &format!("first-{k}"), r);
         }
-        assert_eq!(held.len(), 4, "the first key's share of 8 workers");
-        let (reason, hint) = sessions
-            .reserve("squatter", 33, 0, &policy)
+        let full = sessions
+            .reserve("first", 1, 1, &policy)
             .err()
-            .expect("envs past the share");
-        assert!(reason.contains("share of 32"), "{reason}");
-        assert!(hint.contains("--max-envs-per-client"), "{hint}");
-        let _victim = sessions
-            .reserve("victim", 1, 4, &policy)
-            .expect("another key finds the rest");
-        let (reason, _) = sessions
+            .expect("full");
+        assert!(
+            full.reason.contains("limit of 8") && !full.room_coming,
+            "{full:?}"
+        );
+        // Another key within its share: the two newest lent sessions close for it.
+        let wait = sessions
+            .reserve("second", 2, 2, &policy)
+            .err()
+            .expect("waits");
+        assert!(
+            wait.room_coming && wait.reason.contains("closing to make room"),
+            "{wait:?}"
+        );
+        let again = sessions
+            .reserve("second", 2, 2, &policy)
+            .err()
+            .expect("waits");
+        assert!(again.room_coming, "{again:?}");
+        assert_eq!(
+            closing(&sessions),
+            ["first-6", "first-7"],
+            "no more than it needs"
+        );
+        // While it waits, the first key is lent nothing, though there is room now.
+        let share = sessions
+            .reserve("first", 1, 1, &policy)
+            .err()
+            .expect("share");
+        assert!(
+            share.reason.contains("share of 4") && share.reason.contains("another client waits"),
+            "{share:?}"
+        );
+        assert!(share.hint.contains("--max-workers-per-client"), "{share:?}");
+        let r = sessions
+            .reserve("second", 2, 2, &policy)
+            .expect("the room given back");
+        assert!(!r.lent);
+        open(&sessions, "second-0", r);
+        // Again, up to its share: the first key keeps exactly its share.
+        let wait = sessions
+            .reserve("second", 1, 2, &policy)
+            .err()
+            .expect("waits");
+        assert!(wait.room_coming, "{wait:?}");
+        assert_eq!(closing(&sessions), ["first-4", "first-5"]);
+        open(
+            &sessions,
+            "second-1",
+            sessions.reserve("second", 1, 2, &policy).unwrap(),
+        );
+        let past = sessions
+            .reserve("second", 1, 1, &policy)
+            .err()
+            .expect("past");
+        assert!(
+            !past.room_coming && past.reason.contains("limit of 8"),
+            "{past:?}"
+        );
+        assert!(
+            closing(&sessions).is_empty(),
+            "nothing within a share is closed"
+        );
+        // Nothing is lent now: a third key within its share waits with no room coming.
+        let third = sessions
             .reserve("third", 1, 1, &policy)
             .err()
-            .expect("the hub-wide limit");
-        assert!(reason.contains("limit of 8"), "{reason}");
-        drop(held);
-        let _again = sessions
-            .reserve("squatter", 1, 4, &policy)
-            .expect("a share given back is the key's again");
+            .expect("full");
+        assert!(
+            !third.room_coming && third.reason.contains("limit of 8"),
+            "{third:?}"
+        );
     }
 
     #[test]
@@ -1018,7 +1313,7 @@ mod tests {
         assert!(p.idle_timeout.is_some() && p.max_step_timeout < Duration::MAX);
         assert!(!p.allow_remote_files && !p.allow_provision && !p.insecure_listen);
         let sessions = Sessions::default();
-        let (reason, hint) = sessions
+        let Refusal { reason, hint, .. } = sessions
             .reserve("c", 200_000, 1, &p)
             .err()
             .expect("200,000 envs refused by default");

@@ -18,7 +18,7 @@ pub mod local;
 mod opener;
 mod policy;
 
-pub use bridge::{Client, DROPPED, Sessions, dispatch, new_session_id, start};
+pub use bridge::{Client, DROPPED, Refusal, Sessions, dispatch, new_session_id, start};
 pub use client::{DISCOVERY, Network, unknown_hub};
 pub use config::{
     DEFAULT_LEASE_MS, ENVHUB_CONNECT, ENVHUB_MULTICAST, HubSession, LocalEntry, NetConfig, open,

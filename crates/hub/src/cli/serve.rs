@@ -43,12 +43,13 @@ pub(crate) struct Args {
     /// per core.
     #[arg(long, value_name = "N")]
     max_workers: Option<usize>,
-    /// Envs one client (one identity key) may hold here at once, so that one key leaves
-    /// room for others (0: up to `--max-envs`). Default: half of `--max-envs`.
+    /// Envs one client (one identity key) holds here while another waits for room: past
+    /// it a session is only lent, and closed when another client asks for the room (0: no
+    /// share). Default: half of `--max-envs`.
     #[arg(long, value_name = "N")]
     max_envs_per_client: Option<usize>,
-    /// Worker processes one client (one identity key) may hold here at once (0: up to
-    /// `--max-workers`). Default: half of `--max-workers`.
+    /// Worker processes one client (one identity key) holds here while another waits for
+    /// room, as `--max-envs-per-client` (0: no share). Default: half of `--max-workers`.
     #[arg(long, value_name = "N")]
     max_workers_per_client: Option<usize>,
     /// Sessions one client may hold here at once (0: no limit).
