@@ -243,3 +243,86 @@ fn netns_a_hub_and_a_client_of_a_lab_meet_through_a_router() {
     drop(router);
     let _ = std::fs::remove_dir_all(root);
 }
+
+/// `envhub lab remove`: the removed machine keeps its copy of its config, and with it links to
+/// no member that holds a new config, as a client given a member hub's endpoint or as a hub a
+/// member is given the endpoint of; a remaining member's new config finds the lab's hub as
+/// before. Removing a name that is not a member names the members.
+#[test]
+fn netns_a_removed_member_links_to_no_member() {
+    let test = "netns_a_removed_member_links_to_no_member";
+    let Some(hosts) = TwoHosts::new(test) else {
+        return;
+    };
+    let (root, config) = labs("remove", &[("box-a", ""), ("you", ""), ("gone", "")]);
+    let kept = root.join("gone-kept.json5").display().to_string();
+    std::fs::copy(config("gone"), &kept).unwrap();
+    let ours = root.join("ours").display().to_string();
+    let lab = |args: &[&str]| {
+        let out = Command::new(binary("envhub"))
+            .arg("lab")
+            .args(args)
+            .output()
+            .expect("envhub runs");
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        (out.status.success(), text(&out.stdout), text(&out.stderr))
+    };
+    let (ok, _, err) = lab(&["remove", &ours, "nobody"]);
+    assert!(
+        !ok && err.contains("`nobody` is not a member") && err.contains("box-a, gone, you"),
+        "{err}"
+    );
+    let (ok, out, err) = lab(&["remove", &ours, "gone"]);
+    assert!(ok, "envhub lab remove: {err}");
+    assert!(
+        out.contains("box-a.json5 -> box-a") && out.contains("you.json5 -> you"),
+        "{out}"
+    );
+    let socket = |hub: &str| socket_in(&root, hub);
+    let (listen_a, listen_g) = (
+        format!("tls/{}:7447", hosts.addr[0]),
+        format!("tls/{}:7447", hosts.addr[1]),
+    );
+    let box_a = config("box-a");
+    let serve = |side: usize, tag: &str, config: &str, name: &str, listen: &str| {
+        let mut hub = hosts.envhub(
+            side,
+            tag,
+            &[
+                "--zenoh-config",
+                config,
+                "serve",
+                "--name",
+                name,
+                "--listen",
+                listen,
+                "--socket",
+                &socket(name),
+            ],
+        );
+        hub.wait_for_line(
+            &format!("on the network as hub `{name}`"),
+            Duration::from_secs(60),
+        );
+        hub
+    };
+    let hub_a = serve(0, "hub-a", &box_a, "a", &listen_a);
+    // The removed member's hub, on the other machine, listening on its veth.
+    let hub_g = serve(1, "hub-g", &kept, "g", &listen_g);
+    let default_multicast = [(envhub_hub::ENVHUB_MULTICAST, "")];
+    // A remaining member, given the removed one's endpoint too: finds `a`, never `g`.
+    let you = config("you");
+    let at_g = ["--connect", listen_g.as_str()];
+    let seen = hubs_from_b(&hosts, "you", &you, &at_g, &default_multicast, "a", 5);
+    assert_eq!(seen, ["a"], "a remaining member's new config");
+    // The removed member as a client, given `a`'s endpoint: its own hub at most, never `a`.
+    let at_a = ["--connect", listen_a.as_str()];
+    let seen = hubs_from_b(&hosts, "gone", &kept, &at_a, &default_multicast, "a", 2);
+    assert!(
+        !seen.iter().any(|h| h == "a"),
+        "the removed member's config reached hub a: {seen:?}"
+    );
+    drop(hub_g);
+    drop(hub_a);
+    let _ = std::fs::remove_dir_all(root);
+}

@@ -13,7 +13,13 @@
 //! hub's pinned identity ([`crate::identity`]); TLS adds that nothing of a link is readable.
 //!
 //! A member's config holds its private key: it is written 0600 and copied to that machine only.
-//! A member whose key leaked is shut out by making a new lab (there is no revocation list).
+//!
+//! Zenoh's TLS links check no revocation list, so a member is removed (`envhub lab remove`) by
+//! a new CA: the lab's key and certificate are made anew, every other member's certificate is
+//! signed again by it (same key, same names) and its config rewritten, and the removed
+//! member's config is deleted. Each remaining member picks the change up from one file, its
+//! new config; the removed member's copy trusts and carries only the old CA, so no member
+//! with a new config links to it, nor it to them.
 
 use base64::Engine;
 use envhub_core::private_dir;
@@ -136,6 +142,184 @@ pub fn add(dir: &Path, member: &str, role: Role) -> Result<PathBuf, String> {
     Ok(path)
 }
 
+/// The lab's members in `dir`: the names of its `NAME.json5` configs, sorted.
+pub fn members(dir: &Path) -> Result<Vec<String>, String> {
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| format!("cannot read `{}`: {e}", dir.display()))?;
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter_map(|f| f.strip_suffix(".json5").map(str::to_string))
+        .filter(|n| check_name("member", n).is_ok())
+        .collect();
+    names.sort();
+    Ok(names)
+}
+
+/// Removes member `member` from the lab in `dir`: makes the lab's CA anew, signs every other
+/// member's certificate again with it (its key and names kept) and rewrites its config, then
+/// deletes `member`'s config. The remaining members' configs, rewritten, in name order.
+///
+/// The CA is written first and the removed member's config deleted last: a run cut short is
+/// completed by running it again.
+pub fn remove(dir: &Path, member: &str) -> Result<Vec<PathBuf>, String> {
+    private_dir::check(dir).map_err(|e| format!("cannot use `{}`: {e}", dir.display()))?;
+    let all = members(dir)?;
+    if !all.iter().any(|m| m == member) {
+        let known = if all.is_empty() {
+            "it has no members yet".to_string()
+        } else {
+            format!("its members are {}", all.join(", "))
+        };
+        return Err(format!(
+            "`{member}` is not a member of the lab in `{}` (no `{member}.json5` there)\nhint: \
+             {known}",
+            dir.display()
+        ));
+    }
+    let ca_pem = read_text(dir, CA_CERT)?;
+    let lab = common_name(&ca_pem).map_err(|e| format!("`{}` {e}", dir.join(CA_CERT).display()))?;
+    let lab = lab.strip_prefix("envhub lab ").unwrap_or(&lab).to_string();
+    let ca_key = KeyPair::generate().map_err(|e| format!("cannot make the lab's key: {e}"))?;
+    let ca_cert = ca_params(&lab)
+        .self_signed(&ca_key)
+        .map_err(|e| format!("cannot make the lab's certificate: {e}"))?;
+    let issuer = Issuer::from_ca_cert_pem(&ca_cert.pem(), &ca_key)
+        .map_err(|e| format!("cannot use the lab's new certificate: {e}"))?;
+    // Every config made before anything is written: a member that cannot be read stops the
+    // removal with the lab as it was.
+    let mut rewritten = Vec::new();
+    for other in all.iter().filter(|m| *m != member) {
+        let path = dir.join(format!("{other}.json5"));
+        let config = reissue(&path, other, &ca_cert.pem(), &issuer)?;
+        rewritten.push((path, config));
+    }
+    write(&dir.join(CA_KEY), ca_key.serialize_pem().as_bytes(), true)?;
+    write(&dir.join(CA_CERT), ca_cert.pem().as_bytes(), true)?;
+    for (path, config) in &rewritten {
+        write(path, config.as_bytes(), true)?;
+    }
+    let gone = dir.join(format!("{member}.json5"));
+    std::fs::remove_file(&gone).map_err(|e| format!("cannot remove `{}`: {e}", gone.display()))?;
+    Ok(rewritten.into_iter().map(|(path, _)| path).collect())
+}
+
+/// `file` of the lab in `dir`, as text.
+fn read_text(dir: &Path, file: &str) -> Result<String, String> {
+    let path = dir.join(file);
+    match private_dir::read_file(&path, 1 << 20) {
+        Ok(Some(body)) => {
+            String::from_utf8(body).map_err(|_| format!("`{}` is not text", path.display()))
+        }
+        Ok(None) => Err(format!(
+            "`{}` holds no lab (no `{file}`)\nhint: make one with `envhub lab init {}`",
+            dir.display(),
+            dir.display()
+        )),
+        Err(e) => Err(format!("cannot read `{}`: {e}", path.display())),
+    }
+}
+
+/// The DER of a PEM certificate.
+fn der_of(pem: &str) -> Result<Vec<u8>, String> {
+    let body: String = pem
+        .lines()
+        .filter(|l| !l.starts_with("-----"))
+        .collect::<Vec<_>>()
+        .concat();
+    base64::engine::general_purpose::STANDARD
+        .decode(body.trim())
+        .map_err(|e| format!("is not a PEM certificate: {e}"))
+}
+
+/// A certificate's subject common name.
+fn common_name(pem: &str) -> Result<String, String> {
+    let der = der_of(pem)?;
+    let (_, cert) = x509_parser::parse_x509_certificate(&der)
+        .map_err(|e| format!("is not a certificate: {e}"))?;
+    cert.subject()
+        .iter_common_name()
+        .next()
+        .and_then(|cn| cn.as_str().ok())
+        .map(str::to_string)
+        .ok_or_else(|| "has no common name".to_string())
+}
+
+/// A certificate's subject alternative names (DNS names and IP addresses), as text.
+fn alt_names(pem: &str) -> Result<Vec<String>, String> {
+    use x509_parser::extensions::GeneralName;
+    let der = der_of(pem)?;
+    let (_, cert) = x509_parser::parse_x509_certificate(&der)
+        .map_err(|e| format!("is not a certificate: {e}"))?;
+    let Ok(Some(san)) = cert.subject_alternative_name() else {
+        return Ok(Vec::new());
+    };
+    Ok(san
+        .value
+        .general_names
+        .iter()
+        .filter_map(|n| match n {
+            GeneralName::DNSName(d) => Some(d.to_string()),
+            GeneralName::IPAddress(ip) => match ip.len() {
+                4 => Some(std::net::Ipv4Addr::from(<[u8; 4]>::try_from(*ip).ok()?).to_string()),
+                16 => Some(std::net::Ipv6Addr::from(<[u8; 16]>::try_from(*ip).ok()?).to_string()),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect())
+}
+
+/// `member`'s config at `path`, its certificate signed again by `issuer` (whose certificate is
+/// `ca_pem`): its role, key and names kept.
+fn reissue(
+    path: &Path,
+    member: &str,
+    ca_pem: &str,
+    issuer: &Issuer<'_, &KeyPair>,
+) -> Result<String, String> {
+    let shown = path.display();
+    let text = match private_dir::read_file(path, 1 << 20) {
+        Ok(Some(body)) => String::from_utf8(body).map_err(|_| format!("`{shown}` is not text"))?,
+        Ok(None) => return Err(format!("`{shown}` went away meanwhile")),
+        Err(e) => return Err(format!("cannot read `{shown}`: {e}")),
+    };
+    let config = zenoh::Config::from_json5(&text)
+        .map_err(|e| format!("`{shown}` is not a Zenoh config: {e}"))?;
+    let field = |key: &str| -> Result<String, String> {
+        let json = config
+            .get_json(key)
+            .map_err(|e| format!("`{shown}` has no `{key}`: {e}"))?;
+        let b64: String = serde_json::from_str(&json)
+            .map_err(|_| format!("`{shown}`: `{key}` is not a string"))?;
+        let bytes = base64::engine::general_purpose::STANDARD
+            .decode(b64)
+            .map_err(|e| format!("`{shown}`: `{key}` is not base64: {e}"))?;
+        String::from_utf8(bytes).map_err(|_| format!("`{shown}`: `{key}` is not PEM"))
+    };
+    let role = match config.get_json("mode").unwrap_or_default().as_str() {
+        "\"client\"" => Role::RouterClient,
+        "\"router\"" => Role::Router,
+        _ => Role::Member,
+    };
+    let key = KeyPair::from_pem(&field("transport/link/tls/listen_private_key_base64")?)
+        .map_err(|e| format!("`{shown}`: its key is not a key: {e}"))?;
+    let cert = field("transport/link/tls/listen_certificate_base64")?;
+    let mut names = alt_names(&cert).map_err(|e| format!("`{shown}`: its certificate {e}"))?;
+    if names.is_empty() {
+        names.push(member.to_string());
+    }
+    let cert = member_params_named(member, names)?
+        .signed_by(&key, issuer)
+        .map_err(|e| format!("cannot sign {member}'s certificate: {e}"))?;
+    Ok(member_config(
+        member,
+        role,
+        ca_pem,
+        &cert.pem(),
+        &key.serialize_pem(),
+    ))
+}
+
 fn write(path: &Path, body: &[u8], replace: bool) -> Result<bool, String> {
     private_dir::write_file(path, body, 0o600, replace)
         .map_err(|e| format!("cannot write `{}`: {e}", path.display()))
@@ -164,7 +348,12 @@ fn ca_params(lab: &str) -> CertificateParams {
 }
 
 fn member_params(member: &str) -> Result<CertificateParams, String> {
-    let mut params = CertificateParams::new(vec![member.to_string()])
+    member_params_named(member, vec![member.to_string()])
+}
+
+/// A member's certificate, for its subject alternative `names` (DNS names and addresses).
+fn member_params_named(member: &str, names: Vec<String>) -> Result<CertificateParams, String> {
+    let mut params = CertificateParams::new(names)
         .map_err(|e| format!("`{member}` cannot name a certificate: {e}"))?;
     let mut dn = DistinguishedName::new();
     dn.push(DnType::CommonName, member);
@@ -262,6 +451,82 @@ mod tests {
             assert!(e.contains("already exists"), "{e}");
         }
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// `members.json5`'s field `key` (a string).
+    fn field(path: &Path, key: &str) -> String {
+        zenoh::Config::from_file(path)
+            .unwrap()
+            .get_json(key)
+            .unwrap()
+    }
+
+    /// Removing a member makes the CA anew and signs the others again with their keys, roles
+    /// and names; the removed member's config is gone; an unknown member is named with the
+    /// members there are.
+    #[test]
+    fn a_removed_member_leaves_the_others_on_a_new_ca() {
+        let dir = fresh("remove");
+        init(&dir, "test").unwrap();
+        for (name, role) in [
+            ("box1", Role::Member),
+            ("gone", Role::Member),
+            ("hop", Role::Router),
+        ] {
+            add(&dir, name, role).unwrap();
+        }
+        const CA: &str = "transport/link/tls/root_ca_certificate_base64";
+        const KEY: &str = "transport/link/tls/listen_private_key_base64";
+        const CERT: &str = "transport/link/tls/listen_certificate_base64";
+        let box1 = dir.join("box1.json5");
+        let (old_ca, old_key, old_cert) = (field(&box1, CA), field(&box1, KEY), field(&box1, CERT));
+        let e = remove(&dir, "nobody").unwrap_err();
+        assert!(
+            e.contains("`nobody` is not a member") && e.contains("box1, gone, hop"),
+            "{e}"
+        );
+        let rewritten = remove(&dir, "gone").unwrap();
+        assert_eq!(rewritten, [box1.clone(), dir.join("hop.json5")]);
+        assert!(!dir.join("gone.json5").exists());
+        assert_eq!(members(&dir).unwrap(), ["box1", "hop"]);
+        let new_ca = field(&box1, CA);
+        assert_ne!(new_ca, old_ca, "the CA is new");
+        let ca_pem = std::fs::read_to_string(dir.join(CA_CERT)).unwrap();
+        let b64 = |pem: &str| {
+            format!(
+                "\"{}\"",
+                base64::engine::general_purpose::STANDARD.encode(pem)
+            )
+        };
+        assert_eq!(new_ca, b64(&ca_pem), "configs carry the CA of the folder");
+        assert_eq!(field(&dir.join("hop.json5"), CA), new_ca);
+        assert_eq!(field(&box1, KEY), old_key, "a member keeps its key");
+        assert_ne!(
+            field(&box1, CERT),
+            old_cert,
+            "its certificate is signed again"
+        );
+        assert_eq!(field(&dir.join("hop.json5"), "mode"), "\"router\"");
+        let cert: String = serde_json::from_str(&field(&box1, CERT)).unwrap();
+        let cert = String::from_utf8(
+            base64::engine::general_purpose::STANDARD
+                .decode(cert)
+                .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(alt_names(&cert).unwrap(), ["box1"]);
+        assert_eq!(common_name(&ca_pem).unwrap(), "envhub lab test");
+        assert_eq!(mode(&box1), 0o600);
+        // The CA's key is the new one: a member added now is of the new CA.
+        let later = add(&dir, "later", Role::Member).unwrap();
+        assert_eq!(field(&later, CA), new_ca);
+        let e = remove(&dir, "gone").unwrap_err();
+        assert!(e.contains("box1, hop, later"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    fn mode(p: &Path) -> u32 {
+        std::fs::metadata(p).unwrap().permissions().mode() & 0o777
     }
 
     #[test]

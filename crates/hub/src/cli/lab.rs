@@ -38,6 +38,15 @@ enum Command {
         #[arg(long)]
         client: bool,
     },
+    /// Remove a member: the lab's CA is made anew and every other member's config signed
+    /// again (copy each to its machine again); NAME's config, which trusts only the old CA,
+    /// then links to no member.
+    Remove {
+        /// The lab's folder (made by `envhub lab init`).
+        folder: PathBuf,
+        /// The member to remove (its `NAME.json5` is deleted).
+        name: String,
+    },
     /// Run a Zenoh router from a router member's config (as `zenohd -c FILE` would), until
     /// interrupted.
     Router {
@@ -88,6 +97,30 @@ pub(crate) fn run(args: &Args) -> anyhow::Result<Outcome> {
                      `zenohd -c {name}.json5`) there, and give members `--connect tls/{name}:{}`",
                     lab::ROUTER_PORT
                 ),
+            }
+        }
+        Command::Remove { folder, name } => {
+            let rewritten = lab::remove(folder, name).map_err(anyhow::Error::msg)?;
+            let f = folder.display();
+            println!(
+                "member `{name}` removed from the lab in {f}: its certificate authority is new, \
+                 and `{name}`'s config links to no member that holds a new config"
+            );
+            if rewritten.is_empty() {
+                println!("no member is left: add members with `envhub lab add {f} NAME`");
+            } else {
+                println!(
+                    "next: copy each member's new config to its machine (it holds that member's \
+                     key) and restart what runs there with it; a member still on its old config \
+                     links with `{name}` and not with the members on new ones:"
+                );
+                for path in rewritten {
+                    let member = path
+                        .file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_default();
+                    println!("  {} -> {member}", path.display());
+                }
             }
         }
         Command::Router { router_config } => router(router_config)?,
