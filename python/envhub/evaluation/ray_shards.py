@@ -49,8 +49,11 @@ def _die_with_parent() -> None:
     ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
 
 
-def shard_task(argv: list[str], shard: str, header: dict[str, Any] | None, done: list[dict[str, Any]]) -> Iterator[Any]:
-    """Runs on a Ray node: the shard's evaluation, yielding ("started", host, pid),
+def shard_task(
+    argv: list[str], shard: str, header: dict[str, Any] | None, done: list[dict[str, Any]], cwd: str
+) -> Iterator[Any]:
+    """Runs on a Ray node: the shard's evaluation (in the driver's folder `cwd` where the node
+    has it, so that relative paths in `argv` mean what they meant there), yielding ("started", host, pid),
     ("header", run.json), ("episode", record) as each is durable, ("end", exit status,
     results or None, the end of its stderr)."""
     import socket
@@ -67,7 +70,8 @@ def shard_task(argv: list[str], shard: str, header: dict[str, Any] | None, done:
         errors = open(os.path.join(folder, "stderr.log"), "w+", encoding="utf-8")
         command = [sys.executable, "-m", "envhub.evaluation", *argv, "--shard", shard, "--out", folder, "--resume", "--quiet"]
         proc = subprocess.Popen(
-            command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors, preexec_fn=_die_with_parent
+            command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors, preexec_fn=_die_with_parent,
+            cwd=cwd if os.path.isdir(cwd) else None,
         )
         yield ("started", socket.gethostname(), os.getpid())
         sent_header = header is not None
@@ -199,7 +203,7 @@ def run_on_ray(
     def submit(i: int) -> None:
         s = states[i]
         s.attempts += 1
-        gen = task.remote(list(argv), str(s.shard), s.header, list(s.records.values()))
+        gen = task.remote(list(argv), str(s.shard), s.header, list(s.records.values()), os.getcwd())
         attempt = s.attempts
 
         def drain() -> None:

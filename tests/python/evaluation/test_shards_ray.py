@@ -93,7 +93,8 @@ def whole(tmp_path_factory):
 
 def test_ray_shards_merge_to_the_one_machine_table(cluster, whole, tmp_path):
     out = tmp_path / "run"
-    done = cli(*RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster, "--shards", "3", "--out", str(out))
+    # The policy named relative to the driver's folder: the shards run there (the node has it).
+    done = cli(*RUN, "--policy", "policy.py:act", "--ray", cluster, "--shards", "3", "--out", str(out), cwd=whole)
     assert done.returncode == 0, done.stderr[-3000:]
     assert rows(out) == rows(whole / "whole")
     merged = json.loads((out / "results.json").read_text())
