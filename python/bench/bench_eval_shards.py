@@ -19,6 +19,7 @@ import argparse
 import csv
 import json
 import os
+import secrets
 import shutil
 import socket
 import statistics
@@ -28,6 +29,8 @@ import tempfile
 import time
 
 RAY = os.path.join(os.path.dirname(sys.executable), "ray")
+# The clusters and the drivers share a token of their own (Ray's token authentication).
+RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
 
 
 def rows(folder: str) -> list[dict]:
@@ -44,7 +47,7 @@ def free_port() -> int:
 def evaluate(args: list[str], out: str) -> float:
     t0 = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "envhub.evaluation", *args, "--out", out, "--quiet"],
-                          capture_output=True, text=True, timeout=3600)
+                          capture_output=True, text=True, timeout=3600, env={**os.environ, **RAY_ENV})
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
         raise SystemExit(f"envhub eval {' '.join(args)} failed: {done.stderr[-3000:]}")
@@ -54,7 +57,7 @@ def evaluate(args: list[str], out: str) -> float:
 def with_cluster(cpus: int, run):
     temp = tempfile.mkdtemp(prefix="ray-", dir="/tmp")
     port = free_port()
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    env = {**os.environ, **RAY_ENV}
     subprocess.run([RAY, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", f"--num-cpus={cpus}",
                     "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={temp}",
                     "--object-store-memory=100000000", f"--ray-client-server-port={free_port()}"],

@@ -170,7 +170,11 @@ def _connect(address: str | None) -> Any:
         try:
             ray.init(address=address, logging_level="WARNING", log_to_driver=False, include_dashboard=False)
         except (ConnectionError, ValueError, RuntimeError) as e:
-            raise RayUnavailable(f"--ray {address or ''}: cannot reach a Ray cluster: {e}".replace("  ", " ")) from None
+            raise RayUnavailable(
+                f"--ray {address or ''}: cannot reach a Ray cluster: {e}".replace("  ", " ")
+                + "\nhint: give the head node's address (ray start --head prints it); a cluster with token authentication "
+                "needs its token here too (RAY_AUTH_MODE=token with RAY_AUTH_TOKEN, or ~/.ray/auth_token)"
+            ) from None
     return ray
 
 

@@ -9,6 +9,7 @@ import csv
 import json
 import os
 import shutil
+import secrets
 import signal
 import socket
 import subprocess
@@ -44,6 +45,9 @@ def act(observations, tasks):
 """
 RUN = ["mujoco", "--tasks", "mujoco-hopper", "mujoco-swimmer", "--episodes", "3", "--quiet"]
 BIN = os.path.join(os.path.dirname(sys.executable), "ray")
+# The cluster and its drivers share a token of their own (Ray's token authentication), not
+# whatever ~/.ray/auth_token holds: Ray 2.59+ makes one there for local clusters.
+RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
 
 
 def free_port() -> int:
@@ -57,7 +61,7 @@ def cluster():
     """A head node on loopback with 3 CPUs: up to 3 shards at once, each in a worker process."""
     port = free_port()
     temp = tempfile.mkdtemp(prefix="ray-", dir="/tmp")  # Ray's socket paths must stay short
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    env = {**os.environ, **RAY_ENV}
     start = subprocess.run(
         [BIN, "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=3",
          "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={temp}",
@@ -74,7 +78,7 @@ def cluster():
 
 def cli(*args: str, **kw) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "envhub.evaluation", *args], capture_output=True, text=True,
-                          timeout=900, **kw)
+                          timeout=900, env={**os.environ, **RAY_ENV}, **kw)
 
 
 def rows(folder) -> list[dict]:
@@ -127,7 +131,7 @@ def test_a_killed_ray_worker_costs_only_its_unfinished_episodes(cluster, whole, 
     driver = subprocess.Popen(
         [sys.executable, "-m", "envhub.evaluation", *RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster,
          "--shards", "2", "--out", str(out)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, **RAY_ENV},
     )
     try:
         # Shard 1 is swimmer's three episodes: kill its Ray worker once its first is kept.
