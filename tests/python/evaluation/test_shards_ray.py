@@ -8,8 +8,8 @@ from __future__ import annotations
 import csv
 import json
 import os
-import shutil
 import secrets
+import shutil
 import signal
 import socket
 import subprocess
