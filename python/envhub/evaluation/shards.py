@@ -108,11 +108,12 @@ def read_shard(folder: str) -> ShardRun:
     if not isinstance(header, dict) or "shard" not in header:
         raise ShardError(f"{folder} holds an evaluation run without --shard: only the folders of `envhub eval --shard I/N` merge")
     try:
-        lock = FolderLock(folder)
+        FolderLock(folder).release()
     except FolderLocked as e:
         raise ShardError(f"shard {folder} is still being written: {str(e).splitlines()[0]}\n"
                          "hint: merge once every shard's evaluation has ended") from None
-    lock.release()
+    except OSError:
+        pass  # a filesystem without flock (or read-only): the checks of a finished shard below still hold
     try:
         results = _load_json(os.path.join(folder, RESULTS), f"shard folder {folder}")
     except FileNotFoundError:
