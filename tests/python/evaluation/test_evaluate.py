@@ -105,7 +105,7 @@ def test_usage_errors_name_the_valid_choices(args, expected):
         ({**PENDULUM, "settle": {"steps": 2, "action": [float("nan")]}}, "`settle.action` must be a list of finite numbers"),
         ({**PENDULUM, "episodes_per_task": 0}, "`episodes_per_task` must be an integer >= 1"),
         ({**PENDULUM, "init": {"seeds": [1, 2]}}, "5 episodes per task but 2 seeds"),
-        ({**PENDULUM, "task_reset_option": "task"}, "`tasks`/`task_option`/`task_reset_option` go with `entry`"),
+        ({**PENDULUM, "task_reset_option": "task"}, "`tasks`/`task_option`/`task_reset_option`/`axes` go with `entry`"),
         ({**{k: v for k, v in PENDULUM.items() if k != "entries"}, "entry": "gym-pendulum", "task_reset_option": "task"},
          "`task_reset_option` switches between `tasks`; this benchmark lists none"),
     ],
