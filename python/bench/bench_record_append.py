@@ -2,13 +2,17 @@
 video file grows (issue 42's items 3 and 4: the figures docs/guide/recording.md gives).
 
     .venv/bin/python python/bench/bench_record_append.py memory [--envs 8] [--long 3000] [--steps N]
+        [--short 10] [--commit-each] [--dir DIR]
     .venv/bin/python python/bench/bench_record_append.py append [--mb 200]
 
 `memory`: Gymnasium vector env of `--envs` envs with 4 KiB observations (512 float64), env 0's
-episodes `--long` steps, the others' 10, a 1 MiB queue, `--steps` steps (`--long` + 1 unless
+episodes `--long` steps, the others' `--short` (10), a 1 MiB queue (one step with `--commit-each`:
+each ended episode is then committed at once), `--steps` steps (`--long` + 1 unless
 given); the process's resident set is sampled
 every 5 ms, and its rise over the baseline (after the first reset) reported, held at the end and
-at the peak. `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
+at the peak; and the commits made during env 0's episode: the time a commit took and the
+resident set after it (over the baseline), each the mean over the first and over the last tenth
+of them (issue 52: neither may grow with the commits before). `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
 committed every 0.2 s (or 4x the last commit's time), until the camera's last video file (its
 run of files, joined at the end) reaches `--mb` MB; each commit's time, episodes and the bytes
 it wrote (`/proc/self/io` `wchar`, joins of small files included) against the file's size
@@ -80,11 +84,23 @@ class _Noise(gymnasium.Env):
         return self._obs(), 0.0, False, self.t >= 10, {}
 
 
-def memory(envs: int, long: int, steps: int | None = None) -> dict:
-    fns = [lambda: _Wide(long)] + [lambda: _Wide(10)] * (envs - 1)
+def memory(envs: int, long: int, steps: int | None = None, short: int = 10, each: bool = False,
+           folder: str | None = None) -> dict:
+    fns = [lambda: _Wide(long)] + [lambda: _Wide(short)] * (envs - 1)
+    queue_bytes = 1 if each else 2**20
     env = gymnasium.vector.SyncVectorEnv(fns)
-    with tempfile.TemporaryDirectory() as tmp:
-        rec = RecordEpisodes(env, str(Path(tmp) / "d"), video=False, queue_bytes=2**20)
+    commits: list[tuple[float, int]] = []  # per commit: seconds, resident set after it
+    real = _dataset.Dataset.commit
+
+    def timed(self, episodes):
+        t0 = time.perf_counter()
+        out = real(self, episodes)
+        commits.append((time.perf_counter() - t0, _rss()))
+        return out
+
+    _dataset.Dataset.commit = timed
+    with tempfile.TemporaryDirectory(dir=folder) as tmp:
+        rec = RecordEpisodes(env, str(Path(tmp) / "d"), video=False, queue_bytes=queue_bytes)
         rec.reset(seed=0)
         base, peak, stop = _rss(), [0], threading.Event()
 
@@ -102,9 +118,21 @@ def memory(envs: int, long: int, steps: int | None = None) -> dict:
         rec.close()
         stop.set()
         sampler.join()
-    return {"envs": envs, "long": long, "queue_bytes": 2**20, "baseline_mib": base / 2**20,
+    _dataset.Dataset.commit = real
+    # The commits during env 0's episode (the last one, at the close, writes it): the first
+    # and the last tenth of them.
+    during = commits[:-1] if len(commits) > 1 else commits
+    tenth = max(1, len(during) // 10)
+
+    def mean(part: list[tuple[float, int]], k: int) -> float:
+        return sum(c[k] for c in part) / len(part)
+
+    return {"envs": envs, "long": long, "short": short, "queue_bytes": queue_bytes, "baseline_mib": base / 2**20,
             "held_above_mib": (held - base) / 2**20, "peak_above_mib": (peak[0] - base) / 2**20,
-            "written": rec.stats["episodes_written"]}
+            "written": rec.stats["episodes_written"], "commits": len(commits),
+            "commit_ms_first": 1e3 * mean(during[:tenth], 0), "commit_ms_last": 1e3 * mean(during[-tenth:], 0),
+            "rss_above_mib_first": (mean(during[:tenth], 1) - base) / 2**20,
+            "rss_above_mib_last": (mean(during[-tenth:], 1) - base) / 2**20}
 
 
 def _wchar() -> int:
@@ -144,10 +172,14 @@ def main() -> None:
     p.add_argument("--envs", type=int, default=8)
     p.add_argument("--long", type=int, default=3000)
     p.add_argument("--steps", type=int, default=None)
+    p.add_argument("--short", type=int, default=10, help="memory: the other envs' episodes' steps")
+    p.add_argument("--commit-each", action="store_true",
+                   help="memory: a queue of one step, so that each ended episode is committed at once")
+    p.add_argument("--dir", default=None, help="memory: the folder to record in (default: the system's temporary one)")
     p.add_argument("--mb", type=float, default=200)
     a = p.parse_args()
     if a.what == "memory":
-        print(json.dumps(memory(a.envs, a.long, a.steps)))
+        print(json.dumps(memory(a.envs, a.long, a.steps, a.short, a.commit_each, a.dir)))
     else:
         for row in append(a.mb):
             print(json.dumps(row))

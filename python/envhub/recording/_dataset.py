@@ -39,7 +39,7 @@ import numpy as np
 from . import _encoding as encoding
 from ._durable import Commit, fsync_dir, fsync_file, link_or_copy
 from ._encoding import Encoding
-from ._files import GROUP_BYTES, PARQUET, Files, Part, group_rows, join_parquet, to_join
+from ._files import GROUP_BYTES, PARQUET, Files, Groups, Part, group_rows, join_parquet, to_join
 from ._memory import release
 from ._spill import Spilled, row_bytes, rows_of, values_of, width_of
 from ._stats import NAMES, aggregate, aggregate_all, sliced_stats
@@ -733,6 +733,7 @@ class Dataset:
         out = commit.meta_file(files.rel(home)[len("meta/"):])
         schema = pq.read_schema(paths[0])
         with pq.ParquetWriter(out, schema, **PARQUET) as writer:
+            groups = Groups(writer)
             for path in paths:
                 f = pq.ParquetFile(path)
                 for g in range(f.num_row_groups):
@@ -740,8 +741,9 @@ class Dataset:
                     for name, value in (("meta/episodes/chunk_index", home[0]), ("meta/episodes/file_index", home[1])):
                         i = schema.get_field_index(name)
                         table = table.set_column(i, schema.field(i), pa.array(np.full(len(table), value)).cast(schema.field(i).type))
-                    writer.write_table(table)
-                    release()
+                    groups.write(table)
+                    del table
+            groups.flush()
         for p in parts[1:]:
             commit.remove_meta_file(files.rel(p.at)[len("meta/"):])
         commit.apply()
@@ -753,7 +755,8 @@ class Dataset:
                  shifts: np.ndarray) -> None:
         """Writes into `commit`'s `meta/` the episodes files with the episodes of `parts`
         pointing at the file `at`, where part `k` starts `shifts[k]` frames in. Row group by
-        row group (a commit's episodes each): an episodes file grows to 100 MB."""
+        row group (an episodes file grows to 100 MB), written in groups of about
+        `GROUP_BYTES` (`Groups`)."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -766,6 +769,7 @@ class Dataset:
             if ((index >= start) & (index < end)).any():
                 out = commit.meta_file(str(path.relative_to(self.root / "meta")))
                 with pq.ParquetWriter(out, source.schema_arrow, **PARQUET) as writer:
+                    groups = Groups(writer)
                     for g in range(source.num_row_groups):
                         table = source.read_row_group(g, use_threads=False)
                         rows = table.column("episode_index").to_numpy()
@@ -781,9 +785,9 @@ class Dataset:
                             i = table.schema.get_field_index(name)
                             table = table.set_column(i, table.schema.field(i),
                                                      pa.array(values).cast(table.schema.field(i).type))
-                        writer.write_table(table)
+                        groups.write(table)
                         del table
-                        release()
+                    groups.flush()
             if len(index) and index.min() <= start:
                 break
 

@@ -101,15 +101,52 @@ def to_join(sizes: list[int], cap: int = JOIN_BYTES) -> int:
     return j
 
 
+class Groups:
+    """Writes tables into `writer` in row groups of about `GROUP_BYTES`, whatever the tables'
+    sizes: a file joined or rewritten a row group at a time would otherwise keep every row
+    group it read, one per commit (a commit's episodes are one), and its row groups, its footer
+    and the work of every later join or rewrite of it would grow with the number of commits.
+    Holds at most a group's rows and the table given last."""
+
+    def __init__(self, writer: Any) -> None:
+        self.writer = writer
+        self._tables: list[Any] = []
+        self._bytes = 0
+        #: Row groups written.
+        self.written = 0
+
+    def write(self, table: Any) -> None:
+        self._tables.append(table)
+        self._bytes += table.nbytes
+        if self._bytes >= GROUP_BYTES:
+            self.flush()
+
+    def flush(self) -> None:
+        """Writes what is held as one row group."""
+        import pyarrow as pa
+
+        if not self._tables:
+            return
+        table = self._tables[0] if len(self._tables) == 1 else pa.concat_tables(self._tables)
+        self._tables, self._bytes = [], 0
+        if len(table):
+            self.writer.write_table(table, row_group_size=len(table))
+            self.written += 1
+        del table
+        release()
+
+
 def join_parquet(paths: list[Path], out: Path) -> None:
-    """The rows of `paths`, in order, into one Parquet file (row group by row group: memory
-    bounded by one group, not the files, once the allocators give each group back)."""
+    """The rows of `paths`, in order, into one Parquet file, in row groups of about
+    `GROUP_BYTES` (memory bounded by about two groups, not the files, once the allocators give
+    each group back)."""
     import pyarrow.parquet as pq
 
     schema = pq.read_schema(paths[0])
     with pq.ParquetWriter(out, schema, **PARQUET) as writer:
+        groups = Groups(writer)
         for path in paths:
             f = pq.ParquetFile(path)
             for i in range(f.num_row_groups):
-                writer.write_table(f.read_row_group(i, use_threads=False).cast(schema))
-                release()
+                groups.write(f.read_row_group(i, use_threads=False).cast(schema))
+        groups.flush()
