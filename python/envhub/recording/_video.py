@@ -1,10 +1,15 @@
 """MP4 videos through PyAV (FFmpeg's encoders): one file per episode and camera, encoded frame
 by frame as the episode runs, so no episode's raw frames are ever held in memory.
 
-The default encoder is x264 (`libx264`): an open x264 encoder costs a few MB, so a recorder can
-keep one per env and camera; SVT-AV1 (`libsvtav1`, LeRobot's own default) writes smaller files
-but costs about 80 MB per open encoder. Keyframes every `gop` frames (2, as LeRobot does)
-let a data loader decode any frame quickly.
+The default encoder is x264 (`libx264`): an open x264 encoder costs a few MB and runs on its
+caller's thread, so a recorder can keep one per env and camera. SVT-AV1 (`libsvtav1`, LeRobot's
+own default) writes smaller files but runs a pipeline of threads of its own in every open
+encoder (16 at its least parallel, `lp=1`; no setting makes fewer) and costs about 80 MB: one
+per env and camera would take threads and memory by the envs. Its episodes are encoded
+losslessly first (FFV1, on the caller's thread, in the staging folder) and into AV1 when the
+episode ends (`finish`), so that a recorder has at most one SVT-AV1 encoder open per encoding
+thread. Keyframes every `gop` frames (2, as LeRobot does) let a data loader decode any frame
+quickly.
 """
 
 from __future__ import annotations
@@ -39,31 +44,66 @@ def pix_fmt(width: int, height: int) -> str:
     return "yuv420p" if width % 2 == 0 and height % 2 == 0 else "yuv444p"
 
 
+#: Encoders that run threads of their own whatever FFmpeg's thread count: an episode is encoded
+#: with them when it ends, from its lossless copy (`LOSSLESS`).
+DEFERRED = frozenset({"libsvtav1"})
+#: The lossless copy of a deferred episode: FFV1 (FFmpeg's own, intra-only: no thread, and
+#: decoded back to the very RGB frames), in Matroska.
+LOSSLESS = ("ffv1", "bgr0", "matroska")
+
+
+def _output(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
+    """An MP4 at `path` and its video stream, opened to encode with `encoding`."""
+    import av
+
+    container = av.open(str(path), mode="w", format="mp4")
+    try:
+        container.metadata["comment"] = encoding.tag()  # read back by appends
+        stream = container.add_stream(encoding.encoder, rate=fps, options=encoding.options())
+        stream.width, stream.height = encoding.width, encoding.height
+        stream.pix_fmt = encoding.pix_fmt
+        stream.codec_context.time_base = Fraction(1, fps)
+        # One thread per encoder (FFmpeg's default is one per core each): the recorder bounds
+        # the threads that encode by calling encoders from `encode_threads` threads.
+        stream.codec_context.thread_count = 1
+    except BaseException:
+        container.close()
+        raise
+    return container, stream
+
+
+def _lossless(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
+    import av
+
+    codec, pix_fmt, fmt = LOSSLESS
+    container = av.open(str(path), mode="w", format=fmt)
+    try:
+        stream = container.add_stream(codec, rate=fps)
+        stream.width, stream.height, stream.pix_fmt = encoding.width, encoding.height, pix_fmt
+        stream.codec_context.time_base = Fraction(1, fps)
+        stream.codec_context.thread_count = 1
+    except BaseException:
+        container.close()
+        raise
+    return container, stream
+
+
 class EpisodeVideo:
     """One episode of one camera, encoded into `path` frame by frame (frame `k` at time
-    `k / fps`)."""
+    `k / fps`); with a `DEFERRED` encoder, into a lossless copy beside it, encoded into `path`
+    by `finish`."""
 
     def __init__(self, path: Path, fps: int, encoding: Encoding) -> None:
-        import av
-
         self.path = path
+        self.fps, self.encoding = fps, encoding
         self.shape = (encoding.height, encoding.width, 3)
         self.frames = 0
-        self._container = av.open(str(path), mode="w", format="mp4")
-        try:
-            self._container.metadata["comment"] = encoding.tag()  # read back by appends
-            stream = self._container.add_stream(encoding.encoder, rate=fps, options=encoding.options())
-            stream.width, stream.height = encoding.width, encoding.height
-            stream.pix_fmt = encoding.pix_fmt
-            stream.codec_context.time_base = Fraction(1, fps)
-            # One thread per encoder (FFmpeg's default is one per core each; SVT-AV1's own bound
-            # is in its options): the recorder bounds the threads that encode by calling
-            # encoders from `encode_threads` threads.
-            stream.codec_context.thread_count = 1
-            self._stream = stream
-        except BaseException:
-            self._container.close()
-            raise
+        self.finished = False
+        self._copy = path.with_name(path.name + ".lossless.mkv") if encoding.encoder in DEFERRED else None
+        if self._copy is None:
+            self._container, self._stream = _output(path, fps, encoding)
+        else:
+            self._container, self._stream = _lossless(self._copy, fps, encoding)
         self.stats = _ChannelStats()
 
     def add(self, frame: np.ndarray) -> None:
@@ -83,9 +123,34 @@ class EpisodeVideo:
         self.frames += 1
 
     def finish(self) -> None:
-        """Flushes the encoder and closes the file."""
+        """Flushes the encoder and closes the file; with a `DEFERRED` encoder, first encodes
+        the episode from its lossless copy (one such encoder open, on this thread). Once."""
+        if self.finished:
+            return
         self._container.mux(self._stream.encode(None))
         self._container.close()
+        if self._copy is not None:
+            self._encode_copy(self._copy)
+            self._copy.unlink()
+        self.finished = True
+
+    def _encode_copy(self, copy: Path) -> None:
+        import av
+
+        container, stream = _output(self.path, self.fps, self.encoding)
+        with container, av.open(str(copy)) as src:
+            source = src.streams.video[0]
+            source.codec_context.thread_count = 1
+            k = 0
+            for decoded in src.decode(source):
+                vf = av.VideoFrame.from_ndarray(decoded.to_ndarray(format="rgb24"), format="rgb24")
+                vf.pts = k
+                vf.time_base = stream.codec_context.time_base
+                container.mux(stream.encode(vf))
+                k += 1
+            container.mux(stream.encode(None))
+        if k != self.frames:
+            raise ValueError(f"`{copy}` gave {k} frames back, {self.frames} were encoded into it")
 
     def abandon(self) -> None:
         """Closes and removes the file (an episode that is not kept)."""
@@ -93,10 +158,12 @@ class EpisodeVideo:
             self._container.close()
         except Exception:  # a half-written file is removed either way
             pass
-        try:
-            os.unlink(self.path)
-        except FileNotFoundError:
-            pass
+        for path in (self.path, self._copy):
+            if path is not None:
+                try:
+                    os.unlink(path)
+                except FileNotFoundError:
+                    pass
 
 
 def count_frames(path: Path) -> int:

@@ -190,7 +190,10 @@ class Writer:
             self._task[i] = s.task
         if self.video_keys and not self._full():
             self._encode(np.flatnonzero(recording), s)
-        for i in np.flatnonzero(recording & done):
+        ended = np.flatnonzero(recording & done)
+        if self.video_keys and len(ended):
+            self._finish([i for i in ended if self._keeps(s.success[i] if s.success is not None else None)])
+        for i in ended:
             self._end(i, t, s.success[i] if s.success is not None else None)
         # After an autoreset step, or the end of an episode (recorded or not, after a drop),
         # the env's next episode starts with the next row.
@@ -221,6 +224,23 @@ class Writer:
             _encode_frames(jobs[0])
         else:
             list(self._pool.map(_encode_frames, jobs))  # re-raises an encoder's error
+
+    def _finish(self, envs: list[int]) -> None:
+        """Finishes the videos of the episodes of `envs`, which end and are kept, on the
+        encoding threads (env `i`'s on thread `i % threads`, one after another): with SVT-AV1,
+        which encodes an episode as it ends (`_video.py`), each thread has one encoder open at
+        a time."""
+        jobs: list[list[EpisodeVideo]] = [[] for _ in range(self._threads)]
+        for i in envs:
+            jobs[i % self._threads].extend(self._encoders[i].values())
+        if self._pool is None:
+            _finish_videos(jobs[0])
+        else:
+            list(self._pool.map(_finish_videos, jobs))  # re-raises an encoder's error
+
+    def _keeps(self, success: bool | None) -> bool:
+        """Whether an episode that ends now, with `success`, is kept."""
+        return not (self.keep == "success" and not success) and not self._full()
 
     def _staged(self, name: str) -> Path:
         """A new file's path in the dataset's staging folder."""
@@ -285,3 +305,8 @@ class Writer:
 def _encode_frames(job: list[tuple[EpisodeVideo, np.ndarray]]) -> None:
     for video, frame in job:
         video.add(frame)
+
+
+def _finish_videos(job: list[EpisodeVideo]) -> None:
+    for video in job:
+        video.finish()

@@ -265,3 +265,82 @@ def test_the_queue_is_bounded_in_bytes_and_encoding_in_threads(tmp_path, null_re
             envhub.RecordEpisodes(other, str(tmp_path / "e"), queue_bytes=0)
     finally:
         other.close()
+
+
+class _Camera:
+    """An env whose observation is a 64x64 camera (each frame one level, by env and step),
+    episodes of 4 steps."""
+
+    metadata = {"render_fps": 30}
+
+    def __init__(self, k: int) -> None:
+        import gymnasium
+        from gymnasium import spaces
+
+        class Env(gymnasium.Env):
+            metadata = {"render_fps": 30}
+            observation_space = spaces.Dict({"pixels": spaces.Box(0, 255, (64, 64, 3), np.uint8)})
+            action_space = spaces.Box(-1, 1, (1,), np.float32)
+
+            def reset(self, *, seed=None, options=None):
+                self.t = 0
+                return {"pixels": np.full((64, 64, 3), 20 * k, np.uint8)}, {}
+
+            def step(self, action):
+                self.t += 1
+                return {"pixels": np.full((64, 64, 3), 20 * k + 8 * self.t, np.uint8)}, 0.0, False, self.t >= 4, {}
+
+        self.env = Env()
+
+
+def _svt_threads() -> int:
+    """The threads that one open SVT-AV1 encoder runs, opened with the recorder's settings."""
+    import io
+
+    import av
+    from envhub.recording._encoding import requested
+
+    encoding = requested("libsvtav1", None, None, "yuv420p", 64, 64)
+    before = _threads()
+    with av.open(io.BytesIO(), mode="w", format="mp4") as out:
+        stream = out.add_stream("libsvtav1", rate=30, options=encoding.options())
+        stream.width, stream.height, stream.pix_fmt = 64, 64, "yuv420p"
+        frame = av.VideoFrame.from_ndarray(np.zeros((64, 64, 3), np.uint8), format="rgb24")
+        frame.pts = 0
+        out.mux(stream.encode(frame))
+        opened = _threads() - before
+        out.mux(stream.encode(None))
+    return opened
+
+
+def test_av1_encoding_keeps_one_svt_encoder_per_encoding_thread(tmp_path):
+    """SVT-AV1 runs its own pipeline of threads in every open encoder (16 at its least,
+    whatever FFmpeg's thread count), so an encoder per env and camera, open through each
+    episode, took 16 threads per env (six envs, 96). Its episodes are encoded losslessly as
+    they run and into AV1 when they end, on the `encode_threads` threads, one encoder each at
+    a time: the recording adds at most the writer, two encoding threads and two SVT-AV1
+    encoders' threads, and every frame decodes back."""
+    import av
+    import gymnasium
+
+    svt = _svt_threads()
+    assert svt >= 4, f"SVT-AV1 opened {svt} threads: this test needs an encoder with threads of its own"
+    env = gymnasium.vector.SyncVectorEnv([lambda k=k: _Camera(k).env for k in range(6)])
+    root = tmp_path / "d"
+    rec = envhub.RecordEpisodes(env, str(root), codec="libsvtav1", encode_threads=2)
+    before = _threads()
+    most = before
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec.reset(seed=0)
+        for _ in range(20):
+            rec.step(np.zeros((6, 1), np.float32))
+            most = max(most, _threads())
+        rec.close()
+    assert most - before <= 1 + 2 + 2 * svt, f"{most - before} threads more while recording ({svt} per SVT-AV1 encoder)"
+    assert rec.stats["episodes_written"] == 24  # 4 episodes of 4 steps per env (every 5th step resets)
+    (video,) = root.glob("videos/*/*/*.mp4")
+    with av.open(str(video)) as src:
+        assert src.streams.video[0].codec_context.name in ("av1", "libdav1d", "libaom-av1")
+        frames = [f.to_ndarray(format="rgb24") for f in src.decode(video=0)]
+    assert len(frames) == 24 * 4
