@@ -159,3 +159,39 @@ def test_a_killed_ray_worker_costs_only_its_unfinished_episodes(cluster, whole, 
     lengths = sum(e["length"] for e in merged["episodes"] if e["task"].endswith("swimmer"))
     assert shard1["env_steps"] < lengths, (shard1, lengths)
     assert _shard_evaluation("1/2") is None  # nothing of the killed attempt is left running
+
+
+def test_a_killed_driver_resumes_from_what_its_shards_kept(cluster, whole, tmp_path):
+    """SIGKILL to the driver mid-run: its shards' tasks end with it (nothing is left running on
+    the cluster), and `--resume` goes on from the episodes kept in OUT/shards/."""
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "envhub.evaluation", *RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster,
+            "--shards", "2", "--out", str(out)]
+    driver = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                              env={**os.environ, **RAY_ENV})
+    try:
+        log = out / "shards" / "shard-1" / "episodes.jsonl"
+        deadline = time.monotonic() + 300
+        while not (log.exists() and log.read_text().count("\n") >= 1):
+            assert driver.poll() is None, driver.communicate()[1][-3000:]
+            assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
+            time.sleep(0.05)
+        driver.kill()
+        driver.wait()
+    finally:
+        if driver.poll() is None:
+            driver.kill()
+            driver.wait()
+    kept = log.read_text().count("\n")
+    deadline = time.monotonic() + 120
+    while _shard_evaluation("1/2") is not None:  # the cluster ends the dead driver's tasks
+        assert time.monotonic() < deadline, "the killed driver's shard still runs after 120 s"
+        time.sleep(0.2)
+    done = cli(*RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster, "--shards", "2", "--out", str(out),
+               "--resume")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert rows(out) == rows(whole / "whole")
+    merged = json.loads((out / "results.json").read_text())
+    assert merged["run"]["resumed"] and kept >= 1
+    lengths = sum(e["length"] for e in merged["episodes"] if e["task"].endswith("swimmer"))
+    assert merged["run"]["shards"][1]["env_steps"] < lengths
