@@ -8,7 +8,7 @@ import json
 import os
 from typing import Any, Sequence
 
-from .results import LOG, RUN, FolderLock, _write_json, summarize, write_outputs
+from .results import LOG, RUN, FolderLock, _write_json, summarize, write_log, write_outputs
 from .shards import RESULTS, ShardError, check_shards, merged_records, read_shard
 
 __all__ = ["merge", "shard_rows", "shards_markdown"]
@@ -106,13 +106,7 @@ def merge(out: str | os.PathLike[str], folders: Sequence[str | os.PathLike[str]]
             "episodes": records,
         }
         _write_json(os.path.join(out, RUN), header)
-        tmp = os.path.join(out, LOG + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as f:
-            for rec in records:
-                f.write(json.dumps(rec, allow_nan=False) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, os.path.join(out, LOG))
+        write_log(os.path.join(out, LOG), records)
         write_outputs(out, results)
         if report:
             from .report import write_report

@@ -28,7 +28,7 @@ import time
 from typing import Any, Iterator, Sequence
 
 from .distribute import shard_folders
-from .results import LOG, RUN, FolderLock, Progress, _write_json, read_log
+from .results import LOG, RUN, FolderLock, Progress, _write_json, read_log, write_log
 from .shards import RESULTS, Shard, ShardError
 
 __all__ = ["run_on_ray", "RayUnavailable"]
@@ -135,11 +135,7 @@ class _ShardState:
         if self.header is not None:
             _write_json(os.path.join(self.folder, RUN), self.header)
         path = os.path.join(self.folder, LOG)
-        with open(path + ".tmp", "w", encoding="utf-8") as f:
-            f.writelines(json.dumps(r, allow_nan=False) + "\n" for r in self.records.values())
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(path + ".tmp", path)
+        write_log(path, self.records.values())
         self.log = open(path, "a", encoding="utf-8")
 
     def add(self, record: dict[str, Any]) -> None:

@@ -128,6 +128,16 @@ def _drop_torn_tail(path: str) -> None:
             f.truncate(data.rfind(b"\n") + 1)
 
 
+def write_log(path: str, records: Any) -> None:
+    """`records` as a whole new episode log at `path`, replacing it at once (fsynced first)."""
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.writelines(json.dumps(r, allow_nan=False) + "\n" for r in records)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
 def _write_json(path: str, data: Any) -> None:
     tmp = path + ".tmp"
     with open(tmp, "w", encoding="utf-8") as f:

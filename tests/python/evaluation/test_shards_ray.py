@@ -16,6 +16,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from typing import Any
 
 import pytest
 from harness import import_envhub
@@ -109,6 +110,17 @@ def test_ray_shards_merge_to_the_one_machine_table(cluster, whole, tmp_path):
     assert again.returncode == 0 and rows(tmp_path / "again") == rows(whole / "whole")
 
 
+def wait_for_a_kept_episode(driver: subprocess.Popen, out) -> Any:
+    """The driver's log of shard 1, once it holds an episode (the driver still running)."""
+    log = out / "shards" / "shard-1" / "episodes.jsonl"
+    deadline = time.monotonic() + 300
+    while not (log.exists() and log.read_text().count("\n") >= 1):
+        assert driver.poll() is None, driver.communicate()[1][-3000:]
+        assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
+        time.sleep(0.05)
+    return log
+
+
 def _shard_evaluation(shard: str) -> tuple[int, int] | None:
     """(pid, parent pid) of the evaluation process running `--shard shard`, if one runs."""
     for pid in os.listdir("/proc"):
@@ -135,12 +147,7 @@ def test_a_killed_ray_worker_costs_only_its_unfinished_episodes(cluster, whole, 
     )
     try:
         # Shard 1 is swimmer's three episodes: kill its Ray worker once its first is kept.
-        log = out / "shards" / "shard-1" / "episodes.jsonl"
-        deadline = time.monotonic() + 300
-        while not (log.exists() and log.read_text().count("\n") >= 1):
-            assert driver.poll() is None, driver.communicate()[1][-3000:]
-            assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
-            time.sleep(0.05)
+        wait_for_a_kept_episode(driver, out)
         found = _shard_evaluation("1/2")
         assert found is not None, "no evaluation process of shard 1/2"
         os.kill(found[1], signal.SIGKILL)  # the Ray worker process that runs the shard's task
@@ -170,12 +177,7 @@ def test_a_killed_driver_resumes_from_what_its_shards_kept(cluster, whole, tmp_p
     driver = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                               env={**os.environ, **RAY_ENV})
     try:
-        log = out / "shards" / "shard-1" / "episodes.jsonl"
-        deadline = time.monotonic() + 300
-        while not (log.exists() and log.read_text().count("\n") >= 1):
-            assert driver.poll() is None, driver.communicate()[1][-3000:]
-            assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
-            time.sleep(0.05)
+        log = wait_for_a_kept_episode(driver, out)
         driver.kill()
         driver.wait()
     finally:
