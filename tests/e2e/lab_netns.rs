@@ -326,3 +326,52 @@ fn netns_a_removed_member_links_to_no_member() {
     drop(hub_a);
     let _ = std::fs::remove_dir_all(root);
 }
+
+/// Hub names checked against certificates: member `imp` serves a hub named `a` (member `a`'s
+/// name) before `a` does. A client of the lab, at first contact (no pin), lists no `a` then;
+/// `a`'s own hub starts beside the impostor (which it does not see as a namesake), and the
+/// client lists it and runs its session there.
+#[test]
+fn netns_a_member_cannot_pose_as_another_member_s_hub() {
+    let test = "netns_a_member_cannot_pose_as_another_member_s_hub";
+    let Some(hosts) = TwoHosts::new(test) else {
+        return;
+    };
+    let (root, config) = labs("names", &[("a", ""), ("imp", ""), ("you", "")]);
+    let (listen_a, listen_imp) = (
+        format!("tls/{}:7447", hosts.addr[0]),
+        format!("tls/{}:7447", hosts.addr[1]),
+    );
+    let serve = |side: usize, tag: &str, member: &str, listen: &str| {
+        let mut hub = hosts.envhub(
+            side,
+            tag,
+            &[
+                "--zenoh-config",
+                &config(member),
+                "serve",
+                "--name",
+                "a",
+                "--listen",
+                listen,
+                "--socket",
+                &socket_in(&root, tag),
+            ],
+        );
+        hub.wait_for_line("on the network as hub `a`", Duration::from_secs(60));
+        hub
+    };
+    let impostor = serve(1, "imp", "imp", &listen_imp);
+    let default_multicast = [(envhub_hub::ENVHUB_MULTICAST, "")];
+    let you = config("you");
+    let at_imp = ["--connect", listen_imp.as_str()];
+    let seen = hubs_from_b(&hosts, "first", &you, &at_imp, &default_multicast, "a", 2);
+    assert!(seen.is_empty(), "a member posed as hub `a`: {seen:?}");
+    let real = serve(0, "real", "a", &listen_a);
+    let seen = hubs_from_b(&hosts, "you", &you, &at_imp, &default_multicast, "a", 5);
+    assert_eq!(seen, ["a"], "the lab's client did not find member a's hub");
+    run_on(&hosts, &you, &at_imp, &default_multicast, "a");
+    drop(real);
+    drop(impostor);
+    let _ = std::fs::remove_dir_all(root);
+}

@@ -7,10 +7,15 @@
 //! Members open and accept `tls/` links only (`transport/link/protocols`). Every link between
 //! members is then checked at both ends by the one CA, so a hub may listen
 //! beyond loopback, scout and connect out (see [`crate::exposure`]), a client scouts and follows
-//! gossip, and a peer without a certificate of this lab gets no link at all. Names are not
+//! gossip, and a peer without a certificate of this lab gets no link at all. Addresses are not
 //! checked on connect (`verify_name_on_connect: false`): the lab's CA is the trust, whatever
-//! address a member is reached at. Session keys still come from the key exchange with each
-//! hub's pinned identity ([`crate::identity`]); TLS adds that nothing of a link is readable.
+//! address a member is reached at (multicast finds members by address). Hub names are checked
+//! instead, where it matters: every config lists the lab's members (as they were when it was
+//! written) in Zenoh's access control, so a hub's name (`envhub/hub/NAME/**`: its tokens,
+//! queryables and answers) comes in only on a link whose certificate is member `NAME`'s, and
+//! no member can pose as another member's hub, at first contact either. Session keys still
+//! come from the key exchange with each hub's pinned identity ([`crate::identity`]); TLS adds
+//! that nothing of a link is readable.
 //!
 //! A member's config holds its private key: it is written 0600 and copied to that machine only.
 //!
@@ -100,8 +105,10 @@ pub fn init(dir: &Path, name: &str) -> Result<(), String> {
 }
 
 /// Adds member `member` to the lab in `dir`: writes `DIR/MEMBER.json5` (0600), its Zenoh config
-/// with a certificate of the lab's CA. An existing config of that name is refused.
-pub fn add(dir: &Path, member: &str, role: Role) -> Result<PathBuf, String> {
+/// with a certificate of the lab's CA. An existing config of that name is refused. The other
+/// members' configs are written again (same certificate and key) to check the new member's
+/// name too ([`member_config`]); its path first, then theirs, in name order.
+pub fn add(dir: &Path, member: &str, role: Role) -> Result<Vec<PathBuf>, String> {
     check_name("member", member)?;
     private_dir::check(dir).map_err(|e| format!("cannot use `{}`: {e}", dir.display()))?;
     let read = |file: &str| -> Result<String, String> {
@@ -126,20 +133,49 @@ pub fn add(dir: &Path, member: &str, role: Role) -> Result<PathBuf, String> {
             dir.join(CA_CERT).display()
         )
     })?;
+    let mut others = Vec::new();
+    for other in members(dir)?.into_iter().filter(|m| m != member) {
+        others.push(read_member(&dir.join(format!("{other}.json5")), &other)?);
+    }
     let key = KeyPair::generate().map_err(|e| format!("cannot make {member}'s key: {e}"))?;
     let cert = member_params(member)?
         .signed_by(&key, &issuer)
         .map_err(|e| format!("cannot sign {member}'s certificate: {e}"))?;
-    let config = member_config(member, role, &ca_pem, &cert.pem(), &key.serialize_pem());
+    let new = Member {
+        name: member.to_string(),
+        role,
+        cert: cert.pem(),
+        key: key.serialize_pem(),
+    };
+    let roster: Vec<(String, Role)> = others
+        .iter()
+        .chain([&new])
+        .map(|m| (m.name.clone(), m.role))
+        .collect();
     let path = dir.join(format!("{member}.json5"));
-    if !write(&path, config.as_bytes(), false)? {
+    if !write(
+        &path,
+        member_config(&new, &ca_pem, &roster).as_bytes(),
+        false,
+    )? {
         return Err(format!(
-            "`{}` already exists\nhint: a member keeps its config; remove the file to make a \
-             new one (the old one still works until the lab is made anew)",
-            path.display()
+            "`{}` already exists\nhint: a member keeps its config; to shut the old one out and \
+             make a new one, `envhub lab remove {} {member}`, then add it again",
+            path.display(),
+            dir.display()
         ));
     }
-    Ok(path)
+    let mut written = vec![path];
+    for other in &others {
+        let path = dir.join(format!("{}.json5", other.name));
+        write(
+            &path,
+            member_config(other, &ca_pem, &roster).as_bytes(),
+            true,
+        )?;
+        written.push(path);
+    }
+    Ok(written)
 }
 
 /// The lab's members in `dir`: the names of its `NAME.json5` configs, sorted.
@@ -187,12 +223,22 @@ pub fn remove(dir: &Path, member: &str) -> Result<Vec<PathBuf>, String> {
         .map_err(|e| format!("cannot use the lab's new certificate: {e}"))?;
     // Every config made before anything is written: a member that cannot be read stops the
     // removal with the lab as it was.
-    let mut rewritten = Vec::new();
+    let mut kept = Vec::new();
     for other in all.iter().filter(|m| *m != member) {
-        let path = dir.join(format!("{other}.json5"));
-        let config = reissue(&path, other, &ca_cert.pem(), &issuer)?;
-        rewritten.push((path, config));
+        kept.push(reissue(
+            &dir.join(format!("{other}.json5")),
+            other,
+            &issuer,
+        )?);
     }
+    let roster: Vec<(String, Role)> = kept.iter().map(|m| (m.name.clone(), m.role)).collect();
+    let rewritten: Vec<(PathBuf, String)> = kept
+        .iter()
+        .map(|m| {
+            let path = dir.join(format!("{}.json5", m.name));
+            (path, member_config(m, &ca_cert.pem(), &roster))
+        })
+        .collect();
     write(&dir.join(CA_KEY), ca_key.serialize_pem().as_bytes(), true)?;
     write(&dir.join(CA_CERT), ca_cert.pem().as_bytes(), true)?;
     for (path, config) in &rewritten {
@@ -269,14 +315,17 @@ fn alt_names(pem: &str) -> Result<Vec<String>, String> {
         .collect())
 }
 
-/// `member`'s config at `path`, its certificate signed again by `issuer` (whose certificate is
-/// `ca_pem`): its role, key and names kept.
-fn reissue(
-    path: &Path,
-    member: &str,
-    ca_pem: &str,
-    issuer: &Issuer<'_, &KeyPair>,
-) -> Result<String, String> {
+/// A member as its config holds it.
+struct Member {
+    name: String,
+    role: Role,
+    /// Its certificate and key (PEM).
+    cert: String,
+    key: String,
+}
+
+/// `member`'s config at `path`, read back: its role, certificate and key.
+fn read_member(path: &Path, member: &str) -> Result<Member, String> {
     let shown = path.display();
     let text = match private_dir::read_file(path, 1 << 20) {
         Ok(Some(body)) => String::from_utf8(body).map_err(|_| format!("`{shown}` is not text"))?,
@@ -301,23 +350,30 @@ fn reissue(
         "\"router\"" => Role::Router,
         _ => Role::Member,
     };
-    let key = KeyPair::from_pem(&field("transport/link/tls/listen_private_key_base64")?)
+    Ok(Member {
+        name: member.to_string(),
+        role,
+        cert: field("transport/link/tls/listen_certificate_base64")?,
+        key: field("transport/link/tls/listen_private_key_base64")?,
+    })
+}
+
+/// `member`'s config at `path`, read back with its certificate signed again by `issuer`: its
+/// role, key and names kept.
+fn reissue(path: &Path, member: &str, issuer: &Issuer<'_, &KeyPair>) -> Result<Member, String> {
+    let shown = path.display();
+    let mut read = read_member(path, member)?;
+    let key = KeyPair::from_pem(&read.key)
         .map_err(|e| format!("`{shown}`: its key is not a key: {e}"))?;
-    let cert = field("transport/link/tls/listen_certificate_base64")?;
-    let mut names = alt_names(&cert).map_err(|e| format!("`{shown}`: its certificate {e}"))?;
+    let mut names = alt_names(&read.cert).map_err(|e| format!("`{shown}`: its certificate {e}"))?;
     if names.is_empty() {
         names.push(member.to_string());
     }
-    let cert = member_params_named(member, names)?
+    read.cert = member_params_named(member, names)?
         .signed_by(&key, issuer)
-        .map_err(|e| format!("cannot sign {member}'s certificate: {e}"))?;
-    Ok(member_config(
-        member,
-        role,
-        ca_pem,
-        &cert.pem(),
-        &key.serialize_pem(),
-    ))
+        .map_err(|e| format!("cannot sign {member}'s certificate: {e}"))?
+        .pem();
+    Ok(read)
 }
 
 fn write(path: &Path, body: &[u8], replace: bool) -> Result<bool, String> {
@@ -369,8 +425,53 @@ fn member_params_named(member: &str, names: Vec<String>) -> Result<CertificatePa
     Ok(params)
 }
 
-/// The Zenoh config (JSON5) of `member`: TLS with client certificates of the lab on every link.
-fn member_config(member: &str, role: Role, ca: &str, cert: &str, key: &str) -> String {
+/// The access control that checks hub names against certificates: a member's config lets a
+/// hub's name (`envhub/hub/NAME/**`: its tokens, queryables and answers) in only from a link
+/// whose certificate is the member `NAME`'s, for every member of `roster` but routers (which
+/// pass on what their own links let in, checked by the same rules in their config). `None`
+/// where no member's name needs guarding.
+fn names_checked(roster: &[(String, Role)]) -> Option<serde_json::Value> {
+    let linked: Vec<&str> = roster
+        .iter()
+        .filter(|(_, role)| *role != Role::Router)
+        .map(|(name, _)| name.as_str())
+        .collect();
+    let (mut rules, mut subjects, mut policies) = (Vec::new(), Vec::new(), Vec::new());
+    for (k, name) in linked.iter().enumerate() {
+        let others: Vec<&str> = linked.iter().copied().filter(|n| n != name).collect();
+        if others.is_empty() {
+            continue;
+        }
+        rules.push(serde_json::json!({
+            "id": format!("hub-{k}"),
+            "permission": "deny",
+            "flows": ["ingress"],
+            "messages": ["liveliness_token", "declare_queryable", "reply", "put", "delete"],
+            "key_exprs": [format!("envhub/hub/{name}"), format!("envhub/hub/{name}/**")],
+        }));
+        subjects.push(serde_json::json!({ "id": format!("not-{k}"), "cert_common_names": others }));
+        policies.push(serde_json::json!({
+            "id": format!("name-{k}"),
+            "rules": [format!("hub-{k}")],
+            "subjects": [format!("not-{k}")],
+        }));
+    }
+    (!rules.is_empty()).then(|| {
+        serde_json::json!({
+            "enabled": true,
+            "default_permission": "allow",
+            "rules": rules,
+            "subjects": subjects,
+            "policies": policies,
+        })
+    })
+}
+
+/// The Zenoh config (JSON5) of `member`: TLS with client certificates of the lab on every link,
+/// and hub names checked against the certificates of the members of `roster`.
+fn member_config(member: &Member, ca: &str, roster: &[(String, Role)]) -> String {
+    let (role, cert, key) = (member.role, member.cert.as_str(), member.key.as_str());
+    let member = member.name.as_str();
     let b64 = |pem: &str| base64::engine::general_purpose::STANDARD.encode(pem.as_bytes());
     let mut tls = serde_json::Map::new();
     for (k, v) in [
@@ -395,6 +496,9 @@ fn member_config(member: &str, role: Role, ca: &str, cert: &str, key: &str) -> S
     });
     if role == Role::Router {
         config["listen"] = serde_json::json!({ "endpoints": [format!("tls/[::]:{ROUTER_PORT}")] });
+    }
+    if let Some(acl) = names_checked(roster) {
+        config["access_control"] = acl;
     }
     let how = match role {
         Role::Member => {
@@ -439,7 +543,7 @@ mod tests {
             ("far", Role::RouterClient, "\"client\""),
             ("hop", Role::Router, "\"router\""),
         ] {
-            let path = add(&dir, name, role).unwrap();
+            let path = add(&dir, name, role).unwrap().remove(0);
             assert_eq!(mode(&path), 0o600);
             let config = zenoh::Config::from_file(&path).unwrap();
             assert_eq!(config.get_json("mode").unwrap(), mode_json);
@@ -518,10 +622,63 @@ mod tests {
         assert_eq!(common_name(&ca_pem).unwrap(), "envhub lab test");
         assert_eq!(mode(&box1), 0o600);
         // The CA's key is the new one: a member added now is of the new CA.
-        let later = add(&dir, "later", Role::Member).unwrap();
+        let later = add(&dir, "later", Role::Member).unwrap().remove(0);
         assert_eq!(field(&later, CA), new_ca);
         let e = remove(&dir, "gone").unwrap_err();
         assert!(e.contains("box1, hop, later"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Every config lists the lab's members, so a hub's name comes in only from its member's
+    /// certificate: adding a member writes the others again with it; routers are trusted to
+    /// pass names on (their own config checks them), and Zenoh reads the rules.
+    #[test]
+    fn every_config_checks_hub_names_against_the_members_certificates() {
+        let dir = fresh("names");
+        init(&dir, "test").unwrap();
+        let written = add(&dir, "a", Role::Member).unwrap();
+        assert_eq!(written, [dir.join("a.json5")]);
+        let acl = |m: &str| {
+            zenoh::Config::from_file(dir.join(format!("{m}.json5")))
+                .unwrap()
+                .get_json("access_control")
+                .ok()
+                .and_then(|j| serde_json::from_str::<serde_json::Value>(&j).ok())
+                .filter(|v| v["enabled"] == true)
+        };
+        assert!(acl("a").is_none(), "a member alone has no name to guard");
+        add(&dir, "hop", Role::Router).unwrap();
+        let written = add(&dir, "b", Role::Member).unwrap();
+        let names: Vec<&str> = ["b", "a", "hop"].to_vec();
+        assert_eq!(
+            written,
+            names
+                .iter()
+                .map(|m| dir.join(format!("{m}.json5")))
+                .collect::<Vec<_>>(),
+            "the new member's config, then the others' written again"
+        );
+        for member in ["a", "b", "hop"] {
+            let acl = acl(member).unwrap_or_else(|| panic!("{member} checks names"));
+            assert_eq!(acl["default_permission"], "allow");
+            let subjects = acl["subjects"].as_array().unwrap();
+            let rules = acl["rules"].as_array().unwrap();
+            assert_eq!(
+                rules.len(),
+                2,
+                "{member}: one rule per member but the router"
+            );
+            for (rule, subject) in rules.iter().zip(subjects) {
+                let guarded = rule["key_exprs"][0].as_str().unwrap();
+                let others = &subject["cert_common_names"];
+                assert_eq!(rule["permission"], "deny");
+                match guarded {
+                    "envhub/hub/a" => assert_eq!(others, &serde_json::json!(["b"])),
+                    "envhub/hub/b" => assert_eq!(others, &serde_json::json!(["a"])),
+                    other => panic!("{member} guards {other}"),
+                }
+            }
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -22,7 +22,9 @@ enum Command {
         name: String,
     },
     /// Add a member (a machine's hubs and clients) to the lab: writes FOLDER/NAME.json5, the
-    /// Zenoh config to copy to that machine and use with `--zenoh-config`.
+    /// Zenoh config to copy to that machine and use with `--zenoh-config`, and writes the
+    /// other members' configs again so that each checks NAME's hub name against NAME's
+    /// certificate too (copy them again).
     Add {
         /// The lab's folder (made by `envhub lab init`).
         folder: PathBuf,
@@ -79,7 +81,8 @@ pub(crate) fn run(args: &Args) -> anyhow::Result<Outcome> {
                 (_, true) => Role::RouterClient,
                 _ => Role::Member,
             };
-            let path = lab::add(folder, name, role).map_err(anyhow::Error::msg)?;
+            let written = lab::add(folder, name, role).map_err(anyhow::Error::msg)?;
+            let path = &written[0];
             let p = path.display();
             match role {
                 Role::Member => println!(
@@ -97,6 +100,17 @@ pub(crate) fn run(args: &Args) -> anyhow::Result<Outcome> {
                      `zenohd -c {name}.json5`) there, and give members `--connect tls/{name}:{}`",
                     lab::ROUTER_PORT
                 ),
+            }
+            if written.len() > 1 {
+                let others: Vec<String> = written[1..]
+                    .iter()
+                    .filter_map(|p| Some(p.file_stem()?.to_string_lossy().into_owned()))
+                    .collect();
+                println!(
+                    "the other members' configs now name `{name}` too ({}): until each is \
+                     copied to its machine again, that member does not check `{name}`'s hub name",
+                    others.join(", ")
+                );
             }
         }
         Command::Remove { folder, name } => {
