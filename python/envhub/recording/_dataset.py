@@ -654,8 +654,24 @@ class Dataset:
             self.tasks, self.stats = tasks, stats
             raise
         for files in self._files.values():
-            self._join(files, to_join([p.size for p in files.run]))
+            first = to_join([p.size for p in files.run])
+            self._join(files, self._aligned(files, first) if files.kind == EPISODES else first)
         return indices
+
+    def _aligned(self, episodes: Files, first: int) -> int:
+        """The first of the episodes files to join from `first` on, moved on until the joined
+        file holds no episodes of two files of a data or video run. A data or video join
+        re-points its episodes by rewriting every episodes file that holds one of them, so an
+        episodes file across such a boundary would be rewritten whole by a join that moves a
+        part of it: a cost that grew with the episodes files (up to 16 MiB each between
+        rolls), so with the commits, not with the join. Kept so, an episodes file lies inside
+        one file of each run, and a join rewrites exactly the episodes it moves. (A roll or the
+        close joins a run whole, as LeRobot's files are.)"""
+        bounds = {p.first for kind, files in self._files.items() if kind != EPISODES for p in files.run}
+        end = episodes.run[-1].first + episodes.run[-1].episodes if episodes.run else 0
+        while first < len(episodes.run) - 1 and any(episodes.run[first].first < b < end for b in bounds):
+            first += 1
+        return first
 
     # Joining small files (`_files.py`) -----------------------------------------------------
 
