@@ -18,7 +18,7 @@ from typing import Any
 
 from .stats import wilson
 
-__all__ = ["AXES", "ORIGINAL", "per_axis", "rows"]
+__all__ = ["AXES", "ORIGINAL", "axis_rows", "per_axis", "rows"]
 
 #: The axes a benchmark may name, with what each perturbs. LIBERO-PRO's five (object,
 #: position, language, task, environment) and LIBERO-Plus's seven (camera, robot_init,
@@ -78,6 +78,14 @@ def per_axis(tasks: list[dict[str, Any]], episodes: list[dict[str, Any]], rule: 
     for r in out:
         r["vs_original"] = None if base is None or r["success_rate"] is None else r["success_rate"] - base
     return out
+
+
+def axis_rows(tasks: list[dict[str, Any]], episodes: list[dict[str, Any]], rule: str) -> dict[str, Any]:
+    """`{"per_axis": [...]}` for a perturbation benchmark's results (its tasks carry an axis),
+    `{}` for any other, whose results keep their keys."""
+    if not any(t.get("axis") for t in tasks):
+        return {}
+    return {"per_axis": per_axis(tasks, episodes, rule)}
 
 
 def rows(results: dict[str, Any]) -> list[dict[str, Any]]:

@@ -12,6 +12,7 @@ import time
 from importlib import metadata
 from typing import Any, Sequence
 
+from .axes import axis_rows
 from .benchmarks import Benchmark, BenchmarkError
 from .callable import DEFAULT_TIMEOUT
 from .catalog import Catalog
@@ -351,6 +352,7 @@ def _evaluate(
             },
             "summary": summary,
             "per_task": per_task_rows,
+            **axis_rows(task_plan, records, bench.rule),
             "episodes": records,
         }
         if shard is not None:

@@ -8,6 +8,7 @@ import json
 import os
 from typing import Any, Sequence
 
+from .axes import axis_rows
 from .results import LOG, RUN, FolderLock, _write_json, summarize, write_log, write_outputs
 from .shards import RESULTS, ShardError, check_shards, merged_records, read_shard
 
@@ -103,6 +104,7 @@ def merge(out: str | os.PathLike[str], folders: Sequence[str | os.PathLike[str]]
             },
             "summary": summary,
             "per_task": per_task,
+            **axis_rows(task_plan, records, rule),
             "episodes": records,
         }
         _write_json(os.path.join(out, RUN), header)

@@ -14,6 +14,7 @@ and the results grouped by axis (`envhub.evaluation.axes`).
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
@@ -25,6 +26,7 @@ from envhub.evaluation import BenchmarkError, evaluate  # noqa: E402
 from envhub.evaluation.axes import AXES, per_axis, rows  # noqa: E402
 from envhub.evaluation.benchmarks import parse  # noqa: E402
 from envhub.evaluation.catalog import Catalog  # noqa: E402
+from envhub.evaluation.merge import merge  # noqa: E402
 from envhub.evaluation.report import write_report  # noqa: E402
 from envhub.evaluation.results import markdown  # noqa: E402
 from envhub.evaluation.stats import wilson  # noqa: E402
@@ -195,3 +197,10 @@ def test_an_axis_runs_its_own_tasks_end_to_end(tmp_path):
     by_task = {row["task"]: row["mean_return"] for row in results["per_task"]}
     assert len(set(by_task.values())) == 3, by_task
     assert "| environment | 2 | 4 |" in markdown(results)
+    # results.json carries the rows; two shards of the run merge to the same rows.
+    assert results["per_axis"] == got
+    assert json.loads((tmp_path / "run" / "results.json").read_text())["per_axis"] == got
+    for i in range(2):
+        evaluate({**decl, "name": "pendulum-g"}, act, out=tmp_path / f"s{i}", progress=False, shard=f"{i}/2")
+    merged = merge(tmp_path / "merged", [tmp_path / "s0", tmp_path / "s1"])
+    assert merged["per_axis"] == got and merged["per_task"] == results["per_task"]
