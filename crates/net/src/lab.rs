@@ -446,7 +446,8 @@ fn names_checked(roster: &[(String, Role)]) -> Option<serde_json::Value> {
             "id": format!("hub-{k}"),
             "permission": "deny",
             "flows": ["ingress"],
-            "messages": ["liveliness_token", "declare_queryable", "reply", "put", "delete"],
+            // Not puts: clients put a hub's echo requests on its keys (`envhub bench`).
+            "messages": ["liveliness_token", "declare_queryable", "reply"],
             "key_exprs": [format!("envhub/hub/{name}"), format!("envhub/hub/{name}/**")],
         }));
         subjects.push(serde_json::json!({ "id": format!("not-{k}"), "cert_common_names": others }));
@@ -660,6 +661,12 @@ mod tests {
         );
         for member in ["a", "b", "hop"] {
             let acl = acl(member).unwrap_or_else(|| panic!("{member} checks names"));
+            let messages = &acl["rules"][0]["messages"];
+            assert_eq!(
+                messages,
+                &serde_json::json!(["liveliness_token", "declare_queryable", "reply"]),
+                "a hub's tokens, queryables and answers; not clients' echo puts"
+            );
             assert_eq!(acl["default_permission"], "allow");
             let subjects = acl["subjects"].as_array().unwrap();
             let rules = acl["rules"].as_array().unwrap();
