@@ -10,9 +10,9 @@ episodes `--long` steps, the others' `--short` (10), a 1 MiB queue (one step wit
 each ended episode is then committed at once), `--steps` steps (`--long` + 1 unless
 given); the process's resident set is sampled
 every 5 ms, and its rise over the baseline (after the first reset) reported, held at the end and
-at the peak; and the commits made during env 0's episode: the time a commit took and the
-resident set after it (over the baseline), each the mean over the first and over the last tenth
-of them (issue 52: neither may grow with the commits before). `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
+at the peak; and the commits made during env 0's episode: the time a commit took (wall, and
+CPU of the writer thread, which commits), and the resident set after it (over the baseline),
+each the mean over the first and over the last tenth of them (issue 52: neither may grow with the commits before). `append`: one env with 256x256 noise frames (large MP4 packets), episodes of 10 frames,
 committed every 0.2 s (or 4x the last commit's time), until the camera's last video file (its
 run of files, joined at the end) reaches `--mb` MB; each commit's time, episodes and the bytes
 it wrote (`/proc/self/io` `wchar`, joins of small files included) against the file's size
@@ -89,13 +89,15 @@ def memory(envs: int, long: int, steps: int | None = None, short: int = 10, each
     fns = [lambda: _Wide(long)] + [lambda: _Wide(short)] * (envs - 1)
     queue_bytes = 1 if each else 2**20
     env = gymnasium.vector.SyncVectorEnv(fns)
-    commits: list[tuple[float, int]] = []  # per commit: seconds, resident set after it
+    # Per commit: seconds, the writer thread's CPU seconds (a commit runs on it: what another
+    # process on the machine takes does not count), the resident set after it.
+    commits: list[tuple[float, float, int]] = []
     real = _dataset.Dataset.commit
 
     def timed(self, episodes):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         out = real(self, episodes)
-        commits.append((time.perf_counter() - t0, _rss()))
+        commits.append((time.perf_counter() - t0, time.thread_time() - c0, _rss()))
         return out
 
     _dataset.Dataset.commit = timed
@@ -124,15 +126,17 @@ def memory(envs: int, long: int, steps: int | None = None, short: int = 10, each
     during = commits[:-1] if len(commits) > 1 else commits
     tenth = max(1, len(during) // 10)
 
-    def mean(part: list[tuple[float, int]], k: int) -> float:
+    def mean(part: list[tuple[float, float, int]], k: int) -> float:
         return sum(c[k] for c in part) / len(part)
 
     return {"envs": envs, "long": long, "short": short, "queue_bytes": queue_bytes, "baseline_mib": base / 2**20,
             "held_above_mib": (held - base) / 2**20, "peak_above_mib": (peak[0] - base) / 2**20,
             "written": rec.stats["episodes_written"], "commits": len(commits),
             "commit_ms_first": 1e3 * mean(during[:tenth], 0), "commit_ms_last": 1e3 * mean(during[-tenth:], 0),
-            "rss_above_mib_first": (mean(during[:tenth], 1) - base) / 2**20,
-            "rss_above_mib_last": (mean(during[-tenth:], 1) - base) / 2**20}
+            "commit_cpu_ms_first": 1e3 * mean(during[:tenth], 1),
+            "commit_cpu_ms_last": 1e3 * mean(during[-tenth:], 1),
+            "rss_above_mib_first": (mean(during[:tenth], 2) - base) / 2**20,
+            "rss_above_mib_last": (mean(during[-tenth:], 2) - base) / 2**20}
 
 
 def _wchar() -> int:
