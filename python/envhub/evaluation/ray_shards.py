@@ -34,6 +34,7 @@ from .shards import RESULTS, Shard, ShardError
 __all__ = ["run_on_ray", "RayUnavailable"]
 
 POLL = 0.2  # seconds between looks at a shard's log on its node
+CONNECT_TRIES = 3
 
 
 class RayUnavailable(ShardError):
@@ -163,11 +164,26 @@ def _connect(address: str | None) -> Any:
             "--ray needs Ray: pip install 'envhub[ray]' (or `pip install ray`) here and on every node"
         ) from None
     if not ray.is_initialized():
-        try:
-            ray.init(address=address, logging_level="WARNING", log_to_driver=False, include_dashboard=False)
-        except (ConnectionError, ValueError, RuntimeError) as e:
+        options: dict[str, Any] = {"logging_level": "WARNING", "log_to_driver": False, "include_dashboard": False}
+        host = (address or "").rsplit(":", 1)[0].strip("[]")
+        if host in ("127.0.0.1", "localhost", "::1"):
+            # A cluster on loopback is this machine's: the driver is on its node there, not on
+            # the address Ray would guess for it (the LAN's, where no raylet of it listens).
+            options["_node_ip_address"] = "127.0.0.1"
+        error: Exception | None = None
+        for attempt in range(CONNECT_TRIES):  # a loaded head can miss one connection's deadline
+            try:
+                ray.init(address=address, **options)
+                error = None
+                break
+            except (ConnectionError, ValueError, RuntimeError) as e:
+                error = e
+                ray.shutdown()
+                time.sleep(2.0 * (attempt + 1))
+        if error is not None:
+            e = error
             raise RayUnavailable(
-                f"--ray {address or ''}: cannot reach a Ray cluster: {e}".replace("  ", " ")
+                f"--ray {address or ''}: cannot reach a Ray cluster ({CONNECT_TRIES} tries): {e}".replace("  ", " ")
                 + "\nhint: give the head node's address (ray start --head prints it); a cluster with token authentication "
                 "needs its token here too (RAY_AUTH_MODE=token with RAY_AUTH_TOKEN, or ~/.ray/auth_token)"
             ) from None

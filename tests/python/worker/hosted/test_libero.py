@@ -144,7 +144,8 @@ def test_catalog_entries_name_a_suite_whose_task_0_is_the_default(entry):
 
 
 def test_catalog_has_every_suite():
-    assert sorted(split_env_id(e["env_id"], {})[0] for e in catalog()) == sorted(SUITES)
+    # LIBERO-PRO's entries (its own Python environment) run the same suites perturbed.
+    assert sorted({split_env_id(e["env_id"], {})[0] for e in catalog()}) == sorted(SUITES)
 
 
 # Spaces ------------------------------------------------------------------------------------
