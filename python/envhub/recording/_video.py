@@ -52,16 +52,19 @@ DEFERRED = frozenset({"libsvtav1"})
 LOSSLESS = ("ffv1", "bgr0", "matroska")
 
 
-def _output(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
-    """An MP4 at `path` and its video stream, opened to encode with `encoding`."""
+def _open(
+    path: Path, fps: int, encoding: Encoding, fmt: str, codec: str, pix_fmt: str, options: Any = None, comment: Any = None
+) -> tuple[Any, Any]:
+    """A container of format `fmt` at `path` and its one video stream (`codec`, `pix_fmt`, the
+    encoding's size), opened to encode one frame per `1 / fps`."""
     import av
 
-    container = av.open(str(path), mode="w", format="mp4")
+    container = av.open(str(path), mode="w", format=fmt)
     try:
-        container.metadata["comment"] = encoding.tag()  # read back by appends
-        stream = container.add_stream(encoding.encoder, rate=fps, options=encoding.options())
-        stream.width, stream.height = encoding.width, encoding.height
-        stream.pix_fmt = encoding.pix_fmt
+        if comment is not None:
+            container.metadata["comment"] = comment  # read back by appends
+        stream = container.add_stream(codec, rate=fps, **({} if options is None else {"options": options}))
+        stream.width, stream.height, stream.pix_fmt = encoding.width, encoding.height, pix_fmt
         stream.codec_context.time_base = Fraction(1, fps)
         # One thread per encoder (FFmpeg's default is one per core each): the recorder bounds
         # the threads that encode by calling encoders from `encode_threads` threads.
@@ -72,20 +75,15 @@ def _output(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
     return container, stream
 
 
-def _lossless(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
-    import av
+def _output(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
+    """An MP4 at `path` and its video stream, opened to encode with `encoding`."""
+    return _open(path, fps, encoding, "mp4", encoding.encoder, encoding.pix_fmt, encoding.options(), encoding.tag())
 
+
+def _lossless(path: Path, fps: int, encoding: Encoding) -> tuple[Any, Any]:
+    """The lossless copy of a deferred episode (`LOSSLESS`), at the encoding's size."""
     codec, pix_fmt, fmt = LOSSLESS
-    container = av.open(str(path), mode="w", format=fmt)
-    try:
-        stream = container.add_stream(codec, rate=fps)
-        stream.width, stream.height, stream.pix_fmt = encoding.width, encoding.height, pix_fmt
-        stream.codec_context.time_base = Fraction(1, fps)
-        stream.codec_context.thread_count = 1
-    except BaseException:
-        container.close()
-        raise
-    return container, stream
+    return _open(path, fps, encoding, fmt, codec, pix_fmt)
 
 
 class EpisodeVideo:

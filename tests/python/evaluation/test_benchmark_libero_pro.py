@@ -28,15 +28,13 @@ ENVHUB_SUITES_REQUIRED=1 (`make py-test`).
 from __future__ import annotations
 
 import json
-import os
-import re
 import subprocess
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from harness import import_envhub
+from libero_env import WITH_ENVHUB, libero_python
 
 envhub = import_envhub()
 
@@ -46,7 +44,6 @@ from envhub.evaluation.catalog import Catalog  # noqa: E402
 from envhub.evaluation.results import markdown  # noqa: E402
 from envhub.evaluation.stats import wilson  # noqa: E402
 
-REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVHUB_SUITES_REQUIRED"))
 BENCHMARK = "libero-pro-goal"
 HORIZON = 4
 # Each axis's LIBERO-PRO suite, as the catalog's `libero-pro-goal` declares it.
@@ -57,8 +54,6 @@ SUITES = {
     "language": "libero_goal_lan",
     "task": "libero_goal_task",
 }
-# The environment's interpreter run directly, with this envhub on its path.
-WITH_ENVHUB = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
 
 REFERENCE = """
 import json, random, sys
@@ -104,33 +99,6 @@ with open(sys.argv[2], "w") as f:
 """
 
 
-def libero_pro_python() -> str:
-    """The `libero_pro` environment's interpreter (built if missing), or a skip with the reason
-    (a failure under ENVHUB_LIBERO_REQUIRED / ENVHUB_SUITES_REQUIRED)."""
-    from envhub._cli import BINARY
-
-    def skip(reason: str) -> None:
-        if REQUIRED:
-            pytest.fail(f"{reason}, and ENVHUB_SUITES_REQUIRED or ENVHUB_LIBERO_REQUIRED is set")
-        pytest.skip(reason)
-
-    done = subprocess.run([str(BINARY), "env", "sync", "libero_pro"], capture_output=True, text=True, timeout=1800)
-    found = re.search(r"^libero_pro: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
-    if done.returncode != 0 or not found:
-        skip(f"LIBERO-PRO's Python environment cannot be built here: {(done.stderr or done.stdout)[-1500:]}")
-    python = os.path.join(found.group(1), "bin", "python")
-    check = subprocess.run(
-        [python, "-c", "from envhub.worker.hosted.libero import main; raise SystemExit(main())"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env=WITH_ENVHUB,
-    )
-    if check.returncode != 0:
-        skip(f"LIBERO-PRO is unavailable in its environment: {check.stderr.strip()[-1500:]}")
-    return python
-
-
 def fixed(t: int) -> np.ndarray:
     # The gripper's sign is the protocol's (`action: {sign: [6]}`); the policy sends it raw.
     return np.array([0.6 * np.sin(t / 3 + d) for d in range(7)], np.float32)
@@ -165,7 +133,7 @@ class FixedPolicy:
 # (~4 min on two cores, the reference beside envhub's run)
 @pytest.mark.slow
 def test_every_axis_matches_libero_pros_runner(tmp_path):
-    python = libero_pro_python()
+    python = libero_python("libero_pro", "LIBERO-PRO")
     decl = dict(Catalog().declared[BENCHMARK])
     axes = {axis: (spec or {}).get("options", {}).get("suite", "libero_goal") for axis, spec in decl["axes"].items()}
     assert axes == SUITES  # what the reference runs is what the catalog declares

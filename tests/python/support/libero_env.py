@@ -21,18 +21,21 @@ REQUIRED = bool(os.environ.get("ENVHUB_LIBERO_REQUIRED") or os.environ.get("ENVH
 WITH_ENVHUB = {**os.environ, "PYTHONPATH": str(Path(envhub.__file__).resolve().parent.parent)}
 
 
-def libero_python() -> str:
+def libero_python(env: str = "libero", suite: str = "LIBERO") -> str:
+    """The interpreter of the catalog environment `env` (`libero`, or LIBERO-PRO's
+    `libero_pro`), built if missing, with the `libero` adapter available in it; else a skip
+    naming why (`suite` names it in the message)."""
     from envhub._cli import BINARY
 
     def skip(reason: str) -> None:
         if REQUIRED:
-            pytest.fail(f"{reason}, and ENVHUB_LIBERO_REQUIRED is set")
+            pytest.fail(f"{reason}, and ENVHUB_SUITES_REQUIRED or ENVHUB_LIBERO_REQUIRED is set")
         pytest.skip(reason)
 
-    done = subprocess.run([str(BINARY), "env", "sync", "libero"], capture_output=True, text=True, timeout=1800)
-    found = re.search(r"^libero: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
+    done = subprocess.run([str(BINARY), "env", "sync", env], capture_output=True, text=True, timeout=1800)
+    found = re.search(rf"^{re.escape(env)}: (?:built|ready) in [0-9.]+ s \((.*)\)$", done.stdout, re.M)
     if done.returncode != 0 or not found:
-        skip(f"LIBERO's Python environment cannot be built here: {(done.stderr or done.stdout)[-1500:]}")
+        skip(f"{suite}'s Python environment cannot be built here: {(done.stderr or done.stdout)[-1500:]}")
     python = os.path.join(found.group(1), "bin", "python")
     check = subprocess.run(
         [python, "-c", "from envhub.worker.hosted.libero import main; raise SystemExit(main())"],
@@ -42,5 +45,5 @@ def libero_python() -> str:
         env=WITH_ENVHUB,
     )
     if check.returncode != 0:
-        skip(f"LIBERO is unavailable in its environment: {check.stderr.strip()[-1500:]}")
+        skip(f"{suite} is unavailable in its environment: {check.stderr.strip()[-1500:]}")
     return python
