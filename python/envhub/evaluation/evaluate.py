@@ -357,11 +357,7 @@ def _evaluate(
         }
         if shard is not None:
             results["shard"] = shard.as_dict()
-        write_outputs(folder, results)
-        if report:
-            from .report import write_report
-
-            write_report(results, os.path.join(folder, "report.html"))
+        write_outputs(folder, results, report)
         return results
     finally:
         pol.close()

@@ -109,11 +109,7 @@ def merge(out: str | os.PathLike[str], folders: Sequence[str | os.PathLike[str]]
         }
         _write_json(os.path.join(out, RUN), header)
         write_log(os.path.join(out, LOG), records)
-        write_outputs(out, results)
-        if report:
-            from .report import write_report
-
-            write_report(results, os.path.join(out, "report.html"))
+        write_outputs(out, results, report)
         return results
     finally:
         lock.release()

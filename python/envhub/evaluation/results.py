@@ -228,9 +228,10 @@ TASK_FIELDS = [
 ]
 
 
-def write_outputs(folder: str, results: dict[str, Any]) -> None:
+def write_outputs(folder: str, results: dict[str, Any], report: bool = False) -> None:
     """`results.json`, `results.csv` (one row per episode) and `tasks.csv` (one row per task
-and one for all: success rates with their Wilson 95 % intervals) in `folder`."""
+and one for all: success rates with their Wilson 95 % intervals) in `folder`; `report.html`
+too with `report`."""
     _write_json(os.path.join(folder, "results.json"), results)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=CSV_FIELDS)
@@ -247,6 +248,10 @@ and one for all: success rates with their Wilson 95 % intervals) in `folder`."""
         w.writerow({**{k: r.get(k) for k in TASK_FIELDS}, "ci95_low": ci[0], "ci95_high": ci[1]})
     with open(os.path.join(folder, "tasks.csv"), "w", encoding="utf-8", newline="") as f:
         f.write(buf.getvalue())
+    if report:
+        from .report import write_report
+
+        write_report(results, os.path.join(folder, "report.html"))
 
 
 class Progress:
