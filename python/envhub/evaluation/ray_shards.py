@@ -60,13 +60,12 @@ def shard_task(
     import socket
 
     folder = tempfile.mkdtemp(prefix="envhub-eval-shard-")
-    proc = None
+    proc = errors = None
     try:
         log_path, run_path = os.path.join(folder, LOG), os.path.join(folder, RUN)
         if header is not None:  # a retry: the episodes already kept are not run again
             _write_json(run_path, header)
-            with open(log_path, "w", encoding="utf-8") as f:
-                f.writelines(json.dumps(r) + "\n" for r in done)
+            write_log(log_path, done)
         pos = os.path.getsize(log_path) if header is not None else 0
         errors = open(os.path.join(folder, "stderr.log"), "w+", encoding="utf-8")
         command = [sys.executable, "-m", "envhub.evaluation", *argv, "--shard", shard, "--out", folder, "--resume", "--quiet"]
@@ -109,6 +108,8 @@ def shard_task(
         if proc is not None and proc.poll() is None:
             proc.kill()
             proc.wait()
+        if errors is not None:
+            errors.close()
         shutil.rmtree(folder, ignore_errors=True)
 
 

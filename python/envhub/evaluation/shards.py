@@ -48,10 +48,14 @@ class Shard:
     def as_dict(self) -> dict[str, int]:
         return {"index": self.index, "count": self.count}
 
+    def bounds(self, total: int) -> tuple[int, int]:
+        """This shard's slice `[lo, hi)` of a list of `total` episodes."""
+        return (total * self.index) // self.count, (total * (self.index + 1)) // self.count
+
     def keys(self, bench: Benchmark) -> list[str]:
         """This shard's episodes (`<task id>#<index>`), in the benchmark's order."""
         every = episode_keys(bench)
-        lo, hi = (len(every) * self.index) // self.count, (len(every) * (self.index + 1)) // self.count
+        lo, hi = self.bounds(len(every))
         return every[lo:hi]
 
 
@@ -175,10 +179,9 @@ def check_shards(runs: Sequence[ShardRun]) -> int:
 
 def merged_records(runs: Sequence[ShardRun], bench_keys: list[str]) -> list[dict[str, Any]]:
     """Every shard's records, checked to be its slice and nothing else, in the benchmark's order."""
-    n = runs[0].shard.count
     out: dict[str, dict[str, Any]] = {}
     for r in runs:
-        lo, hi = (len(bench_keys) * r.shard.index) // n, (len(bench_keys) * (r.shard.index + 1)) // n
+        lo, hi = r.shard.bounds(len(bench_keys))
         mine = set(bench_keys[lo:hi])
         extra = sorted(set(r.records) - mine)
         lacking = [k for k in bench_keys[lo:hi] if k not in r.records]

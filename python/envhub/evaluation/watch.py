@@ -20,9 +20,13 @@ __all__ = ["status", "status_main"]
 
 
 def _slice_size(header: dict[str, Any]) -> int:
-    total = len(header["tasks"]) * int(header["protocol"]["episodes_per_task"])
-    s = Shard(int(header["shard"]["index"]), int(header["shard"]["count"]))
-    return (total * (s.index + 1)) // s.count - (total * s.index) // s.count
+    lo, hi = Shard(int(header["shard"]["index"]), int(header["shard"]["count"])).bounds(_episodes(header))
+    return hi - lo
+
+
+def _episodes(header: dict[str, Any]) -> int:
+    """The episodes of the whole run a shard's header belongs to."""
+    return len(header["tasks"]) * int(header["protocol"]["episodes_per_task"])
 
 
 def status(out: str) -> dict[str, Any]:
@@ -53,7 +57,7 @@ def status(out: str) -> dict[str, Any]:
             "successes": sum(1 for r in records.values() if r.get("success")),
             "errors": sum(1 for r in records.values() if r.get("error") is not None),
             "rule": header["protocol"]["success"]["rule"],
-            "episodes": count and (len(header["tasks"]) * int(header["protocol"]["episodes_per_task"])),
+            "episodes": _episodes(header),
         })
     total = next((r["episodes"] for r in rows if r.get("episodes")), None)
     done = sum(r["done"] for r in rows)
