@@ -47,8 +47,26 @@ def act(observations, tasks):
 RUN = ["mujoco", "--tasks", "mujoco-hopper", "mujoco-swimmer", "--episodes", "3", "--quiet"]
 BIN = os.path.join(os.path.dirname(sys.executable), "ray")
 # The cluster and its drivers share a token of their own (Ray's token authentication), not
-# whatever ~/.ray/auth_token holds: Ray 2.59+ makes one there for local clusters.
-RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32)}
+# whatever ~/.ray/auth_token holds: Ray 2.59+ makes one there for local clusters. Ray turns
+# 127.0.0.1 into the machine's LAN address (`--node-ip-address` too) unless it runs as a
+# single-machine cluster, which RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 asks for on Linux as well:
+# the tests' cluster then lives on loopback only.
+RAY_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32),
+           "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+RAY_LOGS: list[str] = []  # the cluster's log folder, for a failure's message
+
+
+def cluster_logs() -> str:
+    """The end of the cluster's own logs (the GCS and the raylet): why a node died, if it did."""
+    out = []
+    for folder in RAY_LOGS:
+        for name in ("gcs_server.out", "raylet.out", "raylet.err"):
+            try:
+                with open(os.path.join(folder, "session_latest", "logs", name), errors="replace") as f:
+                    out.append(f"--- {name}\n" + "".join(f.readlines()[-25:]))
+            except OSError as e:
+                out.append(f"--- {name}: {e}")
+    return "\n".join(out)
 
 
 def free_port() -> int:
@@ -70,9 +88,11 @@ def cluster():
         capture_output=True, text=True, timeout=180, env=env,
     )
     assert start.returncode == 0, start.stdout[-2000:] + start.stderr[-2000:]
+    RAY_LOGS[:] = [temp]
     try:
         yield f"127.0.0.1:{port}"
     finally:
+        RAY_LOGS.clear()
         subprocess.run([BIN, "stop", "--force"], capture_output=True, timeout=120, env=env)
         shutil.rmtree(temp, ignore_errors=True)
 
@@ -100,7 +120,7 @@ def test_ray_shards_merge_to_the_one_machine_table(cluster, whole, tmp_path):
     out = tmp_path / "run"
     # The policy named relative to the driver's folder: the shards run there (the node has it).
     done = cli(*RUN, "--policy", "policy.py:act", "--ray", cluster, "--shards", "3", "--out", str(out), cwd=whole)
-    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.returncode == 0, done.stderr[-3000:] + cluster_logs()
     assert rows(out) == rows(whole / "whole")
     merged = json.loads((out / "results.json").read_text())
     assert [s["shard"] for s in merged["run"]["shards"]] == ["0/3", "1/3", "2/3"]
@@ -115,7 +135,7 @@ def wait_for_a_kept_episode(driver: subprocess.Popen, out) -> Any:
     log = out / "shards" / "shard-1" / "episodes.jsonl"
     deadline = time.monotonic() + 300
     while not (log.exists() and log.read_text().count("\n") >= 1):
-        assert driver.poll() is None, driver.communicate()[1][-3000:]
+        assert driver.poll() is None, driver.communicate()[1][-3000:] + cluster_logs()
         assert time.monotonic() < deadline, "shard 1 kept no episode in 300 s"
         time.sleep(0.05)
     return log
@@ -156,7 +176,7 @@ def test_a_killed_ray_worker_costs_only_its_unfinished_episodes(cluster, whole, 
         if driver.poll() is None:
             driver.kill()
             driver.wait()
-    assert driver.returncode == 0, stderr[-3000:]
+    assert driver.returncode == 0, stderr[-3000:] + cluster_logs()
     assert "shard 1/2 lost" in stderr and "finished ones are kept" in stderr
     assert rows(out) == rows(whole / "whole")
     merged = json.loads((out / "results.json").read_text())
@@ -191,7 +211,7 @@ def test_a_killed_driver_resumes_from_what_its_shards_kept(cluster, whole, tmp_p
         time.sleep(0.2)
     done = cli(*RUN, "--policy", f"{whole / 'policy.py'}:act", "--ray", cluster, "--shards", "2", "--out", str(out),
                "--resume")
-    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.returncode == 0, done.stderr[-3000:] + cluster_logs()
     assert rows(out) == rows(whole / "whole")
     merged = json.loads((out / "results.json").read_text())
     assert merged["run"]["resumed"] and kept >= 1
