@@ -434,13 +434,15 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
     );
 }
 
-/// 150 raw TCP connections held open on a hub's port (no Zenoh byte sent; each one the hub
+/// 4,200 raw TCP connections held open on a hub's port (no Zenoh byte sent; each one the hub
 /// drops is opened again), as another user of the machine can: the owner's clients still
-/// find the hub and run a session (Zenoh's default queue of links being accepted, 100 for
-/// 10 s each, was full and closed every new link).
+/// find the hub, within 30 s, and run a session. Zenoh's default queue of links being
+/// accepted (100, for 10 s each) was full with 150 and closed every new link. The owner's
+/// client takes 18–19 s to get in here (docs/design/security.md says what is left).
 #[test]
 fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
-    const HELD: usize = 150;
+    const HELD: usize = 4200;
+    envhub_e2e::hold_open_files(HELD as u64 + 1024);
     let a = RemoteHub::start("held", &[], &[]);
     let address = a.endpoint.trim_start_matches("tcp/").to_string();
     let holding = Arc::new(AtomicBool::new(true));
@@ -462,11 +464,11 @@ fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
                         });
                     }
                 }
-                std::thread::sleep(Duration::from_millis(50));
+                std::thread::sleep(Duration::from_millis(250));
             }
         })
     };
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + Duration::from_secs(60);
     while opened.load(Ordering::Relaxed) < HELD {
         assert!(
             Instant::now() < deadline,
@@ -474,16 +476,24 @@ fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    // Past Zenoh's default queue: the attack is on.
-    std::thread::sleep(Duration::from_millis(500));
+    // Past the hub's accept timeout (2 s): the held links are dropped and opened again while
+    // the owner's client opens its session.
+    std::thread::sleep(Duration::from_secs(3));
     let hub = Hub::new(envhub_hub::Registry::builtin()).with_network(net_to(&[&a]));
+    let flooded_at = Instant::now();
+    // Not locked out: in within 30 s (its link among thousands being dropped).
     let result = hub
-        .make_vec_on(
-            "gym-cartpole",
-            1,
-            &EnvConfig::default(),
-            &Placement::Hubs(vec![a.name.clone()]),
-        )
+        .network()
+        .and_then(|n| n.wait_for(std::slice::from_ref(&a.name), Duration::from_secs(30)))
+        .map(|()| eprintln!("the hub found after {:.1?}", flooded_at.elapsed()))
+        .and_then(|()| {
+            hub.make_vec_on(
+                "gym-cartpole",
+                1,
+                &EnvConfig::default(),
+                &Placement::Hubs(vec![a.name.clone()]),
+            )
+        })
         .and_then(|mut env| {
             env.reset(Some(0))?;
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
@@ -497,8 +507,10 @@ fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
     holding.store(false, Ordering::Relaxed);
     holder.join().unwrap();
     eprintln!(
-        "{} connections opened to hold {HELD} on the hub's port",
-        opened.load(Ordering::Relaxed)
+        "{} connections opened to hold {HELD} on the hub's port; the owner's discovery, \
+         session and 20 steps took {:.1?} under the flood",
+        opened.load(Ordering::Relaxed),
+        flooded_at.elapsed()
     );
     result.expect("the owner's session with idle connections held on the hub's port");
 }

@@ -295,3 +295,24 @@ pub fn step_bytes(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rn
     row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
     row
 }
+
+/// Raises this process's limit of open files to hold `wanted` sockets (a flood's), or fails
+/// naming the machine's hard limit.
+pub fn hold_open_files(wanted: u64) {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit/setrlimit with a valid resource and a pointer to a local struct.
+    unsafe {
+        assert_eq!(libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit), 0);
+        assert!(
+            limit.rlim_max >= wanted,
+            "this machine's hard limit of open files ({}) is below the {wanted} the flood needs \
+             (raise it: `ulimit -Hn`)",
+            limit.rlim_max
+        );
+        limit.rlim_cur = limit.rlim_cur.max(wanted);
+        assert_eq!(libc::setrlimit(libc::RLIMIT_NOFILE, &limit), 0);
+    }
+}

@@ -129,30 +129,50 @@ fn json_list(items: &[String]) -> String {
 /// How long a link into a hub may take to say who it is, in milliseconds (Zenoh's default:
 /// 10 s). A real peer does it within a round trip or two.
 pub const ACCEPT_TIMEOUT_MS: u64 = 2000;
-/// Links into a hub being accepted at once (Zenoh's default: 100, which 150 idle connections
-/// of another user filled, locking the owner's clients out).
+/// The fewest links into a hub being accepted at once (Zenoh's default: 100, which 150 idle
+/// connections of another user filled, locking the owner's clients out). A hub takes as many
+/// as its open files allow ([`accept_pending`]): an idle link holds a file either way.
 pub const ACCEPT_PENDING: usize = 4096;
+/// Open files a hub keeps for itself (workers, shared memory, sessions) when it sizes its
+/// queue of links being accepted.
+const RESERVED_FILES: u64 = 1024;
 
 /// Raises this process's soft limit of open files to at least `wanted` (within the hard
-/// limit): a hub holds a file per link it is accepting.
-fn raise_open_files(wanted: u64) {
+/// limit): a hub holds a file per link it is accepting. Returns the soft limit now.
+fn raise_open_files(wanted: u64) -> u64 {
     let mut limit = libc::rlimit {
         rlim_cur: 0,
         rlim_max: 0,
     };
     // SAFETY: getrlimit/setrlimit with a valid resource and a pointer to a local struct.
     unsafe {
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) != 0 || limit.rlim_cur >= wanted {
-            return;
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) != 0 {
+            return 0;
         }
+        if limit.rlim_cur >= wanted {
+            return limit.rlim_cur;
+        }
+        let now = limit.rlim_cur;
         limit.rlim_cur = wanted.min(limit.rlim_max);
         if libc::setrlimit(libc::RLIMIT_NOFILE, &limit) != 0 {
             tracing::warn!(
                 wanted,
                 "cannot raise the limit of open files: many idle links could lock clients out"
             );
+            return now;
         }
+        limit.rlim_cur
     }
+}
+
+/// The queue of links being accepted for a hub that may hold `files` open files: all but
+/// [`RESERVED_FILES`] of them, and at least [`ACCEPT_PENDING`]. Past the queue Zenoh closes
+/// every new link, the owner's included; past the files the kernel does. Either way an
+/// attacker must hold that many silent connections, each for ACCEPT_TIMEOUT_MS at most.
+fn accept_pending(files: u64) -> usize {
+    usize::try_from(files.saturating_sub(RESERVED_FILES))
+        .unwrap_or(usize::MAX)
+        .max(ACCEPT_PENDING)
 }
 
 /// A hub's Zenoh session and what its exposure rule decided.
@@ -215,8 +235,11 @@ pub fn open_hub(
     )?;
     // Zenoh drops larger messages before they reach envhub. Links that connect and say
     // nothing (held open by anyone who reaches the port) wait at most ACCEPT_TIMEOUT_MS in
-    // the queue of links being accepted, which holds ACCEPT_PENDING: past it Zenoh closes
-    // new links at once, the owner's clients' included.
+    // the queue of links being accepted: past it Zenoh closes new links at once, the owner's
+    // clients' included. A link waiting there, and on TLS every handshake under way (which
+    // no queue bounds), holds an open file: the hub raises its limit to the hard one (at
+    // most Linux's default `nr_open`) and sizes the queue to it.
+    let files = raise_open_files(1 << 20);
     for (key, value) in [
         (
             "transport/link/rx/max_message_size",
@@ -228,7 +251,7 @@ pub fn open_hub(
         ),
         (
             "transport/unicast/accept_pending",
-            ACCEPT_PENDING.to_string(),
+            accept_pending(files).to_string(),
         ),
     ] {
         config
@@ -238,7 +261,6 @@ pub fn open_hub(
                 reason: format!("`{key}`: {e}"),
             })?;
     }
-    raise_open_files(ACCEPT_PENDING as u64 * 2);
     let default_listener = config.get_json("listen/endpoints").ok()
         == Some(format!("[\"{}\"]", crate::LOOPBACK_LISTENER));
     if exposure.local_credential {
@@ -407,6 +429,14 @@ mod tests {
         assert_eq!(get("listen/endpoints"), "[]", "a client listens on nothing");
         assert_eq!(get("scouting/multicast/enabled"), "false");
         assert_eq!(get("transport/link/tx/lease"), "2500");
+    }
+
+    #[test]
+    fn the_queue_of_links_being_accepted_follows_the_open_files() {
+        assert_eq!(accept_pending(0), ACCEPT_PENDING);
+        assert_eq!(accept_pending(1024), ACCEPT_PENDING);
+        assert_eq!(accept_pending(20_000), 20_000 - 1024);
+        assert_eq!(accept_pending(1 << 20), (1 << 20) - 1024);
     }
 
     #[test]
