@@ -280,7 +280,35 @@ pub fn open_hub(
             local,
         });
     }
-    // Loopback on a port of its own choosing, so it can tell local clients which: a port
+    // A Unix socket in the folder of local hubs, which only this user can reach: no other
+    // user's connections can fill its queue of links being accepted (docs/design/security.md).
+    if let Some(endpoint) = crate::local::socket_endpoint() {
+        let mut config = config.clone();
+        config
+            .insert_json5(
+                "listen/endpoints",
+                &json_list(std::slice::from_ref(&endpoint)),
+            )
+            .map_err(|e| HubError::InvalidConfig {
+                what: "zenoh config",
+                reason: format!("`listen/endpoints`: {e}"),
+            })?;
+        match zenoh::open(config).wait() {
+            Ok(session) => {
+                return Ok(HubSession {
+                    session,
+                    notice: exposure.notice,
+                    local: Some(LocalEntry::new(name, std::slice::from_ref(&endpoint))),
+                });
+            }
+            Err(e) => tracing::warn!(
+                %endpoint,
+                error = %e,
+                "cannot listen on a Unix socket: this hub listens on a loopback TCP port"
+            ),
+        }
+    }
+    // Else loopback on a port of its own choosing, so it can tell local clients which: a port
     // taken between the choice and the listen is chosen again.
     let mut tries = 0;
     loop {

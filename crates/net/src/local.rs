@@ -165,7 +165,7 @@ pub fn endpoints() -> Vec<String> {
             let endpoints: Vec<String> = listed
                 .iter()
                 .filter_map(|e| e.as_str())
-                .filter(|e| crate::endpoint::is_loopback(e))
+                .filter(|e| listable(e, &dir))
                 .map(String::from)
                 .collect();
             Some(endpoints)
@@ -175,6 +175,44 @@ pub fn endpoints() -> Vec<String> {
     found.sort();
     found.dedup();
     found
+}
+
+/// The longest socket path a Unix socket takes (`sun_path`'s 108 bytes, less the NUL).
+const MAX_SOCKET_PATH: usize = 107;
+
+/// The Unix-socket endpoint of this process's hub in the folder of local hubs
+/// (`unixsock-stream/<folder>/<pid>.sock`): only this user can reach a socket there (the
+/// folder is 0700), so no other user's connections can crowd its links out. None where the
+/// folder cannot be made or the path is too long for a socket (a hub then listens on a
+/// loopback TCP port).
+pub(crate) fn socket_endpoint() -> Option<String> {
+    let dir = match dir() {
+        Ok(dir) => dir,
+        Err(e) => {
+            tracing::debug!("no Unix socket for this hub: {e}");
+            return None;
+        }
+    };
+    let path = dir.join(format!("{}.sock", std::process::id()));
+    let path = path.to_str()?;
+    if path.len() > MAX_SOCKET_PATH {
+        tracing::info!(
+            path,
+            "the folder of local hubs is too deep for a Unix socket ({MAX_SOCKET_PATH} bytes): \
+             this hub listens on a loopback TCP port"
+        );
+        return None;
+    }
+    Some(format!("{}/{path}", crate::endpoint::UNIX_SOCKET))
+}
+
+/// Whether a listed endpoint may be connected to: a loopback TCP endpoint, or a Unix socket
+/// in the folder of local hubs itself (where only this user can have made it).
+fn listable(endpoint: &str, dir: &Path) -> bool {
+    match crate::endpoint::unix_socket_path(endpoint) {
+        Some(path) => Path::new(path).parent() == Some(dir),
+        None => crate::endpoint::is_loopback(endpoint),
+    }
 }
 
 /// A free loopback TCP port (for a hub's listener, so it can say which it is).
@@ -211,6 +249,28 @@ mod tests {
         )
         .unwrap();
         assert_eq!(endpoints(), vec!["tcp/127.0.0.1:17001".to_string()]);
+        // A Unix socket counts only in the folder itself.
+        let inside = format!("unixsock-stream/{}/2.sock", dir.display());
+        std::fs::write(
+            dir.join(format!("{}.json", std::process::id() + 1)),
+            serde_json::json!({"name": "u", "pid": std::process::id(),
+                "endpoints": [inside, "unixsock-stream//tmp/elsewhere.sock"]})
+            .to_string(),
+        )
+        .unwrap();
+        assert_eq!(
+            endpoints(),
+            vec!["tcp/127.0.0.1:17001".to_string(), inside.clone()]
+        );
+        assert_eq!(
+            socket_endpoint(),
+            Some(format!(
+                "unixsock-stream/{}/{}.sock",
+                dir.display(),
+                std::process::id()
+            ))
+        );
+        std::fs::remove_file(dir.join(format!("{}.json", std::process::id() + 1))).unwrap();
         drop(hub);
         assert!(endpoints().is_empty());
         // A folder others may enter is not believed.
