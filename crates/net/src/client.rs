@@ -448,7 +448,9 @@ impl Network {
             .priority(zenoh::qos::Priority::DataHigh)
             .wait()
             .map_err(failed)?;
-        let payload = vec![0u8; bytes];
+        // One buffer, shared by every put (a clone is a reference): the echo times the wire,
+        // not a copy of the message here.
+        let payload = zenoh::bytes::ZBytes::from(vec![0u8; bytes]);
         let lost = || HubError::HubLost {
             hub: hub.to_string(),
             envs: "-".into(),

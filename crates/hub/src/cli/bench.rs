@@ -163,6 +163,109 @@ fn step_latencies(mut env: VecEnv, n: usize) -> anyhow::Result<(f64, f64)> {
     Ok(percentiles(times))
 }
 
+/// One remote batch against the raw Zenoh echo of its bytes, in alternated blocks.
+struct BatchAgainstEcho {
+    blocks: usize,
+    remote: (f64, f64),
+    here: (f64, f64),
+    echo: (f64, f64),
+    num_envs: usize,
+}
+
+impl BatchAgainstEcho {
+    /// What the echo allows: a batch here plus the echo of its bytes, as steps per second.
+    fn allowed_rate(&self) -> f64 {
+        self.num_envs as f64 / ((self.here.0 + self.echo.0) * 1e-6)
+    }
+
+    fn remote_rate(&self) -> f64 {
+        self.num_envs as f64 / (self.remote.0 * 1e-6)
+    }
+
+    fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "blocks": self.blocks,
+            "remote_batch_p50_us": self.remote.0,
+            "remote_batch_p99_us": self.remote.1,
+            "here_batch_p50_us": self.here.0,
+            "here_batch_p99_us": self.here.1,
+            "echo_p50_us": self.echo.0,
+            "echo_p99_us": self.echo.1,
+            "remote_over_here_plus_echo_p50": self.remote.0 / (self.here.0 + self.echo.0),
+            "remote_over_here_plus_echo_p99": self.remote.1 / (self.here.1 + self.echo.1),
+            "remote_rate_over_allowed": self.remote_rate() / self.allowed_rate(),
+        })
+    }
+
+    fn print(&self) {
+        let (r, h, e) = (self.remote, self.here, self.echo);
+        println!(
+            "  alternated, {} blocks of one batch each way:",
+            self.blocks
+        );
+        println!(
+            "    remote batch    p50 {:>9.1} µs, p99 {:>9.1} µs",
+            r.0, r.1
+        );
+        println!(
+            "    here            p50 {:>9.1} µs, p99 {:>9.1} µs",
+            h.0, h.1
+        );
+        println!(
+            "    raw echo        p50 {:>9.1} µs, p99 {:>9.1} µs  (its request and response bytes)",
+            e.0, e.1
+        );
+        println!(
+            "    remote / (here + echo)  p50 {:.2}, p99 {:.2}; remote rate / what the echo allows {:.2}",
+            r.0 / (h.0 + e.0),
+            r.1 / (h.1 + e.1),
+            self.remote_rate() / self.allowed_rate()
+        );
+    }
+}
+
+/// A remote batch against what the wire allows, in one process pair: blocks of remote steps,
+/// steps of the same envs here, and raw Zenoh echoes of the batch's bytes through the same
+/// hub, alternated so that the machine's drift falls on all three alike. The echo carries the
+/// request's bytes out and back, then the response's; half of the two is one round trip of a
+/// request out and a response back (the hub's echo answers with what it was sent).
+fn batch_against_echo(
+    hub: &Hub,
+    first: &str,
+    remote: &mut VecEnv,
+    local: &mut VecEnv,
+    (request, response): (usize, usize),
+    n: usize,
+) -> anyhow::Result<BatchAgainstEcho> {
+    const BLOCKS: usize = 6;
+    let per_block = (n / BLOCKS).max(20);
+    let time_steps = |env: &mut VecEnv, out: &mut Vec<Duration>| -> anyhow::Result<()> {
+        let action = vec![0u8; env.num_envs() * env.action_space().byte_len()];
+        for _ in 0..per_block {
+            let t = Instant::now();
+            env.step(&action)?;
+            out.push(t.elapsed());
+        }
+        Ok(())
+    };
+    let network = hub.network()?;
+    let (mut on_hub, mut here, mut echo) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..BLOCKS {
+        time_steps(remote, &mut on_hub)?;
+        time_steps(local, &mut here)?;
+        let out = network.echo_round_trips(first, request, per_block)?;
+        let back = network.echo_round_trips(first, response, per_block)?;
+        echo.extend(out.iter().zip(&back).map(|(a, b)| (*a + *b) / 2));
+    }
+    Ok(BatchAgainstEcho {
+        blocks: BLOCKS,
+        remote: percentiles(on_hub),
+        here: percentiles(here),
+        echo: percentiles(echo),
+        num_envs: remote.num_envs(),
+    })
+}
+
 /// `--hub`: the same envs placed on hubs and here, the remote and the raw Zenoh round trip.
 fn run_remote(
     hub: &Hub,
@@ -187,13 +290,31 @@ fn run_remote(
         remote_rate = remote_rate.max(hub_throughput(&mut remote, args.seconds / 2.0)?);
         local_rate = local_rate.max(hub_throughput(&mut local, args.seconds / 2.0)?);
     }
-    remote.close();
-    local.close();
     let first = places
         .iter()
         .map(|(p, _)| p.clone())
         .find(|p| p != envhub_hub::LOCAL)
         .ok_or_else(|| anyhow::anyhow!("`--hub {}` places no env on a hub", args.hub))?;
+    let on_first = places
+        .iter()
+        .find(|(p, _)| *p == first)
+        .map_or(0, |(_, r)| r.len());
+    let request = 24 + envhub_shm::Layout::new(on_first, act_bytes).req_options;
+    let response = 24 + envhub_shm::BatchLayout::new(on_first, obs_bytes, false).size();
+    let batch = if places.len() == 1 {
+        Some(batch_against_echo(
+            hub,
+            &first,
+            &mut remote,
+            &mut local,
+            (request, response),
+            args.round_trips.max(100),
+        )?)
+    } else {
+        None
+    };
+    remote.close();
+    local.close();
     let one = EnvConfig {
         workers: Some(1),
         ..EnvConfig::default()
@@ -220,12 +341,6 @@ fn run_remote(
     // The model of docs/guide/remote.md: a batch on one hub takes what it takes here plus one
     // round trip of its request and response bytes (a raw echo of that many bytes, half each
     // way).
-    let on_first = places
-        .iter()
-        .find(|(p, _)| *p == first)
-        .map_or(0, |(_, r)| r.len());
-    let request = 24 + envhub_shm::Layout::new(on_first, act_bytes).req_options;
-    let response = 24 + envhub_shm::BatchLayout::new(on_first, obs_bytes, false).size();
     let (bulk50, _) = percentiles(hub.network()?.echo_round_trips(
         &first,
         (request + response) / 2,
@@ -261,6 +376,7 @@ fn run_remote(
                 "response_bytes": response,
                 "raw_zenoh_batch_bytes_p50_us": bulk50,
                 "model_steps_per_sec": predicted,
+                "batch_against_echo": batch.as_ref().map(BatchAgainstEcho::json),
             })
         );
     } else {
@@ -286,6 +402,9 @@ fn run_remote(
             println!(
                 "  model             {p:>12.0} steps/s  (here + that echo per batch; docs/guide/remote.md)"
             );
+        }
+        if let Some(b) = &batch {
+            b.print();
         }
     }
     Ok(Outcome::Done)
