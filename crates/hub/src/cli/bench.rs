@@ -28,8 +28,10 @@ pub(crate) struct Args {
     #[arg(long)]
     json: bool,
     /// Measure envs placed on hubs (a name, a list, `all` or counts, as `run --hub`) against
-    /// the same envs here, and the remote round trip against a raw Zenoh one. The round trip
-    /// uses the hub's `null-small` entry (serve it with ENVHUB_TEST_ADAPTERS=1 and
+    /// the same envs here, and the remote round trip against a raw Zenoh one; with every env
+    /// on one hub, also the batch against the raw Zenoh echo of its request and response bytes,
+    /// alternated with the same batch here (p50, p99, remote / (here + echo), the remote rate
+    /// against what the echo allows). The round trip uses the hub's `null-small` entry (serve it with ENVHUB_TEST_ADAPTERS=1 and
     /// `--registry @default --registry configs/bench/data_plane.yaml`).
     #[arg(long, value_name = "HUBS", default_value = "local")]
     hub: String,
