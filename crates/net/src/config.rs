@@ -280,27 +280,17 @@ pub fn open_hub(
             local,
         });
     }
+    // This user's local hub, listening on one endpoint it lists in the folder of local hubs.
+    let local_hub = |session, endpoint: String, notice| HubSession {
+        session,
+        notice,
+        local: Some(LocalEntry::new(name, &[endpoint])),
+    };
     // A Unix socket in the folder of local hubs, which only this user can reach: no other
     // user's connections can fill its queue of links being accepted (docs/design/security.md).
     if let Some(endpoint) = crate::local::socket_endpoint() {
-        let mut config = config.clone();
-        config
-            .insert_json5(
-                "listen/endpoints",
-                &json_list(std::slice::from_ref(&endpoint)),
-            )
-            .map_err(|e| HubError::InvalidConfig {
-                what: "zenoh config",
-                reason: format!("`listen/endpoints`: {e}"),
-            })?;
-        match zenoh::open(config).wait() {
-            Ok(session) => {
-                return Ok(HubSession {
-                    session,
-                    notice: exposure.notice,
-                    local: Some(LocalEntry::new(name, std::slice::from_ref(&endpoint))),
-                });
-            }
+        match open_listening_on(&config, &endpoint)? {
+            Ok(session) => return Ok(local_hub(session, endpoint, exposure.notice)),
             Err(e) => tracing::warn!(
                 %endpoint,
                 error = %e,
@@ -320,28 +310,29 @@ pub fn open_hub(
                 hint: "check the machine's loopback interface".into(),
             })?
         );
-        let mut config = config.clone();
-        config
-            .insert_json5(
-                "listen/endpoints",
-                &json_list(std::slice::from_ref(&endpoint)),
-            )
-            .map_err(|e| HubError::InvalidConfig {
-                what: "zenoh config",
-                reason: format!("`listen/endpoints`: {e}"),
-            })?;
-        match zenoh::open(config).wait() {
-            Ok(session) => {
-                return Ok(HubSession {
-                    session,
-                    notice: exposure.notice,
-                    local: Some(LocalEntry::new(name, std::slice::from_ref(&endpoint))),
-                });
-            }
+        match open_listening_on(&config, &endpoint)? {
+            Ok(session) => return Ok(local_hub(session, endpoint, exposure.notice)),
             Err(e) if tries >= 3 => return Err(open_failed(net, e)),
             Err(e) => tracing::debug!(%endpoint, error = %e, "loopback port taken: another"),
         }
     }
+}
+
+/// Opens a Zenoh session of `config` listening on `endpoint` alone: the outer error is a
+/// config Zenoh refuses, the inner one the open's (an endpoint taken, say).
+fn open_listening_on(
+    config: &zenoh::Config,
+    endpoint: &str,
+) -> Result<zenoh::Result<zenoh::Session>, HubError> {
+    use zenoh::Wait;
+    let mut config = config.clone();
+    config
+        .insert_json5("listen/endpoints", &json_list(&[endpoint.to_string()]))
+        .map_err(|e| HubError::InvalidConfig {
+            what: "zenoh config",
+            reason: format!("`listen/endpoints`: {e}"),
+        })?;
+    Ok(zenoh::open(config).wait())
 }
 
 /// Loopback is open to every user of the machine: links into this hub must present this
