@@ -3,6 +3,7 @@
 //! hub's thread count and resident memory stay bounded (figures printed, for
 //! `docs/design/security.md`) and another client's session keeps stepping, bit for bit as it would.
 
+use envhub_e2e::flood::SilentFlood;
 use envhub_e2e::remote::{RemoteHub, net_to};
 use envhub_hub::{EnvConfig, Hub, Placement};
 use rand::SeedableRng;
@@ -443,40 +444,11 @@ fn hostile_opens_are_refused_before_parsing_and_leave_the_hub_s_memory_bounded()
 #[test]
 fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
     const HELD: usize = 150;
-    envhub_e2e::hold_open_files(HELD as u64 + 1024);
+    envhub_e2e::flood::hold_open_files(HELD as u64 + 1024);
     let a = RemoteHub::start("held", &[], &[]);
-    let address = a.endpoint.trim_start_matches("tcp/").to_string();
-    let holding = Arc::new(AtomicBool::new(true));
-    let opened = Arc::new(std::sync::atomic::AtomicUsize::new(0));
-    let holder = {
-        let (holding, opened, address) = (holding.clone(), opened.clone(), address.clone());
-        std::thread::spawn(move || {
-            let mut held: Vec<Option<std::net::TcpStream>> = (0..HELD).map(|_| None).collect();
-            while holding.load(Ordering::Relaxed) {
-                for slot in &mut held {
-                    let closed = slot.as_mut().is_none_or(|s| {
-                        let mut b = [0u8; 64];
-                        matches!(std::io::Read::read(s, &mut b), Ok(0))
-                    });
-                    if closed {
-                        *slot = std::net::TcpStream::connect(&address).ok().inspect(|s| {
-                            s.set_nonblocking(true).unwrap();
-                            opened.fetch_add(1, Ordering::Relaxed);
-                        });
-                    }
-                }
-                std::thread::sleep(Duration::from_millis(250));
-            }
-        })
-    };
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while opened.load(Ordering::Relaxed) < HELD {
-        assert!(
-            Instant::now() < deadline,
-            "could not open {HELD} connections"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let address = a.endpoint.trim_start_matches("tcp/").parse().unwrap();
+    let flood = SilentFlood::hold(address, HELD);
+    flood.wait_held(Duration::from_secs(60));
     // Past the hub's accept timeout (2 s): the held links are dropped and opened again while
     // the owner's client opens its session.
     std::thread::sleep(Duration::from_secs(3));
@@ -505,13 +477,11 @@ fn idle_connections_held_on_a_hub_s_port_do_not_lock_its_clients_out() {
             env.close();
             Ok(())
         });
-    holding.store(false, Ordering::Relaxed);
-    holder.join().unwrap();
+    let (opened, took) = (flood.opened(), flooded_at.elapsed());
+    flood.stop();
     eprintln!(
-        "{} connections opened to hold {HELD} on the hub's port; the owner's discovery, \
-         session and 20 steps took {:.1?} under the flood",
-        opened.load(Ordering::Relaxed),
-        flooded_at.elapsed()
+        "{opened} connections opened to hold {HELD} on the hub's port; the owner's discovery, \
+         session and 20 steps took {took:.1?} under the flood"
     );
     result.expect("the owner's session with idle connections held on the hub's port");
 }

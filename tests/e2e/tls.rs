@@ -3,6 +3,7 @@
 //! of another CA sees no hub; one of the lab's CA with a name the rules do not allow sees no
 //! hub either. Certificates are made by `openssl` for each run.
 
+use envhub_e2e::flood::SilentFlood;
 use envhub_e2e::remote::{RemoteHub, free_port};
 use envhub_hub::{EnvConfig, Hub, NetConfig, Placement, Registry, SessionOptions};
 use std::path::{Path, PathBuf};
@@ -287,60 +288,14 @@ const FLOODED: usize = 4200;
 /// client's session failed at its 30 s start timeout).
 #[test]
 fn a_flood_of_silent_connections_on_a_tls_hub_s_port_does_not_lock_out_its_clients() {
-    envhub_e2e::hold_open_files(FLOODED as u64 + 1024);
+    envhub_e2e::flood::hold_open_files(FLOODED as u64 + 1024);
     let dir = lab_dir("flood");
     let port = free_port();
     let endpoint = format!("tls/127.0.0.1:{port}");
     let hub_config = hub_config(&dir).display().to_string();
     let a = RemoteHub::start_at("tlsflood", &endpoint, &["--zenoh-config", &hub_config], &[]);
-    let holding = Arc::new(std::sync::atomic::AtomicBool::new(true));
-    let (opened, dropped) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
-    let holder = {
-        let (holding, opened, dropped) = (holding.clone(), opened.clone(), dropped.clone());
-        std::thread::spawn(move || {
-            let mut held: Vec<Option<std::net::TcpStream>> = (0..FLOODED).map(|_| None).collect();
-            while holding.load(Ordering::Relaxed) {
-                for slot in &mut held {
-                    let closed = slot.as_mut().is_some_and(|s| {
-                        let mut b = [0u8; 64];
-                        match std::io::Read::read(s, &mut b) {
-                            Ok(0) => true,
-                            Err(e) => e.kind() != std::io::ErrorKind::WouldBlock,
-                            Ok(_) => false,
-                        }
-                    });
-                    if closed {
-                        dropped.fetch_add(1, Ordering::Relaxed);
-                        *slot = None;
-                    }
-                    if slot.is_none() {
-                        *slot = std::net::TcpStream::connect_timeout(
-                            &format!("127.0.0.1:{port}").parse().unwrap(),
-                            Duration::from_millis(200),
-                        )
-                        .ok()
-                        .inspect(|s| {
-                            s.set_nonblocking(true).unwrap();
-                            opened.fetch_add(1, Ordering::Relaxed);
-                        });
-                    }
-                    if !holding.load(Ordering::Relaxed) {
-                        break;
-                    }
-                }
-                std::thread::sleep(Duration::from_millis(250));
-            }
-        })
-    };
-    let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    while opened.load(Ordering::Relaxed) < FLOODED {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "could not open {FLOODED} connections to the hub in 60 s ({} opened)",
-            opened.load(Ordering::Relaxed)
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let flood = SilentFlood::hold(format!("127.0.0.1:{port}").parse().unwrap(), FLOODED);
+    flood.wait_held(Duration::from_secs(60));
     // Past Zenoh's default handshake timeout (10 s): the held links' handshakes fail while
     // the client opens its session.
     std::thread::sleep(Duration::from_secs(12));
@@ -367,13 +322,9 @@ fn a_flood_of_silent_connections_on_a_tls_hub_s_port_does_not_lock_out_its_clien
             env.close();
             Ok(())
         });
-    let during = (
-        opened.load(Ordering::Relaxed),
-        dropped.load(Ordering::Relaxed),
-    );
+    let during = (flood.opened(), flood.dropped());
     let took = flooded_at.elapsed();
-    holding.store(false, Ordering::Relaxed);
-    holder.join().unwrap();
+    flood.stop();
     eprintln!(
         "{} connections opened and {} dropped by the hub to hold {FLOODED} on its TLS port; \
          the client's discovery, session and 20 steps took {took:.1?} under the flood",

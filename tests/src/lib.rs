@@ -1,5 +1,6 @@
 //! Helpers for envhub's end-to-end tests: an isolated hub per test and the built binaries.
 
+pub mod flood;
 pub mod intruder;
 pub mod remote;
 
@@ -294,27 +295,4 @@ pub fn step_bytes(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rn
     row.extend(b.rewards.iter().flat_map(|r| r.to_le_bytes()));
     row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
     row
-}
-
-/// Raises this process's limit of open files to hold `wanted` sockets (a flood's), or fails
-/// naming the machine's hard limit.
-pub fn hold_open_files(wanted: u64) {
-    let mut limit = libc::rlimit {
-        rlim_cur: 0,
-        rlim_max: 0,
-    };
-    // SAFETY: getrlimit/setrlimit with a valid resource and a pointer to a local struct.
-    unsafe {
-        assert_eq!(libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit), 0);
-        let hard = limit.rlim_max;
-        // Root may raise the hard limit too (the hubs the test starts inherit it).
-        limit.rlim_max = limit.rlim_max.max(wanted);
-        limit.rlim_cur = limit.rlim_cur.max(wanted);
-        assert_eq!(
-            libc::setrlimit(libc::RLIMIT_NOFILE, &limit),
-            0,
-            "this machine's hard limit of open files ({hard}) is below the {wanted} the flood \
-             needs, and this user cannot raise it (`ulimit -Hn {wanted}` as root)"
-        );
-    }
 }
