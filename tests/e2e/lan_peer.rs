@@ -80,25 +80,8 @@ fn a_peer_on_the_lan_never_reaches_a_default_hub_and_a_default_client_ignores_it
         );
         std::thread::sleep(Duration::from_millis(50));
     }
-    // A default client on this machine: it finds the local hub, and not the lure. `envhub
-    // hubs` waits 2 s for discovery; a busy machine can take longer to link, so it is asked
-    // again (a bound of tries, not of time): a client that never finds the hub still fails.
-    let mut listed = String::new();
-    for _ in 0..3 {
-        let out = Command::new(binary("envhub"))
-            .args(["hubs", "--json"])
-            .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, &local)
-            .env_remove(envhub_hub::ENVHUB_MULTICAST)
-            .env_remove(envhub_hub::ENVHUB_CONNECT)
-            .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
-            .stdin(Stdio::null())
-            .output()
-            .unwrap();
-        listed = String::from_utf8_lossy(&out.stdout).to_string();
-        if listed.contains(&name) {
-            break;
-        }
-    }
+    // A default client on this machine: it finds the local hub, and not the lure.
+    let listed = envhub_e2e::envhub_hubs_listing(&local, &name);
     // Scouting runs for seconds: give a hub that scouts (or answers scouts) time to do it.
     std::thread::sleep(Duration::from_secs(4));
     let envhub_e2e::intruder::Seen {

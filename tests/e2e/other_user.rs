@@ -12,7 +12,7 @@
 //! - This user's default client finds the hub (through the folder of local hubs) and one
 //!   given the endpoint reaches it: both present the credential.
 
-use envhub_e2e::binary;
+use envhub_e2e::{binary, envhub_hubs};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -83,23 +83,6 @@ fn start(tag: &str, args: &[&str]) -> LoopbackHub {
     }
 }
 
-/// `envhub hubs --json` as this user (`uid`: as that one), with `args`; its stdout.
-fn hubs(binary: &Path, local: &Path, args: &[&str], uid: Option<u32>) -> String {
-    let mut cmd = Command::new(binary);
-    cmd.args(["hubs", "--json"])
-        .args(args)
-        .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, local)
-        .env_remove(envhub_hub::ENVHUB_MULTICAST)
-        .env_remove(envhub_hub::ENVHUB_CONNECT)
-        .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
-        .stdin(Stdio::null());
-    if let Some(uid) = uid {
-        cmd.uid(uid).gid(uid).current_dir("/");
-    }
-    let out = cmd.output().unwrap();
-    String::from_utf8_lossy(&out.stdout).to_string()
-}
-
 #[test]
 fn another_user_on_this_machine_never_reaches_a_default_hub() {
     never_reached_by_another_user(start("default", &[]));
@@ -150,12 +133,12 @@ fn never_reached_by_another_user(hub: LoopbackHub) {
     );
 
     // This user's clients: found through the folder, and reached through the endpoint.
-    let found = hubs(&binary("envhub"), &hub.local, &[], None);
+    let found = envhub_hubs(&binary("envhub"), &hub.local, &[], None);
     assert!(
         found.contains(&hub.name),
         "this user's default client did not find the hub: {found}"
     );
-    let reached = hubs(
+    let reached = envhub_hubs(
         &binary("envhub"),
         &hub.local,
         &["--connect", &hub.endpoint],
@@ -192,7 +175,7 @@ fn never_reached_by_another_user(hub: LoopbackHub) {
         !read.status.success() && read.stdout.is_empty(),
         "another uid read the credential"
     );
-    let listed = hubs(
+    let listed = envhub_hubs(
         &their_binary,
         &their_local,
         &["--connect", &hub.endpoint],
@@ -203,7 +186,7 @@ fn never_reached_by_another_user(hub: LoopbackHub) {
         "another uid reached the default hub: {listed}"
     );
     // The same binary, run by this user with the endpoint, does reach it (the test can fail).
-    let control = hubs(
+    let control = envhub_hubs(
         &their_binary,
         &hub.local,
         &["--connect", &hub.endpoint],

@@ -136,15 +136,7 @@ fn a_default_hub_listens_on_a_unix_socket_no_other_user_reaches_and_on_no_tcp_po
         listening_addresses(pid)
     );
     // The owner finds it.
-    let found = Command::new(binary("envhub"))
-        .args(["hubs", "--json"])
-        .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, &local)
-        .env_remove(envhub_hub::ENVHUB_MULTICAST)
-        .env_remove(envhub_hub::ENVHUB_CONNECT)
-        .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
-        .output()
-        .unwrap();
-    let listed = String::from_utf8_lossy(&found.stdout);
+    let listed = envhub_e2e::envhub_hubs_listing(&local, "\"quiet\"");
     assert!(
         listed.contains("\"quiet\""),
         "the owner's `envhub hubs`: {listed}"

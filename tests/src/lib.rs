@@ -296,3 +296,43 @@ pub fn step_bytes(env: &mut envhub_hub::VecEnv, rng: &mut rand_chacha::ChaCha8Rn
     row.extend(b.terminated.iter().chain(b.truncated).map(|&d| d as u8));
     row
 }
+
+/// `envhub hubs --json` run by `binary` with `args`, with `local` as the folder of local hubs
+/// and no multicast, endpoints or daemon from the environment, as this user (`uid`: as that
+/// one, from `/`); its stdout.
+pub fn envhub_hubs(
+    binary: &std::path::Path,
+    local: &std::path::Path,
+    args: &[&str],
+    uid: Option<u32>,
+) -> String {
+    use std::os::unix::process::CommandExt;
+    let mut cmd = std::process::Command::new(binary);
+    cmd.args(["hubs", "--json"])
+        .args(args)
+        .env(envhub_hub::local::ENVHUB_LOCAL_HUBS, local)
+        .env_remove(envhub_hub::ENVHUB_MULTICAST)
+        .env_remove(envhub_hub::ENVHUB_CONNECT)
+        .env_remove(envhub_hub::env_vars::ENVHUB_HUB)
+        .stdin(std::process::Stdio::null());
+    if let Some(uid) = uid {
+        cmd.uid(uid).gid(uid).current_dir("/");
+    }
+    let out = cmd.output().unwrap();
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// A default client's `envhub hubs --json` (this user, the folder of local hubs `local`) until
+/// it lists `name`, asked at most 3 times: it waits 2 s for discovery, and a busy machine can
+/// take longer to link (a bound of tries, not of time; a client that never finds the hub still
+/// fails). The last listing.
+pub fn envhub_hubs_listing(local: &std::path::Path, name: &str) -> String {
+    let mut listed = String::new();
+    for _ in 0..3 {
+        listed = envhub_hubs(&binary("envhub"), local, &[], None);
+        if listed.contains(name) {
+            break;
+        }
+    }
+    listed
+}
