@@ -31,8 +31,9 @@ pub(crate) struct Args {
     /// the same envs here, and the remote round trip against a raw Zenoh one; with every env
     /// on one hub, also the batch against the raw Zenoh echo of its request and response bytes,
     /// alternated with the same batch here (p50, p99, remote / (here + echo), the remote rate
-    /// against what the echo allows). The round trip uses the hub's `null-small` entry (serve it with ENVHUB_TEST_ADAPTERS=1 and
-    /// `--registry @default --registry configs/bench/data_plane.yaml`).
+    /// against what the echo allows). The round trip uses the hub's `null-small` entry (serve
+    /// it with ENVHUB_TEST_ADAPTERS=1 and `--registry @default --registry
+    /// configs/bench/data_plane.yaml`).
     #[arg(long, value_name = "HUBS", default_value = "local")]
     hub: String,
 }
@@ -165,46 +166,44 @@ fn step_latencies(mut env: VecEnv, n: usize) -> anyhow::Result<(f64, f64)> {
     Ok(percentiles(times))
 }
 
+/// Alternated blocks of [`batch_against_echo`].
+const ECHO_BLOCKS: usize = 6;
+
 /// One remote batch against the raw Zenoh echo of its bytes, in alternated blocks.
 struct BatchAgainstEcho {
-    blocks: usize,
     remote: (f64, f64),
     here: (f64, f64),
     echo: (f64, f64),
-    num_envs: usize,
 }
 
 impl BatchAgainstEcho {
-    /// What the echo allows: a batch here plus the echo of its bytes, as steps per second.
-    fn allowed_rate(&self) -> f64 {
-        self.num_envs as f64 / ((self.here.0 + self.echo.0) * 1e-6)
-    }
-
-    fn remote_rate(&self) -> f64 {
-        self.num_envs as f64 / (self.remote.0 * 1e-6)
+    /// Remote / (here + echo) at p50 and p99, and the remote rate over what the echo allows
+    /// (a batch here plus the echo of its bytes): at p50, the rates' ratio is the inverse.
+    fn ratios(&self) -> (f64, f64, f64) {
+        let (r, h, e) = (self.remote, self.here, self.echo);
+        let p50 = r.0 / (h.0 + e.0);
+        (p50, r.1 / (h.1 + e.1), 1.0 / p50)
     }
 
     fn json(&self) -> serde_json::Value {
+        let (p50, p99, rate) = self.ratios();
         serde_json::json!({
-            "blocks": self.blocks,
+            "blocks": ECHO_BLOCKS,
             "remote_batch_p50_us": self.remote.0,
             "remote_batch_p99_us": self.remote.1,
             "here_batch_p50_us": self.here.0,
             "here_batch_p99_us": self.here.1,
             "echo_p50_us": self.echo.0,
             "echo_p99_us": self.echo.1,
-            "remote_over_here_plus_echo_p50": self.remote.0 / (self.here.0 + self.echo.0),
-            "remote_over_here_plus_echo_p99": self.remote.1 / (self.here.1 + self.echo.1),
-            "remote_rate_over_allowed": self.remote_rate() / self.allowed_rate(),
+            "remote_over_here_plus_echo_p50": p50,
+            "remote_over_here_plus_echo_p99": p99,
+            "remote_rate_over_allowed": rate,
         })
     }
 
     fn print(&self) {
         let (r, h, e) = (self.remote, self.here, self.echo);
-        println!(
-            "  alternated, {} blocks of one batch each way:",
-            self.blocks
-        );
+        println!("  alternated, {ECHO_BLOCKS} blocks of one batch each way:");
         println!(
             "    remote batch    p50 {:>9.1} µs, p99 {:>9.1} µs",
             r.0, r.1
@@ -217,11 +216,9 @@ impl BatchAgainstEcho {
             "    raw echo        p50 {:>9.1} µs, p99 {:>9.1} µs  (its request and response bytes)",
             e.0, e.1
         );
+        let (p50, p99, rate) = self.ratios();
         println!(
-            "    remote / (here + echo)  p50 {:.2}, p99 {:.2}; remote rate / what the echo allows {:.2}",
-            r.0 / (h.0 + e.0),
-            r.1 / (h.1 + e.1),
-            self.remote_rate() / self.allowed_rate()
+            "    remote / (here + echo)  p50 {p50:.2}, p99 {p99:.2}; remote rate / what the echo allows {rate:.2}"
         );
     }
 }
@@ -239,8 +236,7 @@ fn batch_against_echo(
     (request, response): (usize, usize),
     n: usize,
 ) -> anyhow::Result<BatchAgainstEcho> {
-    const BLOCKS: usize = 6;
-    let per_block = (n / BLOCKS).max(20);
+    let per_block = (n / ECHO_BLOCKS).max(20);
     let time_steps = |env: &mut VecEnv, out: &mut Vec<Duration>| -> anyhow::Result<()> {
         let action = vec![0u8; env.num_envs() * env.action_space().byte_len()];
         for _ in 0..per_block {
@@ -252,7 +248,7 @@ fn batch_against_echo(
     };
     let network = hub.network()?;
     let (mut on_hub, mut here, mut echo) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..BLOCKS {
+    for _ in 0..ECHO_BLOCKS {
         time_steps(remote, &mut on_hub)?;
         time_steps(local, &mut here)?;
         let out = network.echo_round_trips(first, request, per_block)?;
@@ -260,11 +256,9 @@ fn batch_against_echo(
         echo.extend(out.iter().zip(&back).map(|(a, b)| (*a + *b) / 2));
     }
     Ok(BatchAgainstEcho {
-        blocks: BLOCKS,
         remote: percentiles(on_hub),
         here: percentiles(here),
         echo: percentiles(echo),
-        num_envs: remote.num_envs(),
     })
 }
 
@@ -341,13 +335,19 @@ fn run_remote(
         n,
     )?);
     // The model of docs/guide/remote.md: a batch on one hub takes what it takes here plus one
-    // round trip of its request and response bytes (a raw echo of that many bytes, half each
-    // way).
-    let (bulk50, _) = percentiles(hub.network()?.echo_round_trips(
-        &first,
-        (request + response) / 2,
-        (n / 10).max(100),
-    )?);
+    // round trip of its request and response bytes: the alternated echo's where it ran, else a
+    // raw echo of that many bytes, half each way.
+    let bulk50 = match &batch {
+        Some(b) => b.echo.0,
+        None => {
+            percentiles(hub.network()?.echo_round_trips(
+                &first,
+                (request + response) / 2,
+                (n / 10).max(100),
+            )?)
+            .0
+        }
+    };
     let predicted = if places.len() == 1 {
         let batch = args.num_envs as f64 / local_rate;
         Some(args.num_envs as f64 / (batch + bulk50 * 1e-6))
