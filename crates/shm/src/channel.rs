@@ -322,9 +322,6 @@ fn write_flags(l: &Layout, p: &mut [u8], selected: Option<&[bool]>, seeds: &[Opt
             }
         }
     }
-    if seeds.iter().all(Option::is_none) {
-        return;
-    }
     let seed_block: &mut [u64] = bytemuck::cast_slice_mut(seed_block);
     for (i, seed) in seeds.iter().enumerate().take(n) {
         if let Some(seed) = *seed {
