@@ -15,7 +15,7 @@
 use envhub_e2e::{binary, envhub_hubs};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
