@@ -99,7 +99,7 @@ def main() -> None:
     parser.add_argument("--batch", type=int, default=10)
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--policy", type=Path, help="a saved policy folder (default: a random-init ACT)")
-    parser.add_argument("--workers", type=int, help="envhub's worker processes (--env.workers; default one per core)")
+    parser.add_argument("--workers", type=int, help="envhub's worker processes (--env.workers; default the plugin's: balanced over the cores)")
     parser.add_argument("--sides", default="envhub,lerobot", help="which sides to run, in order")
     parser.add_argument("--profile", type=Path, help="a folder for each side's py-spy samples (slower: not a timing run)")
     args = parser.parse_args()

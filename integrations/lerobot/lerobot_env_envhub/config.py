@@ -31,7 +31,8 @@ class EnvhubEnv(EnvConfig):
     or any other catalog entry or benchmark (`mujoco-hopper`, `dm-control`).
 
     `--env.hub`: where the envs run (`local`, `all` live hubs, or hub names, comma-separated);
-    `--env.workers`: worker processes per task (default: one per core, at most one per env);
+    `--env.workers`: worker processes per task (default: at least one per core, at most one
+    per env, as many as keep every core busy through a batch: 5 envs on 2 cores get 3);
     `--env.step_timeout`: seconds a reset or step may take before its worker counts as hung;
     `--env.registry`: more registry files. The LIBERO options are LeRobot's `LiberoEnv`'s;
     `--env.episode_length` (where the rollout stops) applies to every suite."""

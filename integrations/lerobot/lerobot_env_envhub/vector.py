@@ -17,6 +17,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
 
+from .workers import balanced_workers
+
 #: Reset-info keys the LIBERO adapter reports its task by; LeRobot's reset info has neither.
 TASK_KEYS = ("task_description", "task")
 NEW_ROLLOUT_OPTION = "lerobot_new_rollout"
@@ -73,6 +75,14 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
 
     # The session ------------------------------------------------------------------------------
 
+    def _workers(self) -> int | None:
+        """`--env.workers`, else as many workers as keep this machine's cores busy through a
+        batch (5 envs on 2 cores: 3 workers, not 2 of 3 and 2 envs). On hubs elsewhere: each
+        hub's own default."""
+        if self.workers or self.hubs:
+            return self.workers
+        return balanced_workers(self.num_envs, os.cpu_count() or 1)
+
     def _ensure(self) -> Any:
         if self._vec is None:
             import envhub
@@ -83,7 +93,7 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
             self._vec = envhub.make_vec(
                 self.entry,
                 self.num_envs,
-                num_workers=self.workers,
+                num_workers=self._workers(),
                 autoreset_mode="next_step",
                 render_mode=self.render_mode,
                 registry=self.registry,

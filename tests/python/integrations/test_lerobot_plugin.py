@@ -151,6 +151,30 @@ def same_evaluations(runs: dict[str, Path], videos: int) -> dict:
 
 # ---------------------------------------------------------------------------------------------
 
+def test_default_workers_keep_every_core_busy_through_a_lock_step_batch():
+    """LeRobot's rollout waits for a batch's slowest worker: the default worker count is the
+    fewest whose largest share of envs is within 10% of envs / cores (`workers.py`)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[3] / "integrations" / "lerobot" / "lerobot_env_envhub" / "workers.py"
+    spec = importlib.util.spec_from_file_location("plugin_workers", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    balanced = module.balanced_workers
+    # (envs, cores) -> workers: an even split keeps one per core; 5 on 2 takes 3 (2, 2, 1) as
+    # 2 cores allow 2.5 env-steps a batch, where 2 workers take 3; never more than one per env.
+    cases = {(5, 2): 3, (4, 2): 2, (16, 2): 2, (3, 2): 3, (1, 8): 1, (2, 8): 2, (15, 8): 8, (10, 4): 5, (100, 16): 17}
+    assert {case: balanced(*case) for case in cases} == cases
+    for envs in range(1, 40):
+        for cores in (1, 2, 3, 4, 8, 16):
+            workers = balanced(envs, cores)
+            assert min(envs, cores) <= workers <= envs
+            assert -(-envs // workers) <= 1.1 * max(1.0, envs / cores), (envs, cores, workers)
+    for bad in ((0, 2), (4, 0)):
+        with pytest.raises(ValueError):
+            balanced(*bad)
+
+
 def test_ended_episode_frozen_as_lerobot_eval_freezes_it():
     """With asynchronous envs, `lerobot-eval` replays an ended episode's last transition
     (reward 0) instead of stepping or autoresetting the simulator, until a reset with
