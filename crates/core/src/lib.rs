@@ -17,6 +17,8 @@ pub mod env_vars;
 mod error;
 mod framework;
 #[cfg(feature = "logging")]
+mod log_rate;
+#[cfg(feature = "logging")]
 mod logging;
 mod numpy_rng;
 pub mod private_dir;
