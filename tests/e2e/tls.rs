@@ -293,7 +293,7 @@ fn a_flood_of_silent_connections_on_a_tls_hub_s_port_does_not_lock_out_its_clien
     let port = free_port();
     let endpoint = format!("tls/127.0.0.1:{port}");
     let hub_config = hub_config(&dir).display().to_string();
-    let a = RemoteHub::start_at("tlsflood", &endpoint, &["--zenoh-config", &hub_config], &[]);
+    let a = RemoteHub::start_logged("tlsflood", &endpoint, &["--zenoh-config", &hub_config], &[]);
     let flood = SilentFlood::hold(format!("127.0.0.1:{port}").parse().unwrap(), FLOODED);
     flood.wait_held(Duration::from_secs(60));
     // Past Zenoh's default handshake timeout (10 s): the held links' handshakes fail while
@@ -331,5 +331,42 @@ fn a_flood_of_silent_connections_on_a_tls_hub_s_port_does_not_lock_out_its_clien
         during.0, during.1
     );
     result.expect("a lab client's session with a flood of silent connections on the hub's port");
+    log_stays_bounded(&a.log());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The hub's log under the flood: Zenoh warns once per failed handshake, and the held links'
+/// handshakes time out together, so unbounded that is hundreds of lines in one second. Each
+/// statement writes at most 20 lines a second (`envhub_core`'s `log_rate`); a wall-clock
+/// second can hold the ends of two of its windows, and a module may have a few statements.
+fn log_stays_bounded(log: &str) {
+    let mut per_second: std::collections::HashMap<(&str, &str), usize> = Default::default();
+    for line in log.lines() {
+        let mut words = line.split_whitespace();
+        let (Some(time), Some(_level), Some(target)) = (words.next(), words.next(), words.next())
+        else {
+            continue;
+        };
+        // `2026-12-03T07:10:11.123456Z`: the second is the first 19 characters.
+        let second = time.get(..19).unwrap_or(time);
+        *per_second.entry((target, second)).or_default() += 1;
+    }
+    let worst = per_second.iter().max_by_key(|(_, n)| **n);
+    let dropped = log
+        .lines()
+        .filter(|l| l.contains("were not written"))
+        .count();
+    eprintln!(
+        "the hub's log under the flood: {} lines, at most {:?} in one second of one module; \
+         {dropped} lines saying what a statement dropped",
+        log.lines().count(),
+        worst
+    );
+    if let Some(((target, second), n)) = worst {
+        assert!(
+            *n <= 80,
+            "{n} lines of {target} in {second}: the log is not bounded:\n{}",
+            &log[log.char_indices().rev().nth(4000).map_or(0, |(i, _)| i)..]
+        );
+    }
 }

@@ -43,6 +43,32 @@ impl RemoteHub {
 
     /// [`RemoteHub::start`] on a given endpoint (a hub that comes back where it was).
     pub fn start_at(name: &str, endpoint: &str, args: &[&str], vars: &[(&str, &str)]) -> RemoteHub {
+        RemoteHub::launch(name, endpoint, args, vars, false)
+    }
+
+    /// [`RemoteHub::start_at`] with the hub's log (its stderr) written to a file that
+    /// [`RemoteHub::log`] reads, instead of the test's stderr.
+    pub fn start_logged(
+        name: &str,
+        endpoint: &str,
+        args: &[&str],
+        vars: &[(&str, &str)],
+    ) -> RemoteHub {
+        RemoteHub::launch(name, endpoint, args, vars, true)
+    }
+
+    /// What a hub of [`RemoteHub::start_logged`] has logged so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("hub.log")).unwrap_or_default()
+    }
+
+    fn launch(
+        name: &str,
+        endpoint: &str,
+        args: &[&str],
+        vars: &[(&str, &str)],
+        logged: bool,
+    ) -> RemoteHub {
         let tag = format!("{name}-{}-{}", std::process::id(), free_port());
         let dir = std::env::temp_dir().join(format!("e2e-hub-{tag}"));
         std::fs::create_dir_all(&dir).expect("temp dir");
@@ -65,6 +91,13 @@ impl RemoteHub {
             .env_remove(envhub_hub::env_vars::ENVHUB_ADAPTERS)
             .envs(vars.iter().copied())
             .stdout(Stdio::piped())
+            .stderr(if logged {
+                std::fs::File::create(dir.join("hub.log"))
+                    .expect("the hub's log file")
+                    .into()
+            } else {
+                Stdio::inherit()
+            })
             .spawn()
             .expect("envhub serve starts");
         let mut out = std::io::BufReader::new(child.stdout.take().expect("piped"));

@@ -14,6 +14,8 @@ use std::time::{Duration, Instant};
 use tracing::callsite::Identifier;
 use tracing::subscriber::Interest;
 use tracing::{Level, Metadata};
+use tracing_subscriber::fmt::format::Writer;
+use tracing_subscriber::fmt::time::{FormatTime, SystemTime};
 use tracing_subscriber::layer::{Context, Filter};
 
 /// Lines one statement writes a second at most.
@@ -44,6 +46,22 @@ impl<W: Write> RateLimit<W> {
         }
     }
 
+    /// One line, in the log's own format, of how many lines `meta`'s statement dropped.
+    fn say_dropped(&self, meta: &Metadata<'_>, dropped: u64) {
+        let mut time = String::new();
+        let _ = SystemTime.format_time(&mut Writer::new(&mut time));
+        if let Ok(mut note) = self.note.lock() {
+            let _ = writeln!(
+                note,
+                "{time} {:>5} {}: {dropped} more lines of this statement ({}:{}) were not written (at most {LINES_PER_SECOND} a second)",
+                meta.level(),
+                meta.target(),
+                meta.file().unwrap_or("?"),
+                meta.line().unwrap_or(0),
+            );
+        }
+    }
+
     /// Whether this event of `meta`'s statement may be written now.
     fn admit(&self, meta: &Metadata<'_>, now: Instant) -> bool {
         let Ok(mut windows) = self.windows.lock() else {
@@ -55,18 +73,8 @@ impl<W: Write> RateLimit<W> {
             dropped: 0,
         });
         if now.duration_since(window.start) >= WINDOW {
-            if window.dropped > 0
-                && let Ok(mut note) = self.note.lock()
-            {
-                let _ = writeln!(
-                    note,
-                    "{:>5} {}: {} more lines of this statement ({}:{}) were not written (at most {LINES_PER_SECOND} a second)",
-                    meta.level(),
-                    meta.target(),
-                    window.dropped,
-                    meta.file().unwrap_or("?"),
-                    meta.line().unwrap_or(0),
-                );
+            if window.dropped > 0 {
+                self.say_dropped(meta, window.dropped);
             }
             *window = Window {
                 start: now,
@@ -183,7 +191,7 @@ mod tests {
         let dropped: u64 = notes
             .iter()
             .map(|l| {
-                let after = l.split(": ").nth(1).unwrap();
+                let after = l.split(": ").nth(1).unwrap(); // after the target
                 after.split(' ').next().unwrap().parse::<u64>().unwrap()
             })
             .sum();

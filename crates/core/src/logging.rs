@@ -5,6 +5,7 @@
 
 use crate::env_vars::ENVHUB_LOG;
 use crate::log_rate::RateLimit;
+use std::io::IsTerminal;
 
 /// Installs the subscriber (a second call, or one where another is installed, does nothing).
 pub fn init_logging() {
@@ -17,7 +18,9 @@ pub fn init_logging() {
         .or_else(|| std::env::var("RUST_LOG").ok())
         .unwrap_or_else(|| "warn".to_string());
     // The level filter first, so lines it drops are not counted against a statement's rate.
+    // Colour only for a terminal: a hub's log redirected to a file stays plain text.
     let layer = tracing_subscriber::fmt::layer()
+        .with_ansi(std::io::stderr().is_terminal())
         .with_writer(std::io::stderr)
         .with_filter(EnvFilter::new(filter).and(RateLimit::new(std::io::stderr())));
     let _ = tracing_subscriber::registry().with(layer).try_init();
