@@ -3,8 +3,8 @@
 //! A peer can make a statement log once per thing it sends: Zenoh warns once per failed TLS
 //! handshake, so a port flood of garbage handshakes wrote hundreds of lines a second to a
 //! hub's log, for as long as the flood lasted. Each statement (callsite) at `INFO` or above
-//! writes at most [`LINES_PER_SECOND`] lines a second; the lines it drops are counted and
-//! said in one line when the statement next writes. `DEBUG` and `TRACE` are never dropped:
+//! writes at most [`LINES_PER_SECOND`] lines a second. As it starts dropping lines one line
+//! says so at once; their count is said in one line when the statement next writes. `DEBUG` and `TRACE` are never dropped:
 //! whoever asked for them asked for every line.
 
 use std::collections::HashMap;
@@ -28,6 +28,8 @@ struct Window {
     start: Instant,
     written: u32,
     dropped: u64,
+    /// Whether the window before dropped lines too (a flood goes on: its start was said).
+    flooding: bool,
 }
 
 /// The per-layer filter (see the module's documentation). `note` receives the line that says
@@ -46,14 +48,14 @@ impl<W: Write> RateLimit<W> {
         }
     }
 
-    /// One line, in the log's own format, of how many lines `meta`'s statement dropped.
-    fn say_dropped(&self, meta: &Metadata<'_>, dropped: u64) {
+    /// One line about `meta`'s statement, in the log's own format (time, level, target).
+    fn say(&self, meta: &Metadata<'_>, what: std::fmt::Arguments<'_>) {
         let mut time = String::new();
         let _ = SystemTime.format_time(&mut Writer::new(&mut time));
         if let Ok(mut note) = self.note.lock() {
             let _ = writeln!(
                 note,
-                "{time} {:>5} {}: {dropped} more lines of this statement ({}:{}) were not written (at most {LINES_PER_SECOND} a second)",
+                "{time} {:>5} {}: {what} ({}:{}; at most {LINES_PER_SECOND} lines a second)",
                 meta.level(),
                 meta.target(),
                 meta.file().unwrap_or("?"),
@@ -71,24 +73,39 @@ impl<W: Write> RateLimit<W> {
             start: now,
             written: 0,
             dropped: 0,
+            flooding: false,
         });
         if now.duration_since(window.start) >= WINDOW {
             if window.dropped > 0 {
-                self.say_dropped(meta, window.dropped);
+                let dropped = window.dropped;
+                self.say(
+                    meta,
+                    format_args!("{dropped} more lines of this statement were not written"),
+                );
             }
             *window = Window {
                 start: now,
                 written: 0,
                 dropped: 0,
+                flooding: window.dropped > 0,
             };
         }
         if window.written < LINES_PER_SECOND {
             window.written += 1;
-            true
-        } else {
-            window.dropped += 1;
-            false
+            return true;
         }
+        if window.dropped == 0 && !window.flooding {
+            // Said at once, so that a reader knows of dropped lines even if the statement
+            // never writes again to give their count.
+            self.say(
+                meta,
+                format_args!(
+                    "this statement drops lines from now on; their count is said when it next writes"
+                ),
+            );
+        }
+        window.dropped += 1;
+        false
     }
 }
 
@@ -181,6 +198,12 @@ mod tests {
             .filter(|l| l.contains("failed handshake"))
             .collect();
         let notes: Vec<_> = lines.iter().filter(|l| l.contains("more lines")).collect();
+        // The flood's start is said once, however many windows it spans.
+        let starts = lines
+            .iter()
+            .filter(|l| l.contains("drops lines from now on"))
+            .count();
+        assert_eq!(starts, 1, "{lines:?}");
         assert!(
             warnings.len() as u64 <= windows * u64::from(LINES_PER_SECOND),
             "{} lines in {windows} windows",
@@ -217,6 +240,11 @@ mod tests {
                 .count(),
             LINES_PER_SECOND as usize
         );
-        assert!(!lines.iter().any(|l| l.contains("more lines")), "{lines:?}");
+        assert!(
+            !lines
+                .iter()
+                .any(|l| l.contains("more lines") || l.contains("drops lines from now on")),
+            "{lines:?}"
+        );
     }
 }
