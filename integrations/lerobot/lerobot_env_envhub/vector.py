@@ -77,11 +77,14 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
 
     def _workers(self) -> int | None:
         """`--env.workers`, else as many workers as keep this machine's cores busy through a
-        batch (5 envs on 2 cores: 3 workers, not 2 of 3 and 2 envs). On hubs elsewhere: each
+        batch (5 envs on 2 cores: 3 workers, not 2 of 3 and 2 envs), counting the cores this
+        process may run on (a Slurm job's, not the node's). On hubs elsewhere: each
         hub's own default."""
         if self.workers or self.hubs:
             return self.workers
-        return balanced_workers(self.num_envs, os.cpu_count() or 1)
+        from envhub.cores import usable_cores
+
+        return balanced_workers(self.num_envs, usable_cores())
 
     def _ensure(self) -> Any:
         if self._vec is None:

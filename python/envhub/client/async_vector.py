@@ -23,6 +23,7 @@ from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
+from ..cores import usable_cores
 from ..wire.autoreset import autoreset_mode as _autoreset_mode
 from ..wire.calls import Calls
 from ..wire.errors import InvalidConfigError, InvalidStateError, MakeError
@@ -115,7 +116,7 @@ class AsyncVectorEnv(VectorEnv):
             if max_concurrency < 1:
                 raise InvalidConfigError(f"`max_concurrency` must be positive or None, got {max_concurrency}")
             if num_workers is None:
-                num_workers = min(int(max_concurrency), len(env_fns), os.cpu_count() or 1)
+                num_workers = min(int(max_concurrency), len(env_fns), usable_cores())
         mode = _autoreset_mode(autoreset_mode)  # Gymnasium's values and envhub's names
 
         # As Gymnasium does: the first env, built here, gives the metadata and spaces.

@@ -39,6 +39,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..cores import usable_cores
 from .benchmarks import Benchmark, TaskSpec
 from .policy import Episode, Policy, PolicyError, Request, Task, policy_traceback
 from .protocol import ActionError, Observer, check_actions
@@ -251,7 +252,7 @@ class Runner:
 
         # By default a session gets the share of the cores its envs are of `num_envs` (at least
         # one worker): sessions run side by side, and every worker is an interpreter to start.
-        workers = self.workers or max(1, min(n, (os.cpu_count() or 1) * n // self.num_envs))
+        workers = self.workers or max(1, min(n, usable_cores() * n // self.num_envs))
         render = {"render_mode": "rgb_array"} if self.videos is not None and self._needs_render(specs[0]) else {}
         return make_vec(
             specs[0].entry,

@@ -8,7 +8,6 @@ envhub's are views of shared memory) and puts it on a bounded queue; the writer 
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 import weakref
@@ -17,6 +16,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
+from ..cores import usable_cores
 from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
 from ._encoding import CANONICAL, DEFAULT_CODEC
@@ -151,7 +151,7 @@ class RecordEpisodes(VectorWrapper):
         self._queue_bytes, self._commit_every, self._robot_type = int(queue_bytes), float(commit_every), robot_type
         self._sizes = (data_files_size_in_mb, video_files_size_in_mb)
         self._max_episodes = max_episodes
-        self._encode_threads = encode_threads or min(4, os.cpu_count() or 1)
+        self._encode_threads = encode_threads or min(4, usable_cores())
         self.stats: dict[str, Any] = {
             "episodes_kept": 0,  # ended and kept (committed or about to be)
             "episodes_written": 0,  # committed

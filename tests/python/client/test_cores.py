@@ -1,0 +1,37 @@
+"""Default worker and thread counts count the CPUs this process may run on (its affinity, as
+Slurm's CPU binding, `taskset` and container CPU sets narrow it), not the machine's."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+from harness import import_envhub
+
+envhub = import_envhub()
+
+ASK = "import os; from envhub.cores import usable_cores; print(usable_cores(), os.cpu_count())"
+
+
+def _under_affinity(cpus: set[int]) -> tuple[int, int]:
+    done = subprocess.run(
+        [sys.executable, "-c", ASK],
+        preexec_fn=lambda: os.sched_setaffinity(0, cpus),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    usable, machine = done.stdout.split()
+    return int(usable), int(machine)
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity on this platform")
+def test_a_process_bound_to_one_cpu_counts_one_core_whatever_the_machine_has():
+    one = min(os.sched_getaffinity(0))
+    usable, machine = _under_affinity({one})
+    assert usable == 1, f"bound to CPU {one}: {usable} usable cores (the machine has {machine})"
+    # Unbound (as this test runs): every CPU the test may use.
+    assert _under_affinity(os.sched_getaffinity(0))[0] == len(os.sched_getaffinity(0))
