@@ -83,7 +83,7 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                    help="run the shards as Ray tasks (the cluster at ADDRESS, RAY_ADDRESS's, or a local one) and merge them")
     g.add_argument("--ray-retries", type=int, default=3, metavar="K", help="with --ray: times a lost shard runs again (default 3)")
-    g.add_argument("--cpus-per-shard", type=float, default=1.0, metavar="C", help="with --ray: CPUs Ray reserves per shard")
+    g.add_argument("--cpus-per-shard", type=float, default=1.0, metavar="C", help="with --ray: CPUs Ray reserves per shard, which its workers default to")
     g.add_argument("--slurm-script", metavar="FILE",
                    help="write an sbatch job array script (task I runs shard I, task 0 submits the merge) and exit")
     g.add_argument("--slurm-option", action="append", default=[], metavar="OPT",

@@ -27,6 +27,7 @@ import threading
 import time
 from typing import Any, Iterator, Sequence
 
+from ..cores import CPUS_VAR
 from .distribute import shard_folders
 from .results import LOG, RUN, FolderLock, Progress, _write_json, read_log, write_log
 from .shards import RESULTS, Shard, ShardError
@@ -51,10 +52,11 @@ def _die_with_parent() -> None:
 
 
 def shard_task(
-    argv: list[str], shard: str, header: dict[str, Any] | None, done: list[dict[str, Any]], cwd: str
+    argv: list[str], shard: str, header: dict[str, Any] | None, done: list[dict[str, Any]], cwd: str, cpus: float
 ) -> Iterator[Any]:
     """Runs on a Ray node: the shard's evaluation (in the driver's folder `cwd` where the node
-    has it, so that relative paths in `argv` mean what they meant there), yielding ("started", host, pid),
+    has it, so that relative paths in `argv` mean what they meant there; its workers default
+    to the `cpus` Ray reserved for it, `ENVHUB_CPUS`, not to the node's cores), yielding ("started", host, pid),
     ("header", run.json), ("episode", record) as each is durable, ("end", exit status,
     results or None, the end of its stderr)."""
     import socket
@@ -71,7 +73,7 @@ def shard_task(
         command = [sys.executable, "-m", "envhub.evaluation", *argv, "--shard", shard, "--out", folder, "--resume", "--quiet"]
         proc = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=errors, preexec_fn=_die_with_parent,
-            cwd=cwd if os.path.isdir(cwd) else None,
+            cwd=cwd if os.path.isdir(cwd) else None, env={**os.environ, CPUS_VAR: str(max(1, int(cpus)))},
         )
         yield ("started", socket.gethostname(), os.getpid())
         sent_header = header is not None
@@ -212,6 +214,8 @@ def run_on_ray(
         raise ShardError(f"--shards must be at least 1, not {shards}")
     if retries < 0:
         raise ShardError(f"--ray-retries must be 0 or more, not {retries}")
+    if not cpus_per_shard >= 0:  # NaN too
+        raise ShardError(f"--cpus-per-shard must be 0 or more, not {cpus_per_shard}")
     ray = _connect(address)
     states = [_ShardState(Shard(i, shards), f, resume) for i, f in enumerate(shard_folders(out, shards))]
     events: queue.Queue[tuple[int, int, Any]] = queue.Queue()
@@ -220,7 +224,7 @@ def run_on_ray(
     def submit(i: int) -> None:
         s = states[i]
         s.attempts += 1
-        gen = task.remote(list(argv), str(s.shard), s.header, list(s.records.values()), os.getcwd())
+        gen = task.remote(list(argv), str(s.shard), s.header, list(s.records.values()), os.getcwd(), cpus_per_shard)
         attempt = s.attempts
 
         def drain() -> None:

@@ -35,3 +35,32 @@ def test_a_process_bound_to_one_cpu_counts_one_core_whatever_the_machine_has():
     assert usable == 1, f"bound to CPU {one}: {usable} usable cores (the machine has {machine})"
     # Unbound (as this test runs): every CPU the test may use.
     assert _under_affinity(os.sched_getaffinity(0))[0] == len(os.sched_getaffinity(0))
+
+
+def _with_cpus(value: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", ASK],
+        env={**os.environ, "ENVHUB_CPUS": value},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_envhub_cpus_narrows_the_count_as_a_ray_shard_s_reservation_does():
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    one = _with_cpus("1")
+    assert one.returncode == 0, one.stderr
+    assert one.stdout.split()[0] == "1"
+    # More than this process may run on: the cores it has, not the number asked for.
+    many = _with_cpus("4096")
+    assert many.returncode == 0, many.stderr
+    assert int(many.stdout.split()[0]) == cores
+
+
+@pytest.mark.parametrize("bad", ["0", "-2", "two", "1.5"])
+def test_a_bad_envhub_cpus_is_refused_naming_the_variable_and_what_is_valid(bad):
+    done = _with_cpus(bad)
+    assert done.returncode != 0
+    assert f"ENVHUB_CPUS={bad!r}" in done.stderr, done.stderr
+    assert "whole number of CPUs, at least 1" in done.stderr, done.stderr

@@ -237,3 +237,11 @@ def test_shard_options_that_do_not_fit_are_usage_errors(runs, tmp_path):
     ):
         done = cli(*RUN, "--policy", policy, "--out", str(tmp_path / "o"), *args)
         assert done.returncode == 2 and match in done.stderr, (args, done.stderr)
+
+
+@pytest.mark.parametrize("cpus", [-1.0, float("nan")])
+def test_a_bad_cpus_per_shard_is_refused_before_ray_is_asked(cpus, tmp_path):
+    from envhub.evaluation.ray_shards import run_on_ray
+
+    with pytest.raises(ShardError, match="--cpus-per-shard must be 0 or more"):
+        run_on_ray(["mujoco"], str(tmp_path / "o"), 2, bench=None, cpus_per_shard=cpus)

@@ -35,8 +35,13 @@ pytestmark = pytest.mark.xdist_group("ray")  # one Ray cluster at a time on a sm
 # Swimmer's episodes run their 1000 steps; a policy call of 2 ms makes a shard last seconds,
 # long enough to kill its worker between two episodes.
 POLICY = """\
+import os
 import time
 import numpy as np
+
+# The CPUs the process that loads the policy was given (a Ray shard: its --cpus-per-shard).
+with open(os.path.join(os.path.dirname(__file__), f"cpus-{os.getpid()}.txt"), "w") as f:
+    f.write(os.environ.get("ENVHUB_CPUS", "unset"))
 
 DIMS = {"mujoco-hopper": 3, "mujoco-swimmer": 2}
 
@@ -125,6 +130,10 @@ def test_ray_shards_merge_to_the_one_machine_table(cluster, whole, tmp_path):
     merged = json.loads((out / "results.json").read_text())
     assert [s["shard"] for s in merged["run"]["shards"]] == ["0/3", "1/3", "2/3"]
     assert all(s["attempts"] == 1 for s in merged["run"]["shards"])
+    # Each shard's workers default to the CPU Ray reserved for it (--cpus-per-shard, 1), not
+    # to the node's cores: its evaluation sees ENVHUB_CPUS (the one-machine run saw none).
+    given = sorted(p.read_text() for p in whole.glob("cpus-*.txt"))
+    assert given.count("1") >= 3 and "unset" in given, given
     # The shards' folders stay, and merge again by hand to the same table.
     again = cli("merge", str(tmp_path / "again"), *(str(out / "shards" / f"shard-{i}") for i in range(3)))
     assert again.returncode == 0 and rows(tmp_path / "again") == rows(whole / "whole")
