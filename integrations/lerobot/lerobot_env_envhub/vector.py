@@ -82,7 +82,7 @@ class LeRobotVectorEnv(gym.vector.VectorEnv):
         hub's own default."""
         if self.workers or self.hubs:
             return self.workers
-        from envhub.cores import usable_cores
+        from envhub.wire.cores import usable_cores
 
         return balanced_workers(self.num_envs, usable_cores())
 

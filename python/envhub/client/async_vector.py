@@ -23,9 +23,9 @@ from gymnasium.spaces import Space
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_differing_spaces, batch_space
 
-from ..cores import usable_cores
 from ..wire.autoreset import autoreset_mode as _autoreset_mode
 from ..wire.calls import Calls
+from ..wire.cores import usable_cores
 from ..wire.errors import InvalidConfigError, InvalidStateError, MakeError
 from ..wire.pickled import decode_info, wrap
 from ..worker.hosted.env_fns import FRAMEWORK, write_payload

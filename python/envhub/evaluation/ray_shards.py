@@ -27,7 +27,7 @@ import threading
 import time
 from typing import Any, Iterator, Sequence
 
-from ..cores import CPUS_VAR
+from ..wire.cores import CPUS_VAR
 from .distribute import shard_folders
 from .results import LOG, RUN, FolderLock, Progress, _write_json, read_log, write_log
 from .shards import RESULTS, Shard, ShardError

@@ -39,7 +39,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..cores import usable_cores
+from ..wire.cores import usable_cores
 from .benchmarks import Benchmark, TaskSpec
 from .policy import Episode, Policy, PolicyError, Request, Task, policy_traceback
 from .protocol import ActionError, Observer, check_actions

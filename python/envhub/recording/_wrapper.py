@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
-from ..cores import usable_cores
+from ..wire.cores import usable_cores
 from ._budget import DEFAULT_QUEUE_BYTES
 from ._dataset import Dataset
 from ._encoding import CANONICAL, DEFAULT_CODEC

@@ -12,7 +12,7 @@ from harness import import_envhub
 
 envhub = import_envhub()
 
-ASK = "import os; from envhub.cores import usable_cores; print(usable_cores(), os.cpu_count())"
+ASK = "import os; from envhub.wire.cores import usable_cores; print(usable_cores(), os.cpu_count())"
 
 
 def _under_affinity(cpus: set[int]) -> tuple[int, int]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from .wire.errors import InvalidConfigError
+from .errors import InvalidConfigError
 
 #: CPUs a scheduler granted this process without binding it to them: a Ray shard's
 #: `--cpus-per-shard` (Ray reserves CPUs but leaves the task free to run on every core).
